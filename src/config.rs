@@ -1,0 +1,1 @@
+//! Typed configuration: TOML file, then SEGSPLAT_* environment, then flags.
