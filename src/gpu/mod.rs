@@ -1,1 +1,8 @@
-//! gpu: see DESIGN.md.
+//! GPU foundation: adapter discovery, device creation, and (in their own files) the generic compute
+//! primitives the engine is built from. Knows nothing of splats, HTTP or databases.
+
+pub mod context;
+pub mod kernel;
+
+pub use context::{AdapterFilter, AdapterReport, GpuContext, GpuError};
+pub use kernel::Kernel;

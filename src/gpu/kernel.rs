@@ -1,0 +1,156 @@
+//! Compute kernel loading: WGSL sources from `shaders/` (embedded at build time), optional shared
+//! snippets prepended, one pipeline per entry point with an automatic bind-group layout.
+//!
+//! Convention for every kernel: all bindings in `@group(0)`, numbered from 0 in the order the
+//! caller passes buffers to [`Kernel::bind`].
+
+use crate::gpu::GpuContext;
+
+/// WGSL that gives every kernel `atomic_add_f32(buffer_index, value)`-style accumulation on the
+/// adapter at hand: native `atomic<f32>` where the device has `SHADER_FLOAT32_ATOMIC`, a
+/// compare-and-swap loop on `atomic<u32>` bit patterns where it does not.
+///
+/// The snippet defines `alias AtomicF32 = ...;` and `fn atomic_f32_add(p: ptr<storage, AtomicF32,
+/// read_write>, value: f32)`; kernels declare their accumulators as `array<AtomicF32>` and call it.
+pub fn float_atomic_prelude(ctx: &GpuContext) -> &'static str {
+    if ctx.has_float32_atomics() {
+        NATIVE_FLOAT_ATOMICS
+    } else {
+        CAS_FLOAT_ATOMICS
+    }
+}
+
+const NATIVE_FLOAT_ATOMICS: &str = r#"
+alias AtomicF32 = atomic<f32>;
+fn atomic_f32_add(p: ptr<storage, AtomicF32, read_write>, value: f32) {
+    atomicAdd(p, value);
+}
+fn atomic_f32_load(p: ptr<storage, AtomicF32, read_write>) -> f32 {
+    return atomicLoad(p);
+}
+"#;
+
+const CAS_FLOAT_ATOMICS: &str = r#"
+alias AtomicF32 = atomic<u32>;
+fn atomic_f32_add(p: ptr<storage, AtomicF32, read_write>, value: f32) {
+    var old = atomicLoad(p);
+    loop {
+        let new_bits = bitcast<u32>(bitcast<f32>(old) + value);
+        let result = atomicCompareExchangeWeak(p, old, new_bits);
+        if result.exchanged {
+            break;
+        }
+        old = result.old_value;
+    }
+}
+fn atomic_f32_load(p: ptr<storage, AtomicF32, read_write>) -> f32 {
+    return bitcast<f32>(atomicLoad(p));
+}
+"#;
+
+/// One compute pipeline.
+#[derive(Debug, Clone)]
+pub struct Kernel {
+    pub pipeline: wgpu::ComputePipeline,
+    label: &'static str,
+}
+
+impl Kernel {
+    /// Compiles `entry_point` from the concatenation of `sources` (snippets first, kernel last).
+    /// `constants` fill WGSL `override` declarations (e.g. workgroup sizes).
+    pub fn new(
+        ctx: &GpuContext,
+        label: &'static str,
+        sources: &[&str],
+        entry_point: &str,
+        constants: &[(&str, f64)],
+    ) -> Self {
+        let source = sources.concat();
+        let module = ctx
+            .device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(label),
+                source: wgpu::ShaderSource::Wgsl(source.into()),
+            });
+        let pipeline = ctx
+            .device
+            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(label),
+                layout: None,
+                module: &module,
+                entry_point: Some(entry_point),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants,
+                    zero_initialize_workgroup_memory: true,
+                },
+                cache: None,
+            });
+        Self { pipeline, label }
+    }
+
+    /// A bind group with `buffers[i]` (whole buffer) at `@group(0) @binding(i)`.
+    pub fn bind(&self, ctx: &GpuContext, buffers: &[&wgpu::Buffer]) -> wgpu::BindGroup {
+        let entries: Vec<wgpu::BindGroupEntry> = buffers
+            .iter()
+            .enumerate()
+            .map(|(index, buffer)| wgpu::BindGroupEntry {
+                binding: index as u32,
+                resource: buffer.as_entire_binding(),
+            })
+            .collect();
+        ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(self.label),
+            layout: &self.pipeline.get_bind_group_layout(0),
+            entries: &entries,
+        })
+    }
+
+    /// Records one dispatch of `workgroups` groups.
+    pub fn dispatch(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        bind_group: &wgpu::BindGroup,
+        workgroups: [u32; 3],
+    ) {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some(self.label),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, bind_group, &[]);
+        pass.dispatch_workgroups(workgroups[0], workgroups[1], workgroups[2]);
+    }
+
+    /// Records one dispatch whose group counts are read on the GPU from `indirect` at `offset`
+    /// (three u32), so counts computed by earlier kernels need no CPU read-back.
+    pub fn dispatch_indirect(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        bind_group: &wgpu::BindGroup,
+        indirect: &wgpu::Buffer,
+        offset: u64,
+    ) {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some(self.label),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, bind_group, &[]);
+        pass.dispatch_workgroups_indirect(indirect, offset);
+    }
+}
+
+/// Workgroups needed to cover `items` with groups of `group_size` (at least one).
+pub fn workgroups_for(items: u32, group_size: u32) -> u32 {
+    items.div_ceil(group_size).max(1)
+}
+
+/// Splits a large 1D group count over x and y so it stays within the 65535-per-dimension limit;
+/// kernels recover the flat index as `gid.x + gid.y * num_workgroups.x * group_size`.
+pub fn workgroups_2d(groups: u32, max_per_dim: u32) -> [u32; 3] {
+    if groups <= max_per_dim {
+        [groups.max(1), 1, 1]
+    } else {
+        [max_per_dim, groups.div_ceil(max_per_dim), 1]
+    }
+}
