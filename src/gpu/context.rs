@@ -264,7 +264,10 @@ impl GpuContext {
         receiver
             .recv()
             .map_err(|_| GpuError::Device("map callback dropped".to_string()))??;
-        let bytes = slice.get_mapped_range().to_vec();
+        let bytes = slice
+            .get_mapped_range()
+            .map_err(|error| GpuError::Device(format!("mapping the read-back buffer: {error}")))?
+            .to_vec();
         staging.unmap();
         Ok(bytes)
     }
