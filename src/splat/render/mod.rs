@@ -1,0 +1,1 @@
+//! GPU renderer (forward and backward).
