@@ -100,6 +100,15 @@ impl ScanScratch {
     }
 }
 
+/// Where a scan's level counts and block totals live, and how its kernels are dispatched.
+pub(crate) struct ScanLevels<'a> {
+    /// Per-level counts (layout: [`level_counts_index`]).
+    pub(crate) level_counts: &'a wgpu::Buffer,
+    /// Block totals, already reserved for these levels.
+    pub(crate) scratch: &'a ScanScratch,
+    pub(crate) dispatch: ScanDispatch<'a>,
+}
+
 /// How the level kernels get their workgroup counts.
 pub(crate) enum ScanDispatch<'a> {
     /// Output counts per level, known on the CPU.
@@ -215,29 +224,28 @@ impl ExclusiveScan {
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
         scratch.reserve(ctx, &output_counts);
-        self.encode_levels(
-            ctx,
-            encoder,
-            input,
-            output,
-            &level_counts,
-            &scratch,
-            ScanDispatch::Direct(&output_counts),
-        );
+        let levels = ScanLevels {
+            level_counts: &level_counts,
+            scratch: &scratch,
+            dispatch: ScanDispatch::Direct(&output_counts),
+        };
+        self.encode_levels(ctx, encoder, input, output, &levels);
     }
 
-    /// Records all levels of a scan of `input` into `output`, with counts from `level_counts`
-    /// (layout: [`level_counts_index`]) and block totals in `scratch` (already reserved).
+    /// Records all levels of a scan of `input` into `output`.
     pub(crate) fn encode_levels(
         &self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
         input: &wgpu::Buffer,
         output: &wgpu::Buffer,
-        level_counts: &wgpu::Buffer,
-        scratch: &ScanScratch,
-        dispatch: ScanDispatch<'_>,
+        levels_plan: &ScanLevels<'_>,
     ) {
+        let ScanLevels {
+            level_counts,
+            scratch,
+            dispatch,
+        } = levels_plan;
         let levels = dispatch.levels().clamp(1, MAX_SCAN_LEVELS);
         let input = if input.size() < 4 {
             &self.empty_input
@@ -262,7 +270,7 @@ impl ExclusiveScan {
         let run = |kernel: &Kernel,
                    encoder: &mut wgpu::CommandEncoder,
                    bind_group: &wgpu::BindGroup,
-                   level: usize| match &dispatch {
+                   level: usize| match dispatch {
             ScanDispatch::Direct(counts) => {
                 let groups = counts[level].div_ceil(SCAN_BLOCK_ELEMENTS);
                 kernel.dispatch(encoder, bind_group, workgroups_2d(groups, max_groups));
