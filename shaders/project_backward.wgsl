@@ -57,7 +57,7 @@ fn project_backward(
 
     // Conic -> 2D covariance.
     let v_conic_matrix = mat2x2<f32>(vec2<f32>(v_conic.x, 0.5 * v_conic.y), vec2<f32>(0.5 * v_conic.y, v_conic.z));
-    let v_cov = -(conic * v_conic_matrix * conic);
+    let v_cov = (conic * v_conic_matrix * conic) * -1.0;
     let v00 = v_cov[0][0];
     let v01 = v_cov[1][0];
     let v11 = v_cov[1][1];

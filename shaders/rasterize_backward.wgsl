@@ -1,7 +1,7 @@
 // Backward of rasterize_forward: one 16x16 workgroup per tile; each pixel walks its splats back to
 // front from its last contributor, recovering the transmittance before each fragment by division
 // (as 3DGS/gsplat do), and adds d loss / d (mean2d, conic, colour, opacity) and |d loss / d mean2d|
-// into grad_projected with float atomics. Needs the float-atomic prelude.
+// into grad_projected with float atomics (native or CAS: rasterize_grad_atomics_*.wgsl).
 
 @group(0) @binding(0) var<uniform> uniforms: RenderUniforms;
 @group(0) @binding(1) var<storage, read> tile_ranges: array<u32>;
@@ -24,7 +24,7 @@ var<workgroup> longest_snapshot: u32;
 
 fn add_grad(gaussian: u32, slot: u32, value: f32) {
     if value != 0.0 {
-        atomic_f32_add(&grad_projected[gaussian * GRAD_STRIDE + slot], value);
+        grad_projected_add(gaussian * GRAD_STRIDE + slot, value);
     }
 }
 
