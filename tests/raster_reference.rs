@@ -128,7 +128,11 @@ fn reference_object_filter_renders_only_that_object() {
     let right = render_forward(&gaussians, &camera, &only(2));
     let alpha_sum = |forward: &ReferenceForward, columns: std::ops::Range<u32>| -> f64 {
         (0..camera.height)
-            .flat_map(|y| columns.clone().map(move |x| (y * camera.width + x) as usize))
+            .flat_map(|y| {
+                columns
+                    .clone()
+                    .map(move |x| (y * camera.width + x) as usize)
+            })
             .map(|i| forward.image[i][3])
             .sum()
     };
@@ -136,4 +140,49 @@ fn reference_object_filter_renders_only_that_object() {
     assert!(alpha_sum(&left, 28..48) < 1e-9);
     assert!(alpha_sum(&right, 28..48) > 10.0);
     assert!(alpha_sum(&right, 0..20) < 1e-9);
+}
+
+#[test]
+fn edge_case_scene_exercises_every_case() {
+    let camera = test_camera(40, 36);
+    let gaussians = ReferenceGaussians::from_model(&edge_case_scene(1, 6, &camera));
+    let forward = render_forward(&gaussians, &camera, &RenderSettings::default());
+    let n = gaussians.len();
+    let contributes = |index: usize| {
+        forward
+            .contributors
+            .iter()
+            .any(|list| list.contains(&(index as u32)))
+    };
+    // Order of edge cases: behind, tile corner, thin, large, faint, side (frustum clamp).
+    assert!(
+        forward.projected[n - 6].is_none(),
+        "behind the camera is culled"
+    );
+    let corner = forward.projected[n - 5].expect("corner splat visible");
+    assert!(corner.tile_min == [0, 0] && corner.tile_max[0] >= 2 && corner.tile_max[1] >= 2);
+    let thin = forward.projected[n - 4].expect("thin splat visible");
+    let [a, b, c] = thin.conic;
+    let (trace, det) = (a + c, a * c - b * b);
+    let eigen_ratio =
+        (trace + (trace * trace - 4.0 * det).sqrt()) / (trace - (trace * trace - 4.0 * det).sqrt());
+    assert!(
+        eigen_ratio > 10.0,
+        "thin splat is anisotropic: {eigen_ratio}"
+    );
+    let large = forward.projected[n - 3].expect("large splat visible");
+    assert!(large.radius > 40.0);
+    let faint = forward.projected[n - 2].expect("faint splat projected");
+    assert!(faint.opacity < 0.01);
+    let side = forward.projected[n - 1].expect("side splat visible");
+    assert!(
+        side.mean2d.x > camera.width as f64,
+        "centre off screen, footprint on screen"
+    );
+    for index in n - 5..n {
+        assert!(
+            contributes(index),
+            "edge case {index} contributes to some pixel"
+        );
+    }
 }

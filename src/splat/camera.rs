@@ -60,9 +60,7 @@ impl RenderCamera {
         let scale_y = height as f64 / intrinsics.height as f64;
         let determinant = frame.world_from_camera.determinant();
         if !determinant.is_finite() || determinant.abs() < 1e-12 {
-            return Err(invalid(
-                "world_from_camera is not invertible".to_string(),
-            ));
+            return Err(invalid("world_from_camera is not invertible".to_string()));
         }
         let camera = Self {
             width,
@@ -134,7 +132,9 @@ mod tests {
         assert_eq!((camera.width, camera.height), (51, 30));
         assert!((camera.fx - 100.0 * 51.0 / 101.0).abs() < 1e-4);
         assert!((camera.cy - 15.0).abs() < 1e-5);
-        let p = camera.camera_from_world.transform_point3(Vec3::new(1.0, 2.0, 4.0));
+        let p = camera
+            .camera_from_world
+            .transform_point3(Vec3::new(1.0, 2.0, 4.0));
         assert!((p - Vec3::new(0.0, 0.0, 1.0)).length() < 1e-6);
         assert!((camera.position() - Vec3::new(1.0, 2.0, 3.0)).length() < 1e-6);
     }

@@ -34,7 +34,10 @@ pub const RADIUS_SIGMAS: f32 = 3.0;
 pub enum ObjectFilter {
     #[default]
     All,
-    Object { level: Level, id: u32 },
+    Object {
+        level: Level,
+        id: u32,
+    },
 }
 
 impl ObjectFilter {

@@ -1,12 +1,13 @@
 //! Projection of one 3D Gaussian to a screen-space splat (EWA), and its vector-Jacobian product.
 
+// Index loops mirror the matrix formulas they implement.
+#![allow(clippy::needless_range_loop)]
+
 use glam::{DMat2, DMat3, DVec2, DVec3};
 
 use super::sh;
 use super::{ReferenceCamera, ReferenceGaussians};
-use crate::splat::{
-    COVARIANCE_DILATION, FRUSTUM_SLACK, RADIUS_SIGMAS, RenderSettings, TILE_SIZE,
-};
+use crate::splat::{COVARIANCE_DILATION, FRUSTUM_SLACK, RADIUS_SIGMAS, RenderSettings, TILE_SIZE};
 
 /// A Gaussian as the rasteriser sees it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -107,7 +108,10 @@ fn geometry(gaussians: &ReferenceGaussians, index: usize, camera: &ReferenceCame
     ];
     let limit = tan_fov.map(|t| FRUSTUM_SLACK as f64 * t);
     let ratio = [mean_camera.x / z, mean_camera.y / z];
-    let clamped = [ratio[0].clamp(-limit[0], limit[0]), ratio[1].clamp(-limit[1], limit[1])];
+    let clamped = [
+        ratio[0].clamp(-limit[0], limit[0]),
+        ratio[1].clamp(-limit[1], limit[1]),
+    ];
     let tx = clamped[0] * z;
     let ty = clamped[1] * z;
     let jacobian = [
@@ -186,12 +190,20 @@ pub fn project_gaussian(
     let tiles = camera.tiles();
     let tile = TILE_SIZE as f64;
     let tile_min = [
-        ((mean2d.x - radius) / tile).floor().clamp(0.0, tiles[0] as f64) as u32,
-        ((mean2d.y - radius) / tile).floor().clamp(0.0, tiles[1] as f64) as u32,
+        ((mean2d.x - radius) / tile)
+            .floor()
+            .clamp(0.0, tiles[0] as f64) as u32,
+        ((mean2d.y - radius) / tile)
+            .floor()
+            .clamp(0.0, tiles[1] as f64) as u32,
     ];
     let tile_max = [
-        ((mean2d.x + radius) / tile).ceil().clamp(0.0, tiles[0] as f64) as u32,
-        ((mean2d.y + radius) / tile).ceil().clamp(0.0, tiles[1] as f64) as u32,
+        ((mean2d.x + radius) / tile)
+            .ceil()
+            .clamp(0.0, tiles[0] as f64) as u32,
+        ((mean2d.y + radius) / tile)
+            .ceil()
+            .clamp(0.0, tiles[1] as f64) as u32,
     ];
     if tile_max[0] <= tile_min[0] || tile_max[1] <= tile_min[1] {
         return None;
@@ -211,7 +223,11 @@ pub fn project_gaussian(
     })
 }
 
-fn view_direction(gaussians: &ReferenceGaussians, index: usize, camera: &ReferenceCamera) -> (DVec3, f64) {
+fn view_direction(
+    gaussians: &ReferenceGaussians,
+    index: usize,
+    camera: &ReferenceCamera,
+) -> (DVec3, f64) {
     let offset = DVec3::from_array(gaussians.means[index]) - camera.position;
     let length = offset.length();
     (offset / length, length)
@@ -257,8 +273,13 @@ pub fn project_backward(
     grads.opacity_logits[index] += v.opacity * o * (1.0 - o);
 
     // Colour -> SH coefficients and view direction.
-    let v_colour: [f64; 3] =
-        std::array::from_fn(|c| if projected.colour_clamped[c] { 0.0 } else { v.colour[c] });
+    let v_colour: [f64; 3] = std::array::from_fn(|c| {
+        if projected.colour_clamped[c] {
+            0.0
+        } else {
+            v.colour[c]
+        }
+    });
     let (direction, distance) = view_direction(gaussians, index, camera);
     let basis = sh::basis(settings.sh_degree, direction.to_array());
     let basis_gradient = sh::basis_gradient(settings.sh_degree, direction.to_array());
@@ -270,8 +291,7 @@ pub fn project_backward(
             v_direction += DVec3::from_array(basis_gradient[k]) * weight;
         }
     }
-    let mut v_mean_world =
-        (v_direction - direction * direction.dot(v_direction)) / distance;
+    let mut v_mean_world = (v_direction - direction * direction.dot(v_direction)) / distance;
 
     // Conic -> 2D covariance: d conic = -conic d cov conic.
     let v_conic = DMat2::from_cols_array_2d(&[
@@ -369,7 +389,6 @@ pub fn project_backward(
     ];
     let dot: f64 = (0..4).map(|k| v_unit[k] * g.unit_quaternion[k]).sum();
     for k in 0..4 {
-        grads.rotations[index][k] +=
-            (v_unit[k] - g.unit_quaternion[k] * dot) / g.quaternion_norm;
+        grads.rotations[index][k] += (v_unit[k] - g.unit_quaternion[k] * dot) / g.quaternion_norm;
     }
 }

@@ -1,12 +1,17 @@
 //! Per-pixel front-to-back compositing and its backward pass (reference, f64).
 
+// Index loops mirror the matrix formulas they implement.
+#![allow(clippy::needless_range_loop)]
+
 use glam::DVec2;
 
 use super::project::{ProjectedGrad, project_backward};
 use super::{
     ProjectedGaussian, ReferenceCamera, ReferenceGaussians, ReferenceGrads, project_gaussian,
 };
-use crate::splat::{ALPHA_MAX, ALPHA_MIN, RenderCamera, RenderSettings, TILE_SIZE, TRANSMITTANCE_MIN};
+use crate::splat::{
+    ALPHA_MAX, ALPHA_MIN, RenderCamera, RenderSettings, TILE_SIZE, TRANSMITTANCE_MIN,
+};
 
 /// A reference render and what its backward pass needs.
 #[derive(Debug, Clone)]
@@ -169,10 +174,8 @@ pub fn render_backward(
                     v.conic[0] += 0.5 * v_sigma * d.x * d.x;
                     v.conic[1] += v_sigma * d.x * d.y;
                     v.conic[2] += 0.5 * v_sigma * d.y * d.y;
-                    let v_mean = DVec2::new(
-                        v_sigma * (a * d.x + b * d.y),
-                        v_sigma * (b * d.x + c * d.y),
-                    );
+                    let v_mean =
+                        DVec2::new(v_sigma * (a * d.x + b * d.y), v_sigma * (b * d.x + c * d.y));
                     v.mean2d += v_mean;
                     v.mean2d_abs += v_mean.abs();
                     v.opacity += value * v_alpha;

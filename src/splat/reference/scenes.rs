@@ -98,19 +98,56 @@ pub fn edge_case_scene(seed: u64, count: usize, camera: &RenderCamera) -> Gaussi
     push_random(&mut model, &mut rng, [0.1, 0.0, -1.0], [0.0; 3], 2.0, none);
     // On the corner of tiles (16, 16).
     let corner = point_at_pixel(camera, 16.0, 16.0, 2.5);
-    push_random(&mut model, &mut rng, corner, [log_pixels(3.0, 2.5); 3], 1.0, none);
+    push_random(
+        &mut model,
+        &mut rng,
+        corner,
+        [log_pixels(3.0, 2.5); 3],
+        1.0,
+        none,
+    );
     // Needle-thin along one axis.
     let thin = point_at_pixel(camera, 10.0, 23.0, 3.0);
-    let thin_scale = [log_pixels(0.02, 3.0), log_pixels(6.0, 3.0), log_pixels(2.0, 3.0)];
+    let thin_scale = [
+        log_pixels(0.02, 3.0),
+        log_pixels(8.0, 3.0),
+        log_pixels(0.02, 3.0),
+    ];
     push_random(&mut model, &mut rng, thin, thin_scale, 0.5, none);
     // Very large: covers most of the image.
-    let large = point_at_pixel(camera, camera.width as f32 * 0.6, camera.height as f32 * 0.4, 4.0);
-    push_random(&mut model, &mut rng, large, [log_pixels(18.0, 4.0); 3], -1.0, none);
+    let large = point_at_pixel(
+        camera,
+        camera.width as f32 * 0.6,
+        camera.height as f32 * 0.4,
+        4.0,
+    );
+    push_random(
+        &mut model,
+        &mut rng,
+        large,
+        [log_pixels(18.0, 4.0); 3],
+        -1.0,
+        none,
+    );
     // Nearly transparent (opacity ~0.007: only the core passes the 1/255 cut).
     let faint = point_at_pixel(camera, 30.0, 12.0, 2.0);
-    push_random(&mut model, &mut rng, faint, [log_pixels(4.0, 2.0); 3], -5.0, none);
+    push_random(
+        &mut model,
+        &mut rng,
+        faint,
+        [log_pixels(4.0, 2.0); 3],
+        -5.0,
+        none,
+    );
     // Off to the side near the camera: the frustum clamp of the Jacobian is active.
-    push_random(&mut model, &mut rng, [0.4, 0.05, 0.5], [log_pixels(8.0, 0.5); 3], 0.5, none);
+    push_random(
+        &mut model,
+        &mut rng,
+        [0.4, 0.05, 0.5],
+        [log_pixels(8.0, 0.5); 3],
+        0.5,
+        none,
+    );
     model
 }
 

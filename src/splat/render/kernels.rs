@@ -13,7 +13,8 @@ const TILE_EMIT: &str = include_str!("../../../shaders/tile_emit.wgsl");
 const TILE_RANGES: &str = include_str!("../../../shaders/tile_ranges.wgsl");
 const RASTERIZE_FORWARD: &str = include_str!("../../../shaders/rasterize_forward.wgsl");
 const RASTERIZE_BACKWARD: &str = include_str!("../../../shaders/rasterize_backward.wgsl");
-const GRAD_ATOMICS_NATIVE: &str = include_str!("../../../shaders/rasterize_grad_atomics_native.wgsl");
+const GRAD_ATOMICS_NATIVE: &str =
+    include_str!("../../../shaders/rasterize_grad_atomics_native.wgsl");
 const GRAD_ATOMICS_CAS: &str = include_str!("../../../shaders/rasterize_grad_atomics_cas.wgsl");
 const PROJECT_BACKWARD: &str = include_str!("../../../shaders/project_backward.wgsl");
 const SH_BACKWARD: &str = include_str!("../../../shaders/sh_backward.wgsl");

@@ -21,7 +21,9 @@ pub enum RenderError {
     Gpu(#[from] GpuError),
     #[error("gradient buffers hold {capacity} Gaussians but the scene has {count}")]
     GradsTooSmall { count: usize, capacity: usize },
-    #[error("grad_image holds {bytes} bytes but the render needs {needed} ({pixels} pixels x vec4<f32>)")]
+    #[error(
+        "grad_image holds {bytes} bytes but the render needs {needed} ({pixels} pixels x vec4<f32>)"
+    )]
     GradImageTooSmall {
         bytes: u64,
         needed: u64,
@@ -231,7 +233,14 @@ impl Renderer {
         self.upload_uniforms(ctx, encoder, &workspace, &uniforms);
         encoder.clear_buffer(&workspace.tile_ranges, 0, None);
         if count > 0 {
-            self.encode_tiles(ctx, encoder, gaussians, &workspace, count as u32, [tiles_x, tiles_y]);
+            self.encode_tiles(
+                ctx,
+                encoder,
+                gaussians,
+                &workspace,
+                count as u32,
+                [tiles_x, tiles_y],
+            );
         }
         let k = &self.kernels;
         let rasterize = k.rasterize_forward.bind(

@@ -132,11 +132,7 @@ pub struct WorkspacePool {
 }
 
 impl WorkspacePool {
-    pub fn take(
-        &self,
-        ctx: &GpuContext,
-        size: WorkspaceSize,
-    ) -> Result<RenderWorkspace, GpuError> {
+    pub fn take(&self, ctx: &GpuContext, size: WorkspaceSize) -> Result<RenderWorkspace, GpuError> {
         let mut free = self
             .free
             .lock()
