@@ -1,1 +1,3 @@
 //! splat: see DESIGN.md.
+
+pub mod loss;
