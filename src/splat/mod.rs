@@ -1,3 +1,4 @@
 //! splat: see DESIGN.md.
 
+pub mod adam;
 pub mod loss;
