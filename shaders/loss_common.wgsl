@@ -1,0 +1,37 @@
+// Shared by the render-loss kernels (loss_*.wgsl): L = 0.8 * L1 + 0.2 * (1 - SSIM), SSIM as 3DGS
+// (11x11 Gaussian window, sigma 1.5, zero padding, mean over pixels and RGB channels).
+//
+// Images are `array<vec4<f32>>`, width * height pixels, row-major, RGB in xyz (w ignored).
+// The Gaussian window is prepended by the host as `SSIM_WINDOW` (11 normalised taps), together
+// with `SSIM_C1`, `SSIM_C2`, `L1_WEIGHT` and `DSSIM_WEIGHT`.
+
+const WINDOW_RADIUS: i32 = 5;
+const LOSS_TILE: u32 = 16u;
+
+struct LossParams {
+    width: u32,
+    height: u32,
+    // 1 when the target is masked to pixels whose object id equals `object_id`.
+    use_mask: u32,
+    object_id: u32,
+    // Scales the loss value and its gradient.
+    weight: f32,
+    // 1 / (width * height * 3).
+    inv_value_count: f32,
+    // Index written in the loss-values buffer.
+    loss_slot: u32,
+    // Workgroups of the per-pixel loss kernel (one partial sum each).
+    partial_count: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: LossParams;
+
+var<private> window_weights: array<f32, 11> = SSIM_WINDOW;
+
+fn pixel_index(x: i32, y: i32) -> u32 {
+    return u32(y) * params.width + u32(x);
+}
+
+fn inside(x: i32, y: i32) -> bool {
+    return x >= 0 && y >= 0 && x < i32(params.width) && y < i32(params.height);
+}

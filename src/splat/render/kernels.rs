@@ -1,0 +1,83 @@
+//! The render pipelines, compiled once per device.
+
+use crate::gpu::validation::validated;
+use crate::gpu::{GpuContext, GpuError, Kernel};
+
+const COMMON: &str = include_str!("../../../shaders/project_common.wgsl");
+const SH: &str = include_str!("../../../shaders/sh.wgsl");
+const PROJECT_FORWARD: &str = include_str!("../../../shaders/project_forward.wgsl");
+const TILE_COUNT_IN_DEPTH_ORDER: &str =
+    include_str!("../../../shaders/tile_count_in_depth_order.wgsl");
+const TILE_BUDGET: &str = include_str!("../../../shaders/tile_budget.wgsl");
+const TILE_EMIT: &str = include_str!("../../../shaders/tile_emit.wgsl");
+const TILE_RANGES: &str = include_str!("../../../shaders/tile_ranges.wgsl");
+const RASTERIZE_FORWARD: &str = include_str!("../../../shaders/rasterize_forward.wgsl");
+const RASTERIZE_BACKWARD: &str = include_str!("../../../shaders/rasterize_backward.wgsl");
+const GRAD_ATOMICS_NATIVE: &str =
+    include_str!("../../../shaders/rasterize_grad_atomics_native.wgsl");
+const GRAD_ATOMICS_CAS: &str = include_str!("../../../shaders/rasterize_grad_atomics_cas.wgsl");
+const PROJECT_BACKWARD: &str = include_str!("../../../shaders/project_backward.wgsl");
+const SH_BACKWARD: &str = include_str!("../../../shaders/sh_backward.wgsl");
+
+/// One pipeline per kernel file.
+#[derive(Debug)]
+pub struct RenderKernels {
+    pub project_forward: Kernel,
+    pub tile_count_in_depth_order: Kernel,
+    pub tile_budget: Kernel,
+    pub tile_emit: Kernel,
+    pub tile_ranges: Kernel,
+    pub rasterize_forward: Kernel,
+    pub rasterize_backward: Kernel,
+    pub project_backward: Kernel,
+    pub sh_backward: Kernel,
+}
+
+impl RenderKernels {
+    pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
+        let build = |label: &'static str, sources: &[&str], entry: &str| {
+            validated(ctx, label, || Kernel::new(ctx, label, sources, entry, &[]))
+        };
+        // Native f32 atomics where the device has them, a CAS loop where it does not.
+        let atomics = if ctx.has_float32_atomics() {
+            GRAD_ATOMICS_NATIVE
+        } else {
+            GRAD_ATOMICS_CAS
+        };
+        Ok(Self {
+            project_forward: build(
+                "project_forward",
+                &[COMMON, SH, PROJECT_FORWARD],
+                "project_forward",
+            )?,
+            tile_count_in_depth_order: build(
+                "tile_count_in_depth_order",
+                &[COMMON, TILE_COUNT_IN_DEPTH_ORDER],
+                "tile_count_in_depth_order",
+            )?,
+            tile_budget: build("tile_budget", &[COMMON, TILE_BUDGET], "tile_budget")?,
+            tile_emit: build("tile_emit", &[COMMON, TILE_EMIT], "tile_emit")?,
+            tile_ranges: build(
+                "tile_ranges",
+                &[COMMON, TILE_RANGES],
+                "tile_ranges_from_sorted",
+            )?,
+            rasterize_forward: build(
+                "rasterize_forward",
+                &[COMMON, RASTERIZE_FORWARD],
+                "rasterize_forward",
+            )?,
+            rasterize_backward: build(
+                "rasterize_backward",
+                &[atomics, COMMON, RASTERIZE_BACKWARD],
+                "rasterize_backward",
+            )?,
+            project_backward: build(
+                "project_backward",
+                &[COMMON, PROJECT_BACKWARD],
+                "project_backward",
+            )?,
+            sh_backward: build("sh_backward", &[COMMON, SH, SH_BACKWARD], "sh_backward")?,
+        })
+    }
+}

@@ -1,0 +1,382 @@
+//! GPU renderer against the CPU reference (f64): images, gradients, finite differences, object
+//! filter, background, empty and fully culled scenes, gradient accumulation, capacity growth.
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use segsplat::gpu::GpuContext;
+use segsplat::scene::Level;
+use segsplat::splat::reference::scenes::{
+    edge_case_scene, random_scene, test_camera, turned_around, two_object_scene,
+};
+use segsplat::splat::reference::{
+    ReferenceGaussians, ReferenceGrads, parameter_name, render_backward, render_forward,
+};
+use segsplat::splat::render::Renderer;
+use segsplat::splat::{
+    GaussianModel, GpuGaussianGrads, GpuGaussians, ObjectFilter, RenderCamera, RenderSettings,
+};
+use wgpu::util::DeviceExt;
+
+fn context() -> Option<GpuContext> {
+    match GpuContext::new_default() {
+        Ok(ctx) => Some(ctx),
+        Err(error) if std::env::var("SEGSPLAT_SKIP_GPU_TESTS").as_deref() == Ok("1") => {
+            println!("skipping GPU test (SEGSPLAT_SKIP_GPU_TESTS=1): {error}");
+            None
+        }
+        Err(error) => panic!("no GPU adapter (set SEGSPLAT_SKIP_GPU_TESTS=1 to skip): {error}"),
+    }
+}
+
+fn render_gpu(
+    ctx: &GpuContext,
+    renderer: &mut Renderer,
+    model: &GaussianModel,
+    camera: &RenderCamera,
+    settings: &RenderSettings,
+) -> Vec<[f32; 4]> {
+    let gaussians = GpuGaussians::upload(ctx, model, model.len().max(1)).unwrap();
+    let output = renderer
+        .render_checked(ctx, &gaussians, camera, settings)
+        .unwrap();
+    output.read_image(ctx).unwrap()
+}
+
+fn max_image_error(gpu: &[[f32; 4]], cpu: &[[f64; 4]]) -> f64 {
+    gpu.iter()
+        .zip(cpu)
+        .flat_map(|(g, c)| (0..4).map(move |k| (g[k] as f64 - c[k]).abs()))
+        .fold(0.0, f64::max)
+}
+
+fn random_weights(seed: u64, pixels: usize) -> Vec<[f32; 4]> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    (0..pixels)
+        .map(|_| std::array::from_fn(|_| rng.random_range(-1.0..1.0)))
+        .collect()
+}
+
+/// GPU gradients of sum(weights * image), as (parameters, mean2d_abs), after `renders` backward
+/// passes accumulated into one gradient buffer.
+fn gpu_gradients(
+    ctx: &GpuContext,
+    model: &GaussianModel,
+    camera: &RenderCamera,
+    settings: &RenderSettings,
+    weights: &[[f32; 4]],
+    renders: usize,
+) -> (GaussianModel, Vec<[f32; 2]>) {
+    let mut renderer = Renderer::new(ctx).unwrap();
+    let gaussians = GpuGaussians::upload(ctx, model, model.len()).unwrap();
+    let mut grads = GpuGaussianGrads::new(ctx, model.len()).unwrap();
+    let grad_image = ctx
+        .device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("grad image"),
+            contents: bytemuck::cast_slice(weights),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    grads.encode_zero(&mut encoder);
+    for _ in 0..renders {
+        let output = renderer
+            .forward(ctx, &mut encoder, &gaussians, camera, settings)
+            .unwrap();
+        renderer
+            .backward(
+                ctx,
+                &mut encoder,
+                &gaussians,
+                &output,
+                &grad_image,
+                &mut grads,
+            )
+            .unwrap();
+    }
+    ctx.queue.submit([encoder.finish()]);
+    assert!(!renderer.sync_capacity(ctx).unwrap().overflowed);
+    grads.download(ctx, model.len()).unwrap()
+}
+
+fn reference_gradients(
+    model: &GaussianModel,
+    camera: &RenderCamera,
+    settings: &RenderSettings,
+    weights: &[[f32; 4]],
+) -> ReferenceGrads {
+    let gaussians = ReferenceGaussians::from_model(model);
+    let forward = render_forward(&gaussians, camera, settings);
+    let weights: Vec<[f64; 4]> = weights.iter().map(|w| w.map(f64::from)).collect();
+    render_backward(&gaussians, &forward, &weights)
+}
+
+fn flatten_gpu(model: &GaussianModel, index: usize) -> Vec<f64> {
+    ReferenceGaussians::from_model(model).parameters(index)
+}
+
+/// Largest |gpu - cpu| over all parameters, scaled by the largest |cpu| of the same Gaussian
+/// parameter group, and the absolute-gradient statistic likewise.
+fn compare_gradients(
+    gpu: &(GaussianModel, Vec<[f32; 2]>),
+    cpu: &ReferenceGrads,
+    tolerance: f64,
+) -> f64 {
+    let count = cpu.parameters.len();
+    let mut worst: f64 = 0.0;
+    for index in 0..count {
+        let g = flatten_gpu(&gpu.0, index);
+        let c = cpu.parameters.parameters(index);
+        let scale = c.iter().fold(1e-3f64, |m, v| m.max(v.abs()));
+        for slot in 0..g.len() {
+            let error = (g[slot] - c[slot]).abs() / scale;
+            worst = worst.max(error);
+            assert!(
+                error <= tolerance,
+                "gaussian {index} {}: gpu {} cpu {} (scale {scale})",
+                parameter_name(slot),
+                g[slot],
+                c[slot]
+            );
+        }
+        for axis in 0..2 {
+            let (g, c) = (gpu.1[index][axis] as f64, cpu.mean2d_abs[index][axis]);
+            let error = (g - c).abs() / c.abs().max(1e-3);
+            assert!(
+                error <= tolerance,
+                "gaussian {index} mean2d_abs[{axis}]: gpu {g} cpu {c}"
+            );
+        }
+    }
+    worst
+}
+
+fn settings_with_background() -> RenderSettings {
+    RenderSettings {
+        background: [0.1, 0.4, 0.8],
+        ..RenderSettings::default()
+    }
+}
+
+#[test]
+fn gpu_forward_matches_reference() {
+    let Some(ctx) = context() else { return };
+    let mut renderer = Renderer::new(&ctx).unwrap();
+    for (seed, sh_degree) in [(11u64, 3u32), (12, 0), (13, 2)] {
+        let camera = test_camera(40, 36);
+        let model = edge_case_scene(seed, 40, &camera);
+        let settings = RenderSettings {
+            sh_degree,
+            ..settings_with_background()
+        };
+        let gpu = render_gpu(&ctx, &mut renderer, &model, &camera, &settings);
+        let cpu = render_forward(&ReferenceGaussians::from_model(&model), &camera, &settings);
+        let error = max_image_error(&gpu, &cpu.image);
+        println!("seed {seed} degree {sh_degree}: max abs image error {error:e}");
+        assert!(error < 2e-4, "max abs error {error}");
+        assert!(cpu.image.iter().any(|p| p[3] > 0.9), "scene is not empty");
+    }
+}
+
+#[test]
+fn gpu_gradients_match_reference_and_accumulate() {
+    let Some(ctx) = context() else { return };
+    let camera = test_camera(40, 36);
+    let model = edge_case_scene(21, 12, &camera);
+    let settings = settings_with_background();
+    let weights = random_weights(22, camera.pixel_count());
+    let cpu = reference_gradients(&model, &camera, &settings, &weights);
+    let gpu = gpu_gradients(&ctx, &model, &camera, &settings, &weights, 1);
+    let worst = compare_gradients(&gpu, &cpu, 2e-3);
+    println!("worst scaled gradient error {worst:e}");
+    // Two renders accumulate into the same buffers: twice the gradient.
+    let doubled = gpu_gradients(&ctx, &model, &camera, &settings, &weights, 2);
+    let mut twice = cpu.clone();
+    for index in 0..model.len() {
+        for value in twice.parameters.parameters_mut(index) {
+            *value *= 2.0;
+        }
+        twice.mean2d_abs[index] = twice.mean2d_abs[index].map(|v| 2.0 * v);
+    }
+    compare_gradients(&doubled, &twice, 2e-3);
+}
+
+#[test]
+fn gpu_gradients_match_finite_differences() {
+    let Some(ctx) = context() else { return };
+    let camera = test_camera(32, 32);
+    let model = edge_case_scene(31, 4, &camera);
+    let settings = RenderSettings {
+        sh_degree: 2,
+        ..settings_with_background()
+    };
+    let weights = random_weights(32, camera.pixel_count());
+    let gpu = gpu_gradients(&ctx, &model, &camera, &settings, &weights, 1);
+    let gaussians = ReferenceGaussians::from_model(&model);
+    let weights64: Vec<[f64; 4]> = weights.iter().map(|w| w.map(f64::from)).collect();
+    let loss = |g: &ReferenceGaussians| -> (f64, Vec<Vec<u32>>) {
+        let forward = render_forward(g, &camera, &settings);
+        let value = forward
+            .image
+            .iter()
+            .zip(&weights64)
+            .map(|(p, w)| (0..4).map(|c| p[c] * w[c]).sum::<f64>())
+            .sum();
+        (value, forward.contributors)
+    };
+    let mut checked = 0;
+    for index in 0..gaussians.len() {
+        let analytic = flatten_gpu(&gpu.0, index);
+        let scale = analytic.iter().fold(1e-3f64, |m, v| m.max(v.abs()));
+        for (slot, &gpu_value) in analytic.iter().enumerate() {
+            let eps = 1e-6;
+            let mut plus = gaussians.clone();
+            *plus.parameters_mut(index)[slot] += eps;
+            let mut minus = gaussians.clone();
+            *minus.parameters_mut(index)[slot] -= eps;
+            let (lp, cp) = loss(&plus);
+            let (lm, cm) = loss(&minus);
+            if cp != cm {
+                continue; // a fragment crossed a threshold: no derivative here
+            }
+            let numeric = (lp - lm) / (2.0 * eps);
+            let error = (numeric - gpu_value).abs() / scale;
+            assert!(
+                error < 2e-3,
+                "gaussian {index} {}: gpu {gpu_value} numeric {numeric}",
+                parameter_name(slot),
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked > 200, "{checked} derivatives checked");
+}
+
+#[test]
+fn gpu_object_filter_renders_exactly_that_object() {
+    let Some(ctx) = context() else { return };
+    let mut renderer = Renderer::new(&ctx).unwrap();
+    let camera = test_camera(48, 32);
+    let model = two_object_scene(41, 6, &camera);
+    let reference = ReferenceGaussians::from_model(&model);
+    for id in [1u32, 2] {
+        let settings = RenderSettings {
+            filter: ObjectFilter::Object {
+                level: Level::Large,
+                id,
+            },
+            ..RenderSettings::default()
+        };
+        let gpu = render_gpu(&ctx, &mut renderer, &model, &camera, &settings);
+        let cpu = render_forward(&reference, &camera, &settings);
+        assert!(max_image_error(&gpu, &cpu.image) < 2e-4);
+        let (own, other) = if id == 1 {
+            (0..20, 28..48)
+        } else {
+            (28..48, 0..20)
+        };
+        let alpha = |columns: std::ops::Range<u32>| -> f32 {
+            (0..camera.height)
+                .flat_map(|y| {
+                    columns
+                        .clone()
+                        .map(move |x| (y * camera.width + x) as usize)
+                })
+                .map(|i| gpu[i][3])
+                .sum()
+        };
+        assert!(alpha(own) > 10.0, "object {id} is drawn");
+        assert_eq!(alpha(other), 0.0, "the other object is absent");
+    }
+    // A filter for an id no Gaussian has draws nothing.
+    let settings = RenderSettings {
+        filter: ObjectFilter::Object {
+            level: Level::Small,
+            id: 7,
+        },
+        ..RenderSettings::default()
+    };
+    let gpu = render_gpu(&ctx, &mut renderer, &model, &camera, &settings);
+    assert!(gpu.iter().all(|p| *p == [0.0; 4]));
+}
+
+#[test]
+fn gpu_empty_and_culled_scenes_show_background() {
+    let Some(ctx) = context() else { return };
+    let mut renderer = Renderer::new(&ctx).unwrap();
+    let camera = test_camera(20, 17);
+    let settings = settings_with_background();
+    let expected = [0.1, 0.4, 0.8, 0.0];
+    let empty = render_gpu(
+        &ctx,
+        &mut renderer,
+        &GaussianModel::default(),
+        &camera,
+        &settings,
+    );
+    assert_eq!(empty.len(), 20 * 17);
+    assert!(empty.iter().all(|p| *p == expected), "empty scene");
+    let model = random_scene(51, 30, &camera);
+    let culled = render_gpu(
+        &ctx,
+        &mut renderer,
+        &model,
+        &turned_around(&camera),
+        &settings,
+    );
+    assert!(culled.iter().all(|p| *p == expected), "everything culled");
+    // The same scene seen the right way round is not background.
+    let visible = render_gpu(&ctx, &mut renderer, &model, &camera, &settings);
+    assert!(visible.iter().any(|p| p[3] > 0.5));
+}
+
+#[test]
+fn gpu_intersection_overflow_is_reported_and_grown() {
+    let Some(ctx) = context() else { return };
+    let mut renderer = Renderer::new(&ctx).unwrap();
+    let camera = test_camera(64, 48);
+    // 300 Gaussians each covering every one of the 12 tiles: 3600 intersections, more than the
+    // initial 8 per Gaussian.
+    let mut model = random_scene(61, 300, &camera);
+    for (mean, log_scale) in model.means.iter().zip(model.log_scales.iter_mut()) {
+        *log_scale = [(40.0 * mean[2] / camera.fx).ln(); 3];
+    }
+    let settings = RenderSettings::default();
+    let gaussians = GpuGaussians::upload(&ctx, &model, model.len()).unwrap();
+    renderer.set_intersection_capacity(1);
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    let output = renderer
+        .forward(&ctx, &mut encoder, &gaussians, &camera, &settings)
+        .unwrap();
+    ctx.queue.submit([encoder.finish()]);
+    let (needed, held) = output.read_intersection_count(&ctx).unwrap();
+    drop(output);
+    assert!(
+        needed > held,
+        "test scene must overflow: {needed} <= {held}"
+    );
+    let report = renderer.sync_capacity(&ctx).unwrap();
+    assert!(report.overflowed);
+    assert_eq!(report.peak_intersections, needed);
+    assert!(report.capacity >= needed);
+    renderer.set_intersection_capacity(1);
+    let output = renderer
+        .render_checked(&ctx, &gaussians, &camera, &settings)
+        .unwrap();
+    let gpu = output.read_image(&ctx).unwrap();
+    let cpu = render_forward(&ReferenceGaussians::from_model(&model), &camera, &settings);
+    assert!(max_image_error(&gpu, &cpu.image) < 2e-4);
+}
+
+#[test]
+fn gpu_gradients_with_compare_and_swap_atomics_match_reference() {
+    let Some(mut ctx) = context() else { return };
+    // Kernels pick the CAS loop when the device reports no native f32 atomics.
+    ctx.features.remove(wgpu::Features::SHADER_FLOAT32_ATOMIC);
+    let camera = test_camera(40, 36);
+    let model = edge_case_scene(71, 12, &camera);
+    let settings = settings_with_background();
+    let weights = random_weights(72, camera.pixel_count());
+    let cpu = reference_gradients(&model, &camera, &settings, &weights);
+    let gpu = gpu_gradients(&ctx, &model, &camera, &settings, &weights, 1);
+    compare_gradients(&gpu, &cpu, 2e-3);
+}
