@@ -169,7 +169,7 @@ impl ModelText {
 
     fn keypoints(&self, line_number: usize, line: &str) -> Result<Vec<ColmapKeypoint>, SceneError> {
         let tokens: Vec<&str> = line.split_whitespace().collect();
-        if tokens.len() % 3 != 0 {
+        if !tokens.len().is_multiple_of(3) {
             return Err(self.error(line_number, "keypoints must be X Y POINT3D_ID triples"));
         }
         tokens
@@ -188,7 +188,7 @@ impl ModelText {
 
     fn point(&self, line_number: usize, line: &str) -> Result<ColmapPoint, SceneError> {
         let tokens: Vec<&str> = line.split_whitespace().collect();
-        if tokens.len() < 8 || (tokens.len() - 8) % 2 != 0 {
+        if tokens.len() < 8 || !(tokens.len() - 8).is_multiple_of(2) {
             return Err(self.error(
                 line_number,
                 "expected POINT3D_ID X Y Z R G B ERROR then IMAGE_ID POINT2D_IDX pairs",
