@@ -361,3 +361,20 @@ fn image_referencing_an_unknown_camera_is_rejected() {
     let error = load_scene(dir.path(), &LoadOptions::default()).unwrap_err();
     assert!(error.to_string().contains("camera 1"), "{error}");
 }
+
+#[test]
+fn colmap_image_names_may_not_leave_the_dataset() {
+    let dir = tempfile::tempdir().unwrap();
+    synthetic::write_colmap(dir.path(), &spec(), ColmapEncoding::Text).unwrap();
+    let path = dir.path().join("sparse/0/images.txt");
+    let text = fs::read_to_string(&path)
+        .unwrap()
+        .replace(" frame_0001.png", " ../../frame_0001.png");
+    fs::write(&path, text).unwrap();
+    let error = load_scene(dir.path(), &LoadOptions::default()).unwrap_err();
+    assert!(matches!(error, SceneError::Parse { .. }), "{error}");
+    assert!(
+        error.to_string().contains("../../frame_0001.png"),
+        "{error}"
+    );
+}

@@ -28,6 +28,16 @@ pub struct UnpackLimits {
     pub max_files: u64,
 }
 
+impl Default for UnpackLimits {
+    /// 16 GiB and 100 000 entries: room for a few thousand full-resolution photos with masks.
+    fn default() -> Self {
+        Self {
+            max_unpacked_bytes: 16 << 30,
+            max_files: 100_000,
+        }
+    }
+}
+
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct UnpackStats {
     /// Regular files written.

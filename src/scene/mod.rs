@@ -6,6 +6,7 @@
 pub mod archive;
 pub mod blender;
 pub mod colmap;
+mod dataset_path;
 mod dataset_root;
 mod images;
 pub mod masks;

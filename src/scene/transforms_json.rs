@@ -2,12 +2,13 @@
 
 use std::fs;
 use std::io;
-use std::path::{Component, Path, PathBuf};
+use std::path::{Path, PathBuf};
 
 use glam::{Mat4, Vec4};
 use serde::de::DeserializeOwned;
 
 use super::SceneError;
+use super::dataset_path::contained_relative_path;
 
 /// Reads and parses a JSON file named `file_name` under `root`.
 pub fn read_json<T: DeserializeOwned>(root: &Path, file_name: &str) -> Result<T, SceneError> {
@@ -70,26 +71,10 @@ pub fn relative_file_path(
     file: &str,
     frame_index: usize,
 ) -> Result<PathBuf, SceneError> {
-    let mut relative = PathBuf::new();
-    for component in Path::new(file_path).components() {
-        match component {
-            Component::Normal(part) => relative.push(part),
-            Component::CurDir => {}
-            Component::ParentDir | Component::RootDir | Component::Prefix(_) => {
-                return Err(SceneError::Parse {
-                    file: file.to_string(),
-                    message: format!(
-                        "frame {frame_index}: file_path {file_path:?} must stay inside the dataset"
-                    ),
-                });
-            }
-        }
-    }
-    if relative.as_os_str().is_empty() {
-        return Err(SceneError::Parse {
-            file: file.to_string(),
-            message: format!("frame {frame_index}: file_path is empty"),
-        });
-    }
-    Ok(relative)
+    contained_relative_path(file_path).ok_or_else(|| SceneError::Parse {
+        file: file.to_string(),
+        message: format!(
+            "frame {frame_index}: file_path {file_path:?} must be a non-empty path inside the dataset"
+        ),
+    })
 }

@@ -18,6 +18,7 @@ pub use model::{
     ColmapCamera, ColmapImage, ColmapKeypoint, ColmapModel, ColmapPoint, ColmapTrackElement,
 };
 
+use super::dataset_path::contained_relative_path;
 use super::{Frame, LoadOptions, Scene, SceneError, SceneFormat, SparsePoints, TrackObservation};
 
 /// Folder (relative to the dataset root) holding the images a COLMAP model names.
@@ -136,9 +137,16 @@ pub fn scene_from_model(
                 message: format!("image id {} appears twice", image.id),
             });
         }
+        let name_path = contained_relative_path(&image.name).ok_or_else(|| SceneError::Parse {
+            file: images_file(),
+            message: format!(
+                "image {}: name {:?} must be a path inside the images folder",
+                image.id, image.name
+            ),
+        })?;
         frames.push(Frame {
             name: image.name.clone(),
-            image_path: Path::new(IMAGES_DIR).join(&image.name),
+            image_path: Path::new(IMAGES_DIR).join(name_path),
             intrinsics,
             world_from_camera: world_from_camera(image.qvec, image.tvec),
             time: None,
