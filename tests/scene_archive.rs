@@ -307,3 +307,18 @@ fn duplicate_entries_do_not_overwrite() {
     );
     assert_eq!(read(&workspace.dest, "a.txt"), b"first");
 }
+
+#[test]
+fn long_tar_names_are_unpacked_under_their_full_name() {
+    let long_name = format!("scene/{}/frame.png", "nested_folder_name".repeat(8));
+    let mut builder = tar::Builder::new(Vec::new());
+    let mut header = tar::Header::new_gnu();
+    header.set_size(3);
+    header.set_mode(0o644);
+    builder
+        .append_data(&mut header, &long_name, &b"png"[..])
+        .unwrap();
+    let (result, workspace) = unpack(&builder.into_inner().unwrap());
+    assert_eq!(result.unwrap().files, 1);
+    assert_eq!(read(&workspace.dest, &long_name), b"png");
+}

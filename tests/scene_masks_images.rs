@@ -241,3 +241,35 @@ fn synthetic_objects_have_distinct_small_ids() {
         .collect();
     assert_eq!(ids, vec![1, 2, 3]);
 }
+
+#[test]
+fn source_level_picks_the_nearest_given_level() {
+    use segsplat::scene::MaskLayout;
+    let layout_with = |levels: &[Level]| {
+        let mut layout = MaskLayout::default();
+        for level in levels {
+            layout.paths[level.index()] = Some(Vec::new());
+        }
+        layout
+    };
+    let sources = |levels: &[Level]| {
+        let layout = layout_with(levels);
+        Level::ALL.map(|level| layout.source_level(level))
+    };
+    use Level::{Large, Middle, Small};
+    assert_eq!(sources(&[]), [None; 3]);
+    assert_eq!(sources(&[Large]), [Some(Large); 3]);
+    assert_eq!(sources(&[Small]), [Some(Small); 3]);
+    assert_eq!(
+        sources(&[Small, Large]),
+        [Some(Small), Some(Small), Some(Large)]
+    );
+    assert_eq!(
+        sources(&[Middle, Large]),
+        [Some(Middle), Some(Middle), Some(Large)]
+    );
+    assert_eq!(
+        sources(&[Small, Middle, Large]),
+        [Some(Small), Some(Middle), Some(Large)]
+    );
+}

@@ -29,58 +29,40 @@ struct FrameEntry {
     time: Option<f32>,
 }
 
-/// Frames come in split order (train, val, test), each in file order.
+/// Frames come in split order (train, val, test), each in file order. The field of view is the
+/// train file's; every split shares it, as in the NeRF synthetic data.
 pub fn load_blender(root: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
-    let mut frames = Vec::new();
-    let mut field_of_view = None;
-    let splits = [
-        (TRAIN_TRANSFORMS_FILE, FrameSplit::Train),
-        (VAL_TRANSFORMS_FILE, FrameSplit::Val),
-        (TEST_TRANSFORMS_FILE, FrameSplit::Test),
-    ];
-    for (file, split) in splits {
-        if split != FrameSplit::Train && !root.join(file).is_file() {
-            continue;
-        }
-        let transforms: TransformsFile = read_json(root, file)?;
-        field_of_view.get_or_insert((transforms.camera_angle_x, transforms.camera_angle_y));
-        for (frame_index, entry) in transforms.frames.iter().enumerate() {
-            let image_path = image_path(root, &entry.file_path, file, frame_index)?;
-            frames.push(Frame {
-                name: slash_separated(&image_path),
-                image_path,
-                // Filled in below once the image size is known.
-                intrinsics: Intrinsics {
-                    width: 0,
-                    height: 0,
-                    fx: 0.0,
-                    fy: 0.0,
-                    cx: 0.0,
-                    cy: 0.0,
-                    model: "PINHOLE".to_string(),
-                    distortion: Vec::new(),
-                },
-                world_from_camera: opencv_world_from_camera(
-                    &entry.transform_matrix,
-                    file,
-                    frame_index,
-                )?,
-                time: entry.time,
-                source_id: None,
-                split: Some(split),
-            });
-        }
-    }
-    let Some(first) = frames.first() else {
+    let train: TransformsFile = read_json(root, TRAIN_TRANSFORMS_FILE)?;
+    let Some(first_entry) = train.frames.first() else {
         return Err(SceneError::Inconsistent {
             file: TRAIN_TRANSFORMS_FILE.to_string(),
             message: "frames is empty".to_string(),
         });
     };
-    let (angle_x, angle_y) = field_of_view.unwrap_or_default();
-    let intrinsics = intrinsics_from_first_image(root, &first.image_path, angle_x, angle_y)?;
-    for frame in &mut frames {
-        frame.intrinsics = intrinsics.clone();
+    let first_image = image_path(root, &first_entry.file_path, TRAIN_TRANSFORMS_FILE, 0)?;
+    let intrinsics = intrinsics_from_first_image(
+        root,
+        &first_image,
+        train.camera_angle_x,
+        train.camera_angle_y,
+    )?;
+    let mut frames = Vec::new();
+    append_frames(
+        root,
+        &train,
+        TRAIN_TRANSFORMS_FILE,
+        FrameSplit::Train,
+        &intrinsics,
+        &mut frames,
+    )?;
+    for (file, split) in [
+        (VAL_TRANSFORMS_FILE, FrameSplit::Val),
+        (TEST_TRANSFORMS_FILE, FrameSplit::Test),
+    ] {
+        if root.join(file).is_file() {
+            let transforms: TransformsFile = read_json(root, file)?;
+            append_frames(root, &transforms, file, split, &intrinsics, &mut frames)?;
+        }
     }
     Ok(Scene {
         root: root.to_path_buf(),
@@ -90,6 +72,33 @@ pub fn load_blender(root: &Path, options: &LoadOptions) -> Result<Scene, SceneEr
         masks: None,
         background: options.background,
     })
+}
+
+fn append_frames(
+    root: &Path,
+    transforms: &TransformsFile,
+    file: &str,
+    split: FrameSplit,
+    intrinsics: &Intrinsics,
+    frames: &mut Vec<Frame>,
+) -> Result<(), SceneError> {
+    for (frame_index, entry) in transforms.frames.iter().enumerate() {
+        let image_path = image_path(root, &entry.file_path, file, frame_index)?;
+        frames.push(Frame {
+            name: slash_separated(&image_path),
+            image_path,
+            intrinsics: intrinsics.clone(),
+            world_from_camera: opencv_world_from_camera(
+                &entry.transform_matrix,
+                file,
+                frame_index,
+            )?,
+            time: entry.time,
+            source_id: None,
+            split: Some(split),
+        });
+    }
+    Ok(())
 }
 
 /// The image file for a `file_path`: as given when it exists, else with `.png` appended
