@@ -151,7 +151,15 @@ fn nerfstudio_loads_with_opencv_poses() {
     synthetic::write_nerfstudio(dir.path(), &spec).unwrap();
     let scene = load_scene(dir.path(), &LoadOptions::default()).unwrap();
     assert_eq!(scene.format, SceneFormat::Nerfstudio);
-    assert!(scene.points.is_none());
+    // The writer ships the sphere surface points as sparse_pc.ply (8-bit colours).
+    let points = scene.points.as_ref().unwrap();
+    assert_eq!(points.positions.len(), 144);
+    assert!(points.tracks.iter().all(Vec::is_empty));
+    let objects = synthetic::synthetic_objects();
+    let first_color = objects[0].color.map(|channel| f32::from(channel) / 255.0);
+    assert_eq!(points.colors[0].to_array(), first_color);
+    let on_first_sphere = (points.positions[0] - objects[0].center).length();
+    assert!((on_first_sphere - objects[0].radius).abs() < 1e-5);
     let poses = synthetic_world_from_cameras(&spec);
     let expected = synthetic_intrinsics(&spec);
     for (index, frame) in scene.frames.iter().enumerate() {
@@ -173,7 +181,7 @@ fn nerfstudio_loads_with_opencv_poses() {
         assert_pose_close(frame.world_from_camera, poses[index], &frame.name);
     }
     let summary = validate_scene(&scene).unwrap();
-    assert_eq!(summary.sparse_point_count, 0);
+    assert_eq!(summary.sparse_point_count, 144);
     assert_eq!(summary.frame_count, spec.frame_count as u32);
 }
 

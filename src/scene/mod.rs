@@ -11,6 +11,7 @@ mod dataset_root;
 mod images;
 pub mod masks;
 pub mod nerfstudio;
+pub mod point_ply;
 pub mod synthetic;
 mod transforms_json;
 mod types;

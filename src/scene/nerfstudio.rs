@@ -1,10 +1,13 @@
 //! nerfstudio datasets: `transforms.json` with intrinsics given globally or per frame and
-//! camera-to-world poses in the OpenGL convention. `ply_file_path` points are not read.
+//! camera-to-world poses in the OpenGL convention. The optional `ply_file_path` point cloud
+//! (in the same world frame as the poses) becomes the scene's sparse points, without tracks.
 
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
+use super::dataset_path::contained_relative_path;
+use super::point_ply::read_point_ply;
 use super::transforms_json::{opencv_world_from_camera, read_json, relative_file_path};
 use super::{Frame, Intrinsics, LoadOptions, Scene, SceneError, SceneFormat};
 
@@ -59,6 +62,7 @@ struct TransformsFile {
     #[serde(flatten)]
     camera: CameraFields,
     frames: Vec<FrameEntry>,
+    ply_file_path: Option<String>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -102,11 +106,24 @@ pub fn load_nerfstudio(root: &Path, options: &LoadOptions) -> Result<Scene, Scen
             message: format!("image {} is listed twice", pair[0].name),
         });
     }
+    let points = match &transforms.ply_file_path {
+        Some(ply_file_path) => {
+            let relative =
+                contained_relative_path(ply_file_path).ok_or_else(|| SceneError::Parse {
+                    file: TRANSFORMS_FILE.to_string(),
+                    message: format!(
+                        "ply_file_path {ply_file_path:?} must be a path inside the dataset"
+                    ),
+                })?;
+            Some(read_point_ply(root, &relative)?)
+        }
+        None => None,
+    };
     Ok(Scene {
         root: root.to_path_buf(),
         format: SceneFormat::Nerfstudio,
         frames,
-        points: None,
+        points,
         masks: None,
         background: options.background,
     })

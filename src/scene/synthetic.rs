@@ -19,8 +19,9 @@ use super::colmap::{
     ColmapPoint, ColmapTrackElement,
 };
 use super::masks::mask_path;
+use super::point_ply::write_point_ply;
 use super::transforms_json::opencv_from_opengl_camera;
-use super::{Intrinsics, Level, blender, nerfstudio};
+use super::{Intrinsics, Level, SparsePoints, blender, nerfstudio};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SyntheticImageFormat {
@@ -104,6 +105,7 @@ pub const SYNTHETIC_BACKGROUND: [u8; 3] = [40, 40, 40];
 const CAMERA_DISTANCE: f32 = 4.0;
 const CAMERA_HEIGHT: f32 = 1.5;
 const POINTS_PER_OBJECT: usize = 48;
+const NERFSTUDIO_POINTS_FILE: &str = "sparse_pc.ply";
 
 /// Pinhole intrinsics shared by every synthetic frame (horizontal field of view about 58 degrees).
 pub fn synthetic_intrinsics(spec: &SyntheticSpec) -> Intrinsics {
@@ -245,6 +247,22 @@ fn surface_points() -> Vec<(usize, Vec3)> {
             })
         })
         .collect()
+}
+
+/// The surface points with their object colours, without tracks.
+fn surface_point_cloud() -> SparsePoints {
+    let objects = synthetic_objects();
+    let points = surface_points();
+    SparsePoints {
+        colors: points
+            .iter()
+            .map(|(object_index, _)| {
+                Vec3::from_array(objects[*object_index].color.map(|c| f32::from(c) / 255.0))
+            })
+            .collect(),
+        positions: points.iter().map(|(_, position)| *position).collect(),
+        tracks: vec![Vec::new(); points.len()],
+    }
 }
 
 /// Pixel position of `point` in a view, when the view sees that point unoccluded.
@@ -401,7 +419,8 @@ fn opengl_matrix_rows(world_from_camera: Mat4) -> Vec<Vec<f64>> {
 }
 
 /// A nerfstudio dataset: `transforms.json` (global OPENCV intrinsics with zero distortion,
-/// frames in reverse order) and `images/frame_NNNN.<ext>`.
+/// frames in reverse order), `images/frame_NNNN.<ext>` and the surface points as
+/// `sparse_pc.ply`.
 pub fn write_nerfstudio(dir: &Path, spec: &SyntheticSpec) -> io::Result<()> {
     let intrinsics = synthetic_intrinsics(spec);
     let mut frames = Vec::new();
@@ -416,7 +435,9 @@ pub fn write_nerfstudio(dir: &Path, spec: &SyntheticSpec) -> io::Result<()> {
         }));
     }
     frames.reverse();
+    write_point_ply(&dir.join(NERFSTUDIO_POINTS_FILE), &surface_point_cloud())?;
     let transforms = json!({
+        "ply_file_path": NERFSTUDIO_POINTS_FILE,
         "camera_model": "OPENCV",
         "fl_x": intrinsics.fx, "fl_y": intrinsics.fy,
         "cx": intrinsics.cx, "cy": intrinsics.cy,
