@@ -29,7 +29,9 @@ pub enum InputErrorClass {
 
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
-    #[error("no dataset found: expected COLMAP (sparse/0 or sparse), nerfstudio transforms.json or Blender transforms_train.json{found}")]
+    #[error(
+        "no dataset found: expected COLMAP (sparse/0 or sparse), nerfstudio transforms.json or Blender transforms_train.json{found}"
+    )]
     UnknownFormat { found: String },
     #[error("{file}: {message}")]
     Parse { file: String, message: String },
