@@ -3,6 +3,11 @@
 
 pub mod context;
 pub mod kernel;
+pub mod scan;
+pub mod sort;
+pub mod validation;
 
 pub use context::{AdapterFilter, AdapterReport, GpuContext, GpuError};
 pub use kernel::Kernel;
+pub use scan::ExclusiveScan;
+pub use sort::RadixSort;

@@ -1,0 +1,41 @@
+// Shared by the exclusive-scan kernels (scan_blocks.wgsl, scan_add.wgsl).
+//
+// A scan runs in levels: level 0 scans the input in blocks of SCAN_BLOCK elements and writes each
+// block's total to the next level's input; the top level fits in one block; then every level below
+// the top adds the scanned block totals back. Element counts per level live in a storage buffer
+// (written on the CPU, or on the GPU by a plan kernel when the count is only known there):
+// `level_counts[params.counts_index]` is how many inputs this level reads (reads beyond are 0),
+// `level_counts[params.counts_index + 1]` how many outputs it writes.
+
+const SCAN_WORKGROUP: u32 = 256u;
+const SCAN_ITEMS_PER_THREAD: u32 = 4u;
+const SCAN_BLOCK: u32 = 1024u;
+
+struct ScanLevelParams {
+    counts_index: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
+}
+
+var<workgroup> scan_thread_totals: array<u32, SCAN_WORKGROUP>;
+
+// Exclusive prefix sum of `value` over the workgroup's threads (Hillis-Steele in shared memory).
+fn workgroup_exclusive_sum(thread: u32, value: u32) -> u32 {
+    scan_thread_totals[thread] = value;
+    workgroupBarrier();
+    for (var offset = 1u; offset < SCAN_WORKGROUP; offset = offset << 1u) {
+        var earlier = 0u;
+        if thread >= offset {
+            earlier = scan_thread_totals[thread - offset];
+        }
+        workgroupBarrier();
+        scan_thread_totals[thread] += earlier;
+        workgroupBarrier();
+    }
+    return scan_thread_totals[thread] - value;
+}
+
+fn flat_workgroup_index(workgroup: vec3<u32>, workgroups: vec3<u32>) -> u32 {
+    return workgroup.x + workgroup.y * workgroups.x;
+}

@@ -1,0 +1,108 @@
+//! `ExclusiveScan` against a CPU prefix sum (exact: integer sums, wrapping like the GPU).
+
+mod gpu_support;
+
+use gpu_support::{gpu_context, new_encoder, seeded_rng, storage_buffer, submit};
+use rand::Rng;
+use segsplat::gpu::ExclusiveScan;
+
+fn cpu_exclusive_scan(input: &[u32]) -> Vec<u32> {
+    let mut output = Vec::with_capacity(input.len() + 1);
+    let mut total = 0u32;
+    output.push(0);
+    for &value in input {
+        total = total.wrapping_add(value);
+        output.push(total);
+    }
+    output
+}
+
+/// Scans `input` into a buffer with room for `count + 1 + 5` values, the extra five holding a
+/// sentinel that the scan must leave alone.
+fn check_scan(scan: &ExclusiveScan, input: &[u32]) {
+    let Some(ctx) = gpu_context() else { return };
+    const SENTINEL: u32 = 0xdead_beef;
+    let input_buffer = storage_buffer(ctx, "scan input", input);
+    let output_buffer = storage_buffer(ctx, "scan output", &vec![SENTINEL; input.len() + 6]);
+    let mut encoder = new_encoder(ctx);
+    scan.encode(
+        ctx,
+        &mut encoder,
+        &input_buffer,
+        &output_buffer,
+        input.len() as u32,
+    );
+    submit(ctx, encoder);
+    let output: Vec<u32> = ctx.read_vec(&output_buffer).unwrap();
+    let expected = cpu_exclusive_scan(input);
+    let first_mismatch = (0..expected.len()).find(|&i| output[i] != expected[i]);
+    assert_eq!(
+        first_mismatch,
+        None,
+        "count {}: first mismatch at {:?}",
+        input.len(),
+        first_mismatch.map(|i| (i, output[i], expected[i]))
+    );
+    assert!(
+        output[expected.len()..expected.len() + 5]
+            .iter()
+            .all(|&v| v == SENTINEL),
+        "count {}: scan wrote beyond count + 1",
+        input.len()
+    );
+}
+
+#[test]
+fn scan_matches_cpu_for_block_boundary_and_large_counts() {
+    let Some(ctx) = gpu_context() else { return };
+    let scan = ExclusiveScan::new(ctx).unwrap();
+    let mut rng = seeded_rng(7);
+    for count in [
+        0usize, 1, 255, 256, 257, 1023, 1024, 1025, 100_000, 1_000_000,
+    ] {
+        let input: Vec<u32> = (0..count).map(|_| rng.random_range(0..1000)).collect();
+        check_scan(&scan, &input);
+    }
+}
+
+#[test]
+fn scan_wraps_full_range_values_like_cpu() {
+    let Some(ctx) = gpu_context() else { return };
+    let scan = ExclusiveScan::new(ctx).unwrap();
+    let mut rng = seeded_rng(11);
+    let input: Vec<u32> = (0..70_001).map(|_| rng.random()).collect();
+    check_scan(&scan, &input);
+}
+
+#[test]
+fn three_level_scan_matches_cpu() {
+    let Some(ctx) = gpu_context() else { return };
+    let scan = ExclusiveScan::new(ctx).unwrap();
+    // More than 1024 * 1024 + 1 outputs needs a third level.
+    let input: Vec<u32> = (0..1_100_000u32).map(|i| i % 7).collect();
+    check_scan(&scan, &input);
+}
+
+#[test]
+fn scans_sharing_one_encoder_use_their_own_counts() {
+    let Some(ctx) = gpu_context() else { return };
+    let scan = ExclusiveScan::new(ctx).unwrap();
+    let large: Vec<u32> = (0..300_000u32).map(|i| i % 5).collect();
+    let small: Vec<u32> = (0..3_000u32).map(|i| i % 3 + 1).collect();
+    let large_in = storage_buffer(ctx, "large", &large);
+    let small_in = storage_buffer(ctx, "small", &small);
+    let large_out = storage_buffer(ctx, "large out", &vec![0u32; large.len() + 1]);
+    let small_out = storage_buffer(ctx, "small out", &vec![0u32; small.len() + 1]);
+    let mut encoder = new_encoder(ctx);
+    scan.encode(ctx, &mut encoder, &large_in, &large_out, large.len() as u32);
+    scan.encode(ctx, &mut encoder, &small_in, &small_out, small.len() as u32);
+    submit(ctx, encoder);
+    assert_eq!(
+        ctx.read_vec::<u32>(&large_out).unwrap(),
+        cpu_exclusive_scan(&large)
+    );
+    assert_eq!(
+        ctx.read_vec::<u32>(&small_out).unwrap(),
+        cpu_exclusive_scan(&small)
+    );
+}

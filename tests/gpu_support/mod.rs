@@ -1,0 +1,61 @@
+//! Shared set-up for the GPU kernel tests (`tests/gpu_*.rs`): one adapter context per test binary
+//! and buffer helpers.
+#![allow(dead_code)]
+
+use std::sync::OnceLock;
+
+use segsplat::gpu::GpuContext;
+use wgpu::util::DeviceExt;
+
+/// The test context, or `None` (with a printed reason) when no adapter exists and
+/// `SEGSPLAT_SKIP_GPU_TESTS=1` allows skipping. Without that variable a missing adapter fails.
+pub fn gpu_context() -> Option<&'static GpuContext> {
+    static CONTEXT: OnceLock<Result<GpuContext, String>> = OnceLock::new();
+    match CONTEXT.get_or_init(|| GpuContext::new_default().map_err(|error| error.to_string())) {
+        Ok(ctx) => Some(ctx),
+        Err(error) if std::env::var("SEGSPLAT_SKIP_GPU_TESTS").as_deref() == Ok("1") => {
+            eprintln!("skipping GPU test: no adapter ({error})");
+            None
+        }
+        Err(error) => panic!("no GPU adapter (set SEGSPLAT_SKIP_GPU_TESTS=1 to skip): {error}"),
+    }
+}
+
+/// A storage buffer holding `data`, readable back by the tests.
+pub fn storage_buffer<T: bytemuck::Pod>(ctx: &GpuContext, label: &str, data: &[T]) -> wgpu::Buffer {
+    let bytes: &[u8] = bytemuck::cast_slice(data);
+    if bytes.is_empty() {
+        return ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: 16,
+            usage: usage(),
+            mapped_at_creation: false,
+        });
+    }
+    ctx.device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: bytes,
+            usage: usage(),
+        })
+}
+
+fn usage() -> wgpu::BufferUsages {
+    wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST
+}
+
+pub fn new_encoder(ctx: &GpuContext) -> wgpu::CommandEncoder {
+    ctx.device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("test"),
+        })
+}
+
+pub fn submit(ctx: &GpuContext, encoder: wgpu::CommandEncoder) {
+    ctx.queue.submit([encoder.finish()]);
+}
+
+pub fn seeded_rng(seed: u64) -> rand_chacha::ChaCha8Rng {
+    use rand::SeedableRng;
+    rand_chacha::ChaCha8Rng::seed_from_u64(seed)
+}
