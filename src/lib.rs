@@ -22,5 +22,6 @@ pub mod proto {
     tonic::include_proto!("segsplat.v1");
 
     /// Encoded file descriptors, for the gRPC reflection service.
-    pub const FILE_DESCRIPTOR_SET: &[u8] = tonic::include_file_descriptor_set!("segsplat_descriptor");
+    pub const FILE_DESCRIPTOR_SET: &[u8] =
+        tonic::include_file_descriptor_set!("segsplat_descriptor");
 }

@@ -24,7 +24,9 @@ pub enum GpuError {
     Map(#[from] wgpu::BufferAsyncError),
     #[error("GPU reported an error: {0}")]
     Device(String),
-    #[error("{what} needs {needed_bytes} bytes in one storage binding but the adapter allows {limit_bytes}")]
+    #[error(
+        "{what} needs {needed_bytes} bytes in one storage binding but the adapter allows {limit_bytes}"
+    )]
     BindingTooLarge {
         what: String,
         needed_bytes: u64,
@@ -52,7 +54,10 @@ impl AdapterFilter {
             .is_none_or(|needle| info.name.to_lowercase().contains(&needle.to_lowercase()));
         let backend = backend_name(info.backend);
         let backend_ok = self.backends.is_empty()
-            || self.backends.iter().any(|b| b.eq_ignore_ascii_case(backend));
+            || self
+                .backends
+                .iter()
+                .any(|b| b.eq_ignore_ascii_case(backend));
         name_ok && backend_ok
     }
 
@@ -90,7 +95,9 @@ impl AdapterReport {
             name: info.name.clone(),
             backend: backend_name(info.backend).to_string(),
             device_type: format!("{:?}", info.device_type),
-            driver: format!("{} {}", info.driver, info.driver_info).trim().to_string(),
+            driver: format!("{} {}", info.driver, info.driver_info)
+                .trim()
+                .to_string(),
             is_software: info.device_type == wgpu::DeviceType::Cpu,
             max_storage_buffer_binding_bytes: limits.max_storage_buffer_binding_size,
             max_buffer_bytes: limits.max_buffer_size,
@@ -121,13 +128,14 @@ fn new_instance() -> wgpu::Instance {
 /// All adapters wgpu can see, hardware first.
 pub fn enumerate_adapters() -> Vec<(wgpu::Adapter, AdapterReport)> {
     let instance = new_instance();
-    let mut adapters: Vec<_> = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()))
-        .into_iter()
-        .map(|adapter| {
-            let report = AdapterReport::new(&adapter);
-            (adapter, report)
-        })
-        .collect();
+    let mut adapters: Vec<_> =
+        pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()))
+            .into_iter()
+            .map(|adapter| {
+                let report = AdapterReport::new(&adapter);
+                (adapter, report)
+            })
+            .collect();
     adapters.sort_by_key(|(_, report)| report.is_software);
     adapters
 }
@@ -215,7 +223,8 @@ impl GpuContext {
     }
 
     pub fn has_float32_atomics(&self) -> bool {
-        self.features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC)
+        self.features
+            .contains(wgpu::Features::SHADER_FLOAT32_ATOMIC)
     }
 
     pub fn has_subgroups(&self) -> bool {
@@ -252,7 +261,9 @@ impl GpuContext {
         });
         let mut encoder = self
             .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("readback"),
+            });
         encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size_bytes);
         self.queue.submit([encoder.finish()]);
         let slice = staging.slice(..);
