@@ -1,1 +1,3 @@
-//! eval: see DESIGN.md.
+//! Evaluation: image quality of held-out views (segmentation metrics arrive with the pipeline).
+
+pub mod image_metrics;

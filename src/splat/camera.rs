@@ -122,6 +122,7 @@ mod tests {
             world_from_camera,
             time: None,
             source_id: None,
+            split: None,
         }
     }
 

@@ -26,8 +26,9 @@ pub struct DensifyConfig {
     pub percent_dense: f32,
     /// Gaussians with opacity below this are pruned.
     pub min_opacity: f32,
-    /// Prune Gaussians whose projected radius exceeded this many pixels (None: no screen test).
-    pub max_screen_radius_px: Option<f32>,
+    /// Prune Gaussians whose projected radius exceeded this fraction of the image's longer side
+    /// (gsplat's `prune_scale2d`; None: no screen test).
+    pub max_screen_radius_fraction: Option<f32>,
     /// Prune Gaussians whose largest scale exceeds this fraction of the extent (None: no test).
     pub max_world_scale_fraction: Option<f32>,
     /// Children per split (3DGS: 2); their scale is the parent's / (0.8 * children).
@@ -40,7 +41,7 @@ impl Default for DensifyConfig {
             gradient_threshold: 0.0007,
             percent_dense: 0.01,
             min_opacity: 0.005,
-            max_screen_radius_px: None,
+            max_screen_radius_fraction: None,
             max_world_scale_fraction: None,
             split_children: 2,
         }
@@ -54,8 +55,8 @@ pub struct DensifyStats {
     pub gradient_sums: Vec<f32>,
     /// Renders in which the Gaussian was visible.
     pub visible_counts: Vec<u32>,
-    /// Largest projected radius in pixels.
-    pub max_radii_px: Vec<f32>,
+    /// Largest projected radius as a fraction of the image's longer side.
+    pub max_radii: Vec<f32>,
 }
 
 /// Where each output Gaussian comes from.
@@ -223,8 +224,8 @@ pub fn plan_densification<R: Rng>(
             }
         }
         let too_big_on_screen = config
-            .max_screen_radius_px
-            .is_some_and(|limit| stats.max_radii_px.get(i).copied().unwrap_or(0.0) > limit);
+            .max_screen_radius_fraction
+            .is_some_and(|limit| stats.max_radii.get(i).copied().unwrap_or(0.0) > limit);
         let too_big_in_world = config
             .max_world_scale_fraction
             .is_some_and(|fraction| max_scale > fraction * scene_extent);
@@ -316,7 +317,7 @@ mod tests {
         DensifyStats {
             gradient_sums: gradients.iter().map(|g| g * 2.0).collect(),
             visible_counts: vec![2; gradients.len()],
-            max_radii_px: vec![1.0; gradients.len()],
+            max_radii: vec![0.01; gradients.len()],
         }
     }
 

@@ -161,7 +161,7 @@ pub struct GaussianParameterBuffers {
 }
 
 impl GaussianParameterBuffers {
-    fn new(ctx: &GpuContext, prefix: &str, capacity: usize) -> Result<Self, ModelError> {
+    pub fn new(ctx: &GpuContext, prefix: &str, capacity: usize) -> Result<Self, ModelError> {
         let rest_words = SH_REST_COEFFICIENTS_PER_GROUP * 3;
         Ok(Self {
             means: create_per_gaussian(ctx, &format!("{prefix}.means"), 3, capacity)?,
@@ -194,6 +194,32 @@ impl GaussianParameterBuffers {
             &self.sh_rest[1],
             &self.sh_rest[2],
         ]
+    }
+    /// Writes `model`'s parameters (not its object ids) into the first `model.len()` slots.
+    /// Also used for optimiser moments, which share the parameters' layout.
+    pub fn write(&self, ctx: &GpuContext, model: &GaussianModel) -> Result<(), ModelError> {
+        let host = HostArrays::from_model(model);
+        let queue = &ctx.queue;
+        queue.write_buffer(&self.means, 0, bytemuck::cast_slice(&host.means));
+        queue.write_buffer(&self.log_scales, 0, bytemuck::cast_slice(&host.log_scales));
+        queue.write_buffer(&self.rotations, 0, bytemuck::cast_slice(&host.rotations));
+        queue.write_buffer(
+            &self.opacity_logits,
+            0,
+            bytemuck::cast_slice(&host.opacity_logits),
+        );
+        queue.write_buffer(&self.sh_dc, 0, bytemuck::cast_slice(&host.sh_dc));
+        for (buffer, words) in self.sh_rest.iter().zip(&host.sh_rest) {
+            queue.write_buffer(buffer, 0, bytemuck::cast_slice(words));
+        }
+        Ok(())
+    }
+
+    /// Reads the first `count` entries back as a model-shaped struct (object ids `NONE`).
+    pub fn download(&self, ctx: &GpuContext, count: usize) -> Result<GaussianModel, ModelError> {
+        let mut model = download_parameters(ctx, self, count)?;
+        model.object_ids = vec![[OBJECT_NONE; 3]; count];
+        Ok(model)
     }
 }
 
@@ -322,21 +348,8 @@ impl GpuGaussians {
                 capacity: self.capacity,
             });
         }
-        let host = HostArrays::from_model(model);
+        self.parameters.write(ctx, model)?;
         let queue = &ctx.queue;
-        let p = &self.parameters;
-        queue.write_buffer(&p.means, 0, bytemuck::cast_slice(&host.means));
-        queue.write_buffer(&p.log_scales, 0, bytemuck::cast_slice(&host.log_scales));
-        queue.write_buffer(&p.rotations, 0, bytemuck::cast_slice(&host.rotations));
-        queue.write_buffer(
-            &p.opacity_logits,
-            0,
-            bytemuck::cast_slice(&host.opacity_logits),
-        );
-        queue.write_buffer(&p.sh_dc, 0, bytemuck::cast_slice(&host.sh_dc));
-        for (buffer, words) in p.sh_rest.iter().zip(&host.sh_rest) {
-            queue.write_buffer(buffer, 0, bytemuck::cast_slice(words));
-        }
         let ids: Vec<u32> = model.object_ids.iter().flatten().copied().collect();
         queue.write_buffer(&self.object_ids, 0, bytemuck::cast_slice(&ids));
         self.count = model.len();

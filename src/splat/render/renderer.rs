@@ -95,6 +95,12 @@ impl RenderOutput {
         &self.workspace().image
     }
 
+    /// Projected splats, 3 vec4 per Gaussian (layout in `project_common.wgsl`; `[3 i + 1].w` is
+    /// the screen radius in pixels, 0 when culled). Read by the densification statistics.
+    pub fn projected(&self) -> &wgpu::Buffer {
+        &self.workspace().projected
+    }
+
     pub fn image_bytes(&self) -> u64 {
         self.camera.pixel_count() as u64 * 16
     }

@@ -1,0 +1,115 @@
+//! Training configuration with 3DGS defaults; every field can be set per job.
+
+use serde::{Deserialize, Serialize};
+
+use crate::splat::densify::DensifyConfig;
+use crate::splat::schedule::LearningRates;
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrainConfig {
+    /// Optimisation steps (one training view each).
+    pub steps: u32,
+    /// Longest image side in pixels; images are downscaled to it (never upscaled).
+    pub max_resolution: Option<u32>,
+    /// Every n-th view (by capture order, starting with the first) is held out for evaluation,
+    /// as 3DGS does with n = 8. 0 = train on all views. Datasets with their own split (Blender)
+    /// use it instead.
+    pub eval_split_every: u32,
+    /// Seed of every random choice (initialisation, view order, densification samples).
+    pub seed: u64,
+    /// Background composited behind the splats (0..1 RGB).
+    pub background: [f32; 3],
+    /// Highest SH degree; one more band is enabled every `sh_degree_interval` steps.
+    pub max_sh_degree: u32,
+    pub sh_degree_interval: u32,
+    pub learning_rates: LearningRates,
+    pub densify: DensifyConfig,
+    /// Densify every `densify_interval` steps in [`densify_from`, `densify_until`).
+    pub densify_from: u32,
+    pub densify_until: u32,
+    pub densify_interval: u32,
+    /// Every `opacity_reset_interval` steps (while densifying) opacities are capped at 0.01.
+    pub opacity_reset_interval: u32,
+    /// Upper bound on Gaussians: densification stops growing past it.
+    pub max_gaussians: usize,
+    /// Random initial Gaussians when the dataset has no sparse points.
+    pub random_init_count: usize,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self {
+            steps: 30_000,
+            max_resolution: Some(1600),
+            eval_split_every: 8,
+            seed: 0,
+            background: [0.0; 3],
+            max_sh_degree: 3,
+            sh_degree_interval: 1000,
+            learning_rates: LearningRates::default(),
+            densify: DensifyConfig::default(),
+            densify_from: 500,
+            densify_until: 15_000,
+            densify_interval: 100,
+            opacity_reset_interval: 3000,
+            max_gaussians: 6_000_000,
+            random_init_count: 100_000,
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+#[error("train config: {field}: {problem}")]
+pub struct ConfigError {
+    pub field: &'static str,
+    pub problem: String,
+}
+
+impl TrainConfig {
+    /// Checks ranges; names the offending field.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let fail = |field, problem: &str| {
+            Err(ConfigError {
+                field,
+                problem: problem.to_string(),
+            })
+        };
+        if self.steps == 0 {
+            return fail("steps", "must be at least 1");
+        }
+        if self.max_resolution == Some(0) {
+            return fail("max_resolution", "must be positive");
+        }
+        if self.max_sh_degree > 3 {
+            return fail("max_sh_degree", "must be 0..=3");
+        }
+        if self.densify_interval == 0 {
+            return fail("densify_interval", "must be at least 1");
+        }
+        if self.background.iter().any(|c| !(0.0..=1.0).contains(c)) {
+            return fail("background", "components must be within 0..=1");
+        }
+        if self.densify.gradient_threshold <= 0.0 {
+            return fail("densify.gradient_threshold", "must be positive");
+        }
+        if self.max_gaussians == 0 {
+            return fail("max_gaussians", "must be at least 1");
+        }
+        Ok(())
+    }
+
+    /// Whether densification runs after `step` (1-based count of finished steps).
+    pub fn densifies_at(&self, step: u32) -> bool {
+        step >= self.densify_from
+            && step < self.densify_until
+            && step.is_multiple_of(self.densify_interval)
+    }
+
+    /// Whether the opacity reset runs after `step`.
+    pub fn resets_opacity_at(&self, step: u32) -> bool {
+        self.opacity_reset_interval > 0
+            && step < self.densify_until
+            && step.is_multiple_of(self.opacity_reset_interval)
+    }
+}

@@ -1,0 +1,688 @@
+//! The 3DGS training loop on the GPU.
+//!
+//! One step records, into a single command buffer: zero gradients, forward render, fused L1+SSIM
+//! loss, backward render, densification statistics, and one Adam update per parameter group. It
+//! is submitted without waiting; nothing is read back inside a step. CPU round trips happen only
+//! (a) every `sync_every` steps to read the loss and the renderer's intersection peak (capacity
+//! growth), and (b) at densification / opacity reset, which re-lays out every per-Gaussian buffer
+//! on the CPU (every 100 steps; see `splat::densify`).
+
+use std::time::Instant;
+
+use glam::Vec3;
+use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::gpu::{GpuContext, GpuError};
+use crate::scene::Scene;
+use crate::splat::adam::{Adam, AdamBuffers, AdamError, AdamSettings};
+use crate::splat::checkpoint::{Checkpoint, CheckpointError};
+use crate::splat::densify::{self, DensifyPlan, DensifyStats, PruneGuard};
+use crate::splat::init::{gaussians_from_points, random_gaussians};
+use crate::splat::loss::{LossError, LossImages, LossOutputs, RenderLoss};
+use crate::splat::model::{
+    GaussianModel, GaussianParameterBuffers, GpuGaussianGrads, GpuGaussians, ModelError,
+};
+use crate::splat::render::{RenderError, Renderer};
+use crate::splat::schedule::{scene_extent, sh_degree_at};
+use crate::splat::train::config::{ConfigError, TrainConfig};
+use crate::splat::train::densify_stats::DensifyAccumulators;
+use crate::splat::train::views::{Views, ViewsError};
+use crate::splat::{ObjectFilter, RenderSettings};
+
+/// Steps between loss / capacity read-backs.
+const SYNC_EVERY: u32 = 25;
+/// Capacity headroom when (re)allocating Gaussian buffers, so densification rarely reallocates.
+const CAPACITY_GROWTH: f64 = 1.5;
+
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error(transparent)]
+    Views(#[from] ViewsError),
+    #[error(transparent)]
+    Model(#[from] ModelError),
+    #[error(transparent)]
+    Render(#[from] RenderError),
+    #[error(transparent)]
+    Loss(#[from] LossError),
+    #[error(transparent)]
+    Adam(#[from] AdamError),
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    #[error(transparent)]
+    Checkpoint(#[from] CheckpointError),
+    #[error("checkpoint does not match this scene or config: {0}")]
+    CheckpointMismatch(String),
+    #[error("the initial model is empty: the scene has no points and random_init_count is 0")]
+    EmptyModel,
+}
+
+/// Reported every [`SYNC_EVERY`] steps and at the end.
+#[derive(Debug, Clone, Serialize)]
+pub struct TrainProgress {
+    pub step: u32,
+    pub total_steps: u32,
+    /// Loss of the latest step (0.8 L1 + 0.2 D-SSIM).
+    pub loss: f32,
+    pub gaussians: usize,
+    pub elapsed_secs: f64,
+    pub steps_per_sec: f64,
+}
+
+/// Held-out quality.
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
+pub struct EvalReport {
+    pub views: usize,
+    pub psnr: f64,
+    pub ssim: f64,
+}
+
+/// What a checkpoint's header records besides the arrays.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct TrainerMeta {
+    pub step: u32,
+    pub gaussians: usize,
+    pub rng: ChaCha8Rng,
+    pub view_queue: Vec<usize>,
+    pub intersection_capacity: u32,
+    pub config: TrainConfig,
+    pub train_views: usize,
+}
+
+pub struct Trainer {
+    ctx: GpuContext,
+    config: TrainConfig,
+    views: Views,
+    scene_extent: f32,
+    gaussians: GpuGaussians,
+    grads: GpuGaussianGrads,
+    first_moments: GaussianParameterBuffers,
+    second_moments: GaussianParameterBuffers,
+    accumulators: DensifyAccumulators,
+    renderer: Renderer,
+    loss: RenderLoss,
+    adam: Adam,
+    grad_image: wgpu::Buffer,
+    loss_values: wgpu::Buffer,
+    step: u32,
+    rng: ChaCha8Rng,
+    view_queue: Vec<usize>,
+    prune_guard: Option<Box<dyn PruneGuard + Send>>,
+    started: Instant,
+    steps_at_start: u32,
+}
+
+/// The initial model for a scene: its sparse points, or random points in the cameras' bounds.
+pub fn initial_model(scene: &Scene, config: &TrainConfig) -> Result<GaussianModel, TrainError> {
+    let model = match &scene.points {
+        Some(points) if !points.positions.is_empty() => {
+            gaussians_from_points(&points.positions, &points.colors)
+        }
+        _ => {
+            let centers = camera_centers(scene);
+            let extent = scene_extent(&centers);
+            let center = centers.iter().copied().sum::<Vec3>() / centers.len().max(1) as f32;
+            let mut rng = ChaCha8Rng::seed_from_u64(config.seed ^ 0x1417);
+            random_gaussians(
+                config.random_init_count,
+                center - Vec3::splat(extent),
+                center + Vec3::splat(extent),
+                &mut rng,
+            )
+        }
+    };
+    if model.is_empty() {
+        return Err(TrainError::EmptyModel);
+    }
+    Ok(model)
+}
+
+fn camera_centers(scene: &Scene) -> Vec<Vec3> {
+    scene
+        .frames
+        .iter()
+        .map(|f| f.world_from_camera.w_axis.truncate())
+        .collect()
+}
+
+fn storage_buffer(ctx: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
+    ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: bytes.max(16),
+        usage: wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+impl Trainer {
+    /// Loads the views and uploads `model` (or the scene's initial model).
+    pub fn new(
+        ctx: &GpuContext,
+        scene: &Scene,
+        config: TrainConfig,
+        model: Option<GaussianModel>,
+    ) -> Result<Self, TrainError> {
+        config.validate()?;
+        let model = match model {
+            Some(model) => model,
+            None => initial_model(scene, &config)?,
+        };
+        let views = Views::load(ctx, scene, config.max_resolution, config.eval_split_every)?;
+        let capacity = ((model.len() as f64 * CAPACITY_GROWTH) as usize)
+            .clamp(model.len(), config.max_gaussians.max(model.len()));
+        let [max_width, max_height] = views.max_size();
+        let pixels = max_width as u64 * max_height as u64;
+        let mut loss = RenderLoss::new(ctx)?;
+        loss.reserve(ctx, max_width, max_height)?;
+        let train_views = views.train.len();
+        let extent = scene_extent(&camera_centers(scene));
+        let mut trainer = Self {
+            gaussians: GpuGaussians::upload(ctx, &model, capacity)?,
+            grads: GpuGaussianGrads::new(ctx, capacity)?,
+            first_moments: GaussianParameterBuffers::new(ctx, "adam.m", capacity)?,
+            second_moments: GaussianParameterBuffers::new(ctx, "adam.v", capacity)?,
+            accumulators: DensifyAccumulators::new(ctx, capacity)?,
+            renderer: Renderer::new(ctx)?,
+            loss,
+            adam: Adam::new(ctx, AdamSettings::default())?,
+            grad_image: storage_buffer(ctx, "grad image", pixels * 16),
+            loss_values: storage_buffer(ctx, "loss values", 16),
+            ctx: ctx.clone(),
+            config,
+            views,
+            scene_extent: extent,
+            step: 0,
+            rng: ChaCha8Rng::seed_from_u64(0),
+            view_queue: Vec::new(),
+            prune_guard: None,
+            started: Instant::now(),
+            steps_at_start: 0,
+        };
+        trainer.rng = ChaCha8Rng::seed_from_u64(trainer.config.seed);
+        debug_assert!(train_views > 0);
+        Ok(trainer)
+    }
+
+    /// Lets the caller veto pruning (Segment then Splat's per-object persistence floor).
+    pub fn set_prune_guard(&mut self, guard: Box<dyn PruneGuard + Send>) {
+        self.prune_guard = Some(guard);
+    }
+
+    pub fn step(&self) -> u32 {
+        self.step
+    }
+
+    pub fn gaussian_count(&self) -> usize {
+        self.gaussians.count()
+    }
+
+    pub fn config(&self) -> &TrainConfig {
+        &self.config
+    }
+
+    pub fn views(&self) -> &Views {
+        &self.views
+    }
+
+    pub fn scene_extent(&self) -> f32 {
+        self.scene_extent
+    }
+
+    /// The GPU scene (for renders outside training, e.g. masks).
+    pub fn gaussians(&self) -> &GpuGaussians {
+        &self.gaussians
+    }
+
+    /// Reads the current model back.
+    pub fn model(&self) -> Result<GaussianModel, TrainError> {
+        Ok(self.gaussians.download(&self.ctx)?)
+    }
+
+    fn next_view(&mut self) -> usize {
+        if self.view_queue.is_empty() {
+            self.view_queue = (0..self.views.train.len()).collect();
+            self.view_queue.shuffle(&mut self.rng);
+        }
+        self.view_queue.pop().unwrap_or(0)
+    }
+
+    /// Runs one optimisation step. Returns the step number just finished (from 1).
+    pub fn train_step(&mut self) -> Result<u32, TrainError> {
+        let view_index = self.next_view();
+        let step = self.step + 1;
+        let sh_degree = sh_degree_at(
+            self.step,
+            self.config.sh_degree_interval,
+            self.config.max_sh_degree,
+        );
+        let settings = RenderSettings {
+            filter: ObjectFilter::All,
+            background: self.config.background,
+            sh_degree,
+        };
+        let ctx = &self.ctx;
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("train step"),
+            });
+        self.grads.encode_zero(&mut encoder);
+        let view = &self.views.train[view_index];
+        let camera = view.camera;
+        let output =
+            self.renderer
+                .forward(ctx, &mut encoder, &self.gaussians, &camera, &settings)?;
+        self.loss.encode(
+            ctx,
+            &mut encoder,
+            &LossImages {
+                rendered: output.image(),
+                target: &view.target,
+                target_mask: None,
+                width: camera.width,
+                height: camera.height,
+            },
+            1.0,
+            &LossOutputs {
+                rendered_grad: &self.grad_image,
+                loss_values: &self.loss_values,
+                loss_slot: 0,
+            },
+        )?;
+        self.renderer.backward(
+            ctx,
+            &mut encoder,
+            &self.gaussians,
+            &output,
+            &self.grad_image,
+            &mut self.grads,
+        )?;
+        let count = self.gaussians.count() as u32;
+        self.accumulators.encode_accumulate(
+            ctx,
+            &mut encoder,
+            output.projected(),
+            &self.grads.mean2d_abs,
+            count,
+            [camera.width, camera.height],
+        );
+        self.encode_adam(&mut encoder, step, count)?;
+        ctx.queue.submit([encoder.finish()]);
+        drop(output);
+        self.step = step;
+        if self.config.densifies_at(step) || self.config.resets_opacity_at(step) {
+            self.densify_and_reset(step)?;
+        }
+        Ok(step)
+    }
+
+    fn encode_adam(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        step: u32,
+        count: u32,
+    ) -> Result<(), TrainError> {
+        let rates = &self.config.learning_rates;
+        let position_rate = rates.position_at(self.step, self.scene_extent);
+        let p = &self.gaussians.parameters;
+        let g = &self.grads.parameters;
+        let m = &self.first_moments;
+        let v = &self.second_moments;
+        let rest = rates.sh_rest();
+        let groups: [(
+            &wgpu::Buffer,
+            &wgpu::Buffer,
+            &wgpu::Buffer,
+            &wgpu::Buffer,
+            u32,
+            f32,
+        ); 8] = [
+            (&p.means, &g.means, &m.means, &v.means, 3, position_rate),
+            (
+                &p.log_scales,
+                &g.log_scales,
+                &m.log_scales,
+                &v.log_scales,
+                3,
+                rates.scale,
+            ),
+            (
+                &p.rotations,
+                &g.rotations,
+                &m.rotations,
+                &v.rotations,
+                4,
+                rates.rotation,
+            ),
+            (
+                &p.opacity_logits,
+                &g.opacity_logits,
+                &m.opacity_logits,
+                &v.opacity_logits,
+                1,
+                rates.opacity,
+            ),
+            (&p.sh_dc, &g.sh_dc, &m.sh_dc, &v.sh_dc, 3, rates.sh_dc),
+            (
+                &p.sh_rest[0],
+                &g.sh_rest[0],
+                &m.sh_rest[0],
+                &v.sh_rest[0],
+                15,
+                rest,
+            ),
+            (
+                &p.sh_rest[1],
+                &g.sh_rest[1],
+                &m.sh_rest[1],
+                &v.sh_rest[1],
+                15,
+                rest,
+            ),
+            (
+                &p.sh_rest[2],
+                &g.sh_rest[2],
+                &m.sh_rest[2],
+                &v.sh_rest[2],
+                15,
+                rest,
+            ),
+        ];
+        for (params, grads, first_moment, second_moment, width, rate) in groups {
+            self.adam.encode_step(
+                &self.ctx,
+                encoder,
+                &AdamBuffers {
+                    params,
+                    grads,
+                    first_moment,
+                    second_moment,
+                },
+                count * width,
+                rate,
+                step,
+            )?;
+        }
+        Ok(())
+    }
+
+    /// Trains until `steps` (from the config) are done, calling `on_progress` every
+    /// [`SYNC_EVERY`] steps and at the end; stops early when it returns `false` (cancel).
+    pub fn run(
+        &mut self,
+        mut on_progress: impl FnMut(&TrainProgress) -> bool,
+    ) -> Result<TrainProgress, TrainError> {
+        self.started = Instant::now();
+        self.steps_at_start = self.step;
+        while self.step < self.config.steps {
+            let step = self.train_step()?;
+            if step % SYNC_EVERY == 0 || step == self.config.steps {
+                let progress = self.progress()?;
+                if !on_progress(&progress) {
+                    return Ok(progress);
+                }
+            }
+        }
+        self.progress()
+    }
+
+    /// Reads the latest loss and the renderer's intersection peak (a sync point).
+    pub fn progress(&mut self) -> Result<TrainProgress, TrainError> {
+        self.renderer.sync_capacity(&self.ctx)?;
+        let losses: Vec<f32> = self.ctx.read_vec(&self.loss_values)?;
+        let elapsed = self.started.elapsed().as_secs_f64();
+        Ok(TrainProgress {
+            step: self.step,
+            total_steps: self.config.steps,
+            loss: losses.first().copied().unwrap_or(f32::NAN),
+            gaussians: self.gaussians.count(),
+            elapsed_secs: elapsed,
+            steps_per_sec: (self.step - self.steps_at_start) as f64 / elapsed.max(1e-9),
+        })
+    }
+
+    /// Densification and/or opacity reset: read back, re-lay out on the CPU, upload.
+    fn densify_and_reset(&mut self, step: u32) -> Result<(), TrainError> {
+        let ctx = self.ctx.clone();
+        let count = self.gaussians.count();
+        let mut model = self.gaussians.download(&ctx)?;
+        let mut first = self.first_moments.download(&ctx, count)?;
+        let mut second = self.second_moments.download(&ctx, count)?;
+        if self.config.densifies_at(step) {
+            let stats = self.accumulators.download(&ctx, count)?;
+            let mut config = self.config.densify.clone();
+            if step > self.config.opacity_reset_interval {
+                // After the first opacity reset, also prune oversized splats (3DGS / gsplat).
+                config.max_world_scale_fraction.get_or_insert(0.1);
+                config.max_screen_radius_fraction.get_or_insert(0.15);
+            }
+            if count >= self.config.max_gaussians {
+                config.gradient_threshold = f32::INFINITY;
+            }
+            let plan = densify::plan_densification(
+                &model,
+                &stats,
+                &config,
+                self.scene_extent,
+                self.prune_guard.as_deref().map(|g| g as &dyn PruneGuard),
+                &mut self.rng,
+            );
+            tracing::debug!(
+                step,
+                cloned = plan.cloned,
+                split = plan.split,
+                pruned = plan.pruned,
+                spared = plan.spared,
+                "densified"
+            );
+            model = plan.apply(&model, config.split_children);
+            first = gather_fresh_zero(&plan, &first);
+            second = gather_fresh_zero(&plan, &second);
+        }
+        if self.config.resets_opacity_at(step) {
+            densify::reset_opacity_logits(&mut model.opacity_logits, 0.01);
+            first.opacity_logits.iter_mut().for_each(|m| *m = 0.0);
+            second.opacity_logits.iter_mut().for_each(|v| *v = 0.0);
+        }
+        self.replace_state(&model, &first, &second, &DensifyStats::default())?;
+        Ok(())
+    }
+
+    /// Uploads a new model with its optimiser moments, growing buffers when needed.
+    fn replace_state(
+        &mut self,
+        model: &GaussianModel,
+        first: &GaussianModel,
+        second: &GaussianModel,
+        stats: &DensifyStats,
+    ) -> Result<(), TrainError> {
+        let ctx = self.ctx.clone();
+        let count = model.len();
+        if count > self.gaussians.capacity() {
+            let capacity = ((count as f64 * CAPACITY_GROWTH) as usize)
+                .max(count)
+                .min(self.config.max_gaussians.max(count));
+            self.gaussians = GpuGaussians::upload(&ctx, model, capacity)?;
+            self.grads = GpuGaussianGrads::new(&ctx, capacity)?;
+            self.first_moments = GaussianParameterBuffers::new(&ctx, "adam.m", capacity)?;
+            self.second_moments = GaussianParameterBuffers::new(&ctx, "adam.v", capacity)?;
+            self.accumulators = DensifyAccumulators::new(&ctx, capacity)?;
+        } else {
+            self.gaussians.write(&ctx, model)?;
+        }
+        self.first_moments.write(&ctx, first)?;
+        self.second_moments.write(&ctx, second)?;
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("densify reset"),
+            });
+        self.accumulators.encode_clear(&mut encoder);
+        ctx.queue.submit([encoder.finish()]);
+        if !stats.gradient_sums.is_empty() {
+            self.accumulators.upload(&ctx, stats);
+        }
+        Ok(())
+    }
+
+    /// Renders every held-out view and compares it with its image.
+    pub fn evaluate(&mut self) -> Result<EvalReport, TrainError> {
+        let settings = RenderSettings {
+            filter: ObjectFilter::All,
+            background: self.config.background,
+            sh_degree: sh_degree_at(
+                self.step,
+                self.config.sh_degree_interval,
+                self.config.max_sh_degree,
+            ),
+        };
+        let mut report = EvalReport::default();
+        for view in &self.views.test {
+            let output = self.renderer.render_checked(
+                &self.ctx,
+                &self.gaussians,
+                &view.camera,
+                &settings,
+            )?;
+            let image = output.read_image(&self.ctx)?;
+            let rendered: Vec<[f32; 3]> = image
+                .iter()
+                .take(view.camera.pixel_count())
+                .map(|p| {
+                    [
+                        p[0].clamp(0.0, 1.0),
+                        p[1].clamp(0.0, 1.0),
+                        p[2].clamp(0.0, 1.0),
+                    ]
+                })
+                .collect();
+            report.psnr += crate::eval::image_metrics::psnr(&rendered, &view.target_rgb);
+            report.ssim += crate::eval::image_metrics::ssim(
+                &rendered,
+                &view.target_rgb,
+                view.camera.width as usize,
+                view.camera.height as usize,
+            );
+            report.views += 1;
+        }
+        if report.views > 0 {
+            report.psnr /= report.views as f64;
+            report.ssim /= report.views as f64;
+        }
+        Ok(report)
+    }
+
+    /// Everything needed to continue exactly here.
+    pub fn checkpoint(&self) -> Result<Checkpoint<TrainerMeta>, TrainError> {
+        let ctx = &self.ctx;
+        let count = self.gaussians.count();
+        let model = self.gaussians.download(ctx)?;
+        let first = self.first_moments.download(ctx, count)?;
+        let second = self.second_moments.download(ctx, count)?;
+        let stats = self.accumulators.download(ctx, count)?;
+        let mut checkpoint = Checkpoint::new(TrainerMeta {
+            step: self.step,
+            gaussians: count,
+            rng: self.rng.clone(),
+            view_queue: self.view_queue.clone(),
+            intersection_capacity: self.renderer.intersection_capacity(),
+            config: self.config.clone(),
+            train_views: self.views.train.len(),
+        });
+        put_model(&mut checkpoint, "model", &model);
+        put_model(&mut checkpoint, "adam.m", &first);
+        put_model(&mut checkpoint, "adam.v", &second);
+        checkpoint.put("object_ids", &model.object_ids);
+        checkpoint.put("densify.gradient_sums", &stats.gradient_sums);
+        checkpoint.put("densify.visible_counts", &stats.visible_counts);
+        checkpoint.put("densify.max_radii", &stats.max_radii);
+        Ok(checkpoint)
+    }
+
+    /// A trainer continuing from `checkpoint` (same scene; the config it was made with).
+    pub fn resume(
+        ctx: &GpuContext,
+        scene: &Scene,
+        checkpoint: &Checkpoint<TrainerMeta>,
+    ) -> Result<Self, TrainError> {
+        let meta = &checkpoint.meta;
+        let count = meta.gaussians;
+        let mut model = get_model(checkpoint, "model", count)?;
+        model.object_ids = checkpoint.get("object_ids")?;
+        let first = get_model(checkpoint, "adam.m", count)?;
+        let second = get_model(checkpoint, "adam.v", count)?;
+        let stats = DensifyStats {
+            gradient_sums: checkpoint.get("densify.gradient_sums")?,
+            visible_counts: checkpoint.get("densify.visible_counts")?,
+            max_radii: checkpoint.get("densify.max_radii")?,
+        };
+        let mut trainer = Self::new(ctx, scene, meta.config.clone(), Some(model.clone()))?;
+        if trainer.views.train.len() != meta.train_views {
+            return Err(TrainError::CheckpointMismatch(format!(
+                "{} training views now, {} when saved",
+                trainer.views.train.len(),
+                meta.train_views
+            )));
+        }
+        trainer.replace_state(&model, &first, &second, &stats)?;
+        trainer.step = meta.step;
+        trainer.rng = meta.rng.clone();
+        trainer.view_queue = meta.view_queue.clone();
+        trainer
+            .renderer
+            .set_intersection_capacity(meta.intersection_capacity);
+        Ok(trainer)
+    }
+
+    /// Seeded randomness for callers that extend a step (object sampling).
+    pub fn rng(&mut self) -> &mut impl Rng {
+        &mut self.rng
+    }
+}
+
+fn gather_fresh_zero(plan: &DensifyPlan, rows: &GaussianModel) -> GaussianModel {
+    GaussianModel {
+        means: plan.gather(&rows.means, |_| [0.0; 3]),
+        log_scales: plan.gather(&rows.log_scales, |_| [0.0; 3]),
+        rotations: plan.gather(&rows.rotations, |_| [0.0; 4]),
+        opacity_logits: plan.gather(&rows.opacity_logits, |_| 0.0),
+        sh_coefficients: plan.gather(&rows.sh_coefficients, |_| Default::default()),
+        object_ids: Vec::new(),
+    }
+}
+
+fn put_model(checkpoint: &mut Checkpoint<TrainerMeta>, prefix: &str, model: &GaussianModel) {
+    checkpoint.put(&format!("{prefix}.means"), &model.means);
+    checkpoint.put(&format!("{prefix}.log_scales"), &model.log_scales);
+    checkpoint.put(&format!("{prefix}.rotations"), &model.rotations);
+    checkpoint.put(&format!("{prefix}.opacity_logits"), &model.opacity_logits);
+    checkpoint.put(&format!("{prefix}.sh"), &model.sh_coefficients);
+}
+
+fn get_model(
+    checkpoint: &Checkpoint<TrainerMeta>,
+    prefix: &str,
+    count: usize,
+) -> Result<GaussianModel, TrainError> {
+    let model = GaussianModel {
+        means: checkpoint.get(&format!("{prefix}.means"))?,
+        log_scales: checkpoint.get(&format!("{prefix}.log_scales"))?,
+        rotations: checkpoint.get(&format!("{prefix}.rotations"))?,
+        opacity_logits: checkpoint.get(&format!("{prefix}.opacity_logits"))?,
+        sh_coefficients: checkpoint.get(&format!("{prefix}.sh"))?,
+        object_ids: vec![[crate::splat::OBJECT_NONE; 3]; count],
+    };
+    if model.means.len() != count {
+        return Err(TrainError::CheckpointMismatch(format!(
+            "{prefix}: {} Gaussians stored, header says {count}",
+            model.means.len()
+        )));
+    }
+    Ok(model)
+}
