@@ -1,19 +1,38 @@
-//! Safe archive unpacking (zip, tar, tar.gz): no absolute paths, no `..`, no links, bounded size
-//! and file count, truncation is an error.
+//! Safe archive unpacking (zip, tar, tar.gz): no absolute paths, no `..`, no links or special
+//! files, bounded size and entry count, truncation is an error.
+//!
+//! Archives come from untrusted uploads, so every entry name is checked by
+//! [`entry_path::safe_relative_path`] before anything touches the disk, entries are streamed to
+//! disk (never a whole archive in memory), and the byte cap counts bytes actually written, because
+//! declared sizes in zip and tar headers can lie.
 
+mod entry_path;
+mod sink;
+mod sniff;
+mod tar_unpack;
+mod zip_unpack;
+
+use std::fs::File;
 use std::path::Path;
 
 use super::InputErrorClass;
 
+pub use entry_path::safe_relative_path;
+pub use sniff::{ArchiveKind, sniff_kind};
+
 #[derive(Debug, Clone)]
 pub struct UnpackLimits {
+    /// Cap on bytes written to disk, summed over all files.
     pub max_unpacked_bytes: u64,
+    /// Cap on entries created (files and directories both count).
     pub max_files: u64,
 }
 
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct UnpackStats {
+    /// Regular files written.
     pub files: u64,
+    /// Bytes written.
     pub bytes: u64,
 }
 
@@ -27,6 +46,8 @@ pub enum ArchiveError {
     UnsafePath { entry: String },
     #[error("{entry}: links are not allowed in scene archives")]
     Link { entry: String },
+    #[error("{entry}: {kind} entries are not allowed in scene archives (only files and folders)")]
+    SpecialFile { entry: String, kind: String },
     #[error("archive unpacks to more than {limit} bytes")]
     TooManyBytes { limit: u64 },
     #[error("archive holds more than {limit} files")]
@@ -45,7 +66,8 @@ impl ArchiveError {
             ArchiveError::UnsupportedKind => InputErrorClass::UnsupportedFormat,
             ArchiveError::Corrupt(_)
             | ArchiveError::UnsafePath { .. }
-            | ArchiveError::Link { .. } => InputErrorClass::Malformed,
+            | ArchiveError::Link { .. }
+            | ArchiveError::SpecialFile { .. } => InputErrorClass::Malformed,
             ArchiveError::TooManyBytes { .. } | ArchiveError::TooManyFiles { .. } => {
                 InputErrorClass::TooLarge
             }
@@ -55,11 +77,25 @@ impl ArchiveError {
 }
 
 /// Unpacks `archive` (kind sniffed from its first bytes) into the existing empty directory `dest`.
+///
+/// On error, whatever was already written stays in `dest`; the caller owns `dest` and removes it.
 pub fn unpack_archive(
     archive: &Path,
     dest: &Path,
     limits: &UnpackLimits,
 ) -> Result<UnpackStats, ArchiveError> {
-    let _ = (archive, dest, limits);
-    Err(ArchiveError::UnsupportedKind)
+    let open = || {
+        File::open(archive).map_err(|source| ArchiveError::Io {
+            context: format!("opening {}", archive.display()),
+            source,
+        })
+    };
+    let kind = sniff_kind(&mut open()?)?;
+    let mut sink = sink::DiskSink::new(dest, limits);
+    match kind {
+        ArchiveKind::Zip => zip_unpack::unpack_zip(open()?, &mut sink)?,
+        ArchiveKind::Tar => tar_unpack::unpack_tar(open()?, &mut sink)?,
+        ArchiveKind::TarGz => tar_unpack::unpack_tar_gz(open()?, &mut sink)?,
+    }
+    Ok(sink.stats())
 }

@@ -4,10 +4,23 @@
 //! format used (nerfstudio and Blender store OpenGL-convention poses and are converted here).
 
 pub mod archive;
+pub mod blender;
+pub mod colmap;
+mod dataset_root;
+mod images;
+pub mod masks;
+pub mod nerfstudio;
+pub mod synthetic;
+mod transforms_json;
 mod types;
+mod validate;
 
 pub use archive::{ArchiveError, UnpackLimits, UnpackStats, unpack_archive};
+pub use dataset_root::resolve_dataset_root;
+pub use images::{load_frame_rgb, scale_for_max_side, scaled_size};
+pub use masks::load_instance_mask;
 pub use types::*;
+pub use validate::validate_scene;
 
 use std::path::Path;
 
@@ -29,7 +42,9 @@ pub enum InputErrorClass {
 
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
-    #[error("no dataset found: expected COLMAP (sparse/0 or sparse), nerfstudio transforms.json or Blender transforms_train.json{found}")]
+    #[error(
+        "no dataset found: expected COLMAP (sparse/0 or sparse), nerfstudio transforms.json or Blender transforms_train.json{found}"
+    )]
     UnknownFormat { found: String },
     #[error("{file}: {message}")]
     Parse { file: String, message: String },
@@ -62,18 +77,25 @@ impl SceneError {
 
 /// Detects the format under `root` and parses cameras, frames, sparse points and mask layout.
 /// Cheap: images are not decoded (see [`validate_scene`]).
+///
+/// Formats are tried in this order: COLMAP (`sparse/0` or `sparse`), nerfstudio
+/// (`transforms.json`), Blender NeRF (`transforms_train.json`). When none is at `root` itself but
+/// `root` holds exactly one folder (ignoring hidden entries and `__MACOSX`), that folder is the
+/// dataset root: users often archive the dataset folder itself. [`Scene::root`] is the folder
+/// actually used.
 pub fn load_scene(root: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
-    let _ = (root, options);
-    Err(SceneError::UnknownFormat {
-        found: " (scene loading is not implemented yet)".to_string(),
-    })
-}
-
-/// Decodes every referenced image and mask and checks sizes and counts; returns the summary the
-/// upload endpoint replies with.
-pub fn validate_scene(scene: &Scene) -> Result<SceneSummary, SceneError> {
-    let _ = scene;
-    Err(SceneError::UnknownFormat {
-        found: " (scene validation is not implemented yet)".to_string(),
-    })
+    let dataset_root = resolve_dataset_root(root)?;
+    let mut scene = if let Some(location) = colmap::find_model(&dataset_root) {
+        colmap::load_colmap(&dataset_root, &location, options)?
+    } else if dataset_root.join(nerfstudio::TRANSFORMS_FILE).is_file() {
+        nerfstudio::load_nerfstudio(&dataset_root, options)?
+    } else if dataset_root.join(blender::TRAIN_TRANSFORMS_FILE).is_file() {
+        blender::load_blender(&dataset_root, options)?
+    } else {
+        return Err(SceneError::UnknownFormat {
+            found: dataset_root::describe_contents(&dataset_root),
+        });
+    };
+    scene.masks = masks::discover_masks(&dataset_root, &scene.frames)?;
+    Ok(scene)
 }

@@ -54,8 +54,40 @@ pub struct Intrinsics {
     pub distortion: Vec<f64>,
 }
 
+impl Intrinsics {
+    /// The intrinsics of this camera after resizing its image by `factor` (0.5 halves it).
+    ///
+    /// Width and height are rounded (at least 1 pixel) exactly as [`crate::scene::scaled_size`]
+    /// does for images, and the focal lengths and principal point are scaled by the per-axis
+    /// ratios actually achieved, so the result matches the resized image to the pixel.
+    pub fn scaled(&self, factor: f64) -> Intrinsics {
+        let (width, height) = crate::scene::scaled_size(self.width, self.height, factor);
+        let x_ratio = f64::from(width) / f64::from(self.width.max(1));
+        let y_ratio = f64::from(height) / f64::from(self.height.max(1));
+        Intrinsics {
+            width,
+            height,
+            fx: self.fx * x_ratio,
+            fy: self.fy * y_ratio,
+            cx: self.cx * x_ratio,
+            cy: self.cy * y_ratio,
+            model: self.model.clone(),
+            distortion: self.distortion.clone(),
+        }
+    }
+}
+
+/// Which evaluation split a frame belongs to, when the source says (Blender NeRF files).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FrameSplit {
+    Train,
+    Val,
+    Test,
+}
+
 /// One posed image.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Frame {
     /// Stable name (file name relative to the image folder), used for ordering and mask lookup.
     pub name: String,
@@ -68,13 +100,15 @@ pub struct Frame {
     pub time: Option<f32>,
     /// COLMAP image id, when the source has one (links 2D-3D tracks).
     pub source_id: Option<u32>,
+    /// Train/val/test split when the source defines one; `None` means "use for training".
+    pub split: Option<FrameSplit>,
 }
 
 /// Sparse reconstruction points, with their COLMAP tracks when known.
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct SparsePoints {
     pub positions: Vec<Vec3>,
-    /// Linear 0..1 RGB.
+    /// 0..1 RGB as stored by the source (sRGB-encoded values divided by 255, as 3DGS uses them).
     pub colors: Vec<Vec3>,
     /// Per point: the frames (indices into `Scene::frames`) that observe it, and the 2D pixel
     /// position there. Empty per point when the source has no tracks.
@@ -88,14 +122,50 @@ pub struct TrackObservation {
 }
 
 /// Where user-provided instance-id masks are for each level (`masks/{level}/<image stem>.png`).
-/// When only one level is given it serves all three.
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+/// When only some levels are given, a missing level uses the nearest given one (the finer one on a
+/// tie), so one given level serves all three; see [`MaskLayout::source_level`].
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct MaskLayout {
     /// Per level (small, middle, large): per frame, the mask path relative to the scene root.
+    /// `None` for levels the user did not give.
     pub paths: [Option<Vec<PathBuf>>; 3],
 }
 
-#[derive(Debug, Clone, Serialize, Deserialize)]
+impl MaskLayout {
+    /// Levels for which masks were given, finest first.
+    pub fn given_levels(&self) -> Vec<Level> {
+        Level::ALL
+            .into_iter()
+            .filter(|level| self.paths[level.index()].is_some())
+            .collect()
+    }
+
+    /// The given level whose masks serve `level`: itself when given, else the nearest given level,
+    /// preferring the finer one when two are equally near. `None` when no level was given.
+    pub fn source_level(&self, level: Level) -> Option<Level> {
+        let given = self.given_levels();
+        given.into_iter().min_by_key(|candidate| {
+            let distance = candidate.index().abs_diff(level.index());
+            (distance, candidate.index())
+        })
+    }
+
+    /// Mask path (relative to the scene root) serving `level` for frame `frame_index`.
+    pub fn path_for(&self, level: Level, frame_index: usize) -> Option<&PathBuf> {
+        let source = self.source_level(level)?;
+        self.paths[source.index()].as_ref()?.get(frame_index)
+    }
+}
+
+/// One decoded instance-id mask: row-major ids, 0 = no object.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct InstanceMask {
+    pub width: u32,
+    pub height: u32,
+    pub ids: Vec<u32>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Scene {
     pub root: PathBuf,
     pub format: SceneFormat,
@@ -103,14 +173,14 @@ pub struct Scene {
     pub frames: Vec<Frame>,
     pub points: Option<SparsePoints>,
     pub masks: Option<MaskLayout>,
-    /// Background composited under RGBA images (linear 0..1 RGB).
+    /// Background composited under RGBA images (0..1 RGB in the images' own sRGB encoding).
     pub background: [f32; 3],
 }
 
 /// Options for [`crate::scene::load_scene`].
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct LoadOptions {
-    /// Background for RGBA (Blender) images, 0..1 RGB; white by default.
+    /// Background for RGBA (Blender) images, 0..1 sRGB-encoded RGB; white by default.
     pub background: [f32; 3],
 }
 

@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# Installs what a fresh Debian machine lacks to build, test and run segsplat:
+# - Mesa's software Vulkan driver (lavapipe) and the Vulkan loader, so the GPU engine runs without a GPU;
+# - the ONNX Runtime shared library (from the `onnxruntime` wheel) for the model runtime.
+# Idempotent: skips what is already there.
+set -euo pipefail
+
+need_apt=()
+for package in mesa-vulkan-drivers libvulkan1; do
+  dpkg -s "$package" >/dev/null 2>&1 || need_apt+=("$package")
+done
+if [ ${#need_apt[@]} -gt 0 ]; then
+  sudo_cmd=""
+  [ "$(id -u)" -eq 0 ] || sudo_cmd="sudo"
+  $sudo_cmd apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq "${need_apt[@]}"
+fi
+
+if command -v python3 >/dev/null 2>&1; then
+  if ! python3 -c "import onnxruntime" >/dev/null 2>&1; then
+    python3 -m pip install --quiet --disable-pip-version-check "onnxruntime>=1.20" \
+      || echo "warning: could not install onnxruntime; model features will report it missing" >&2
+  fi
+fi

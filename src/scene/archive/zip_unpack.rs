@@ -1,0 +1,50 @@
+//! Zip entries through the `zip` crate; links and special files are told apart by the unix mode
+//! bits stored in the central directory.
+
+use std::fs::File;
+use std::io::BufReader;
+
+use super::ArchiveError;
+use super::sink::DiskSink;
+
+const FILE_TYPE_MASK: u32 = 0o170000;
+const REGULAR_FILE: u32 = 0o100000;
+const DIRECTORY: u32 = 0o040000;
+const SYMLINK: u32 = 0o120000;
+
+pub fn unpack_zip(file: File, sink: &mut DiskSink<'_>) -> Result<(), ArchiveError> {
+    let mut archive = zip::ZipArchive::new(BufReader::new(file))
+        .map_err(|error| ArchiveError::Corrupt(error.to_string()))?;
+    sink.check_announced_entries(archive.len() as u64)?;
+    for index in 0..archive.len() {
+        let mut entry = archive
+            .by_index(index)
+            .map_err(|error| ArchiveError::Corrupt(format!("entry {index}: {error}")))?;
+        let name = entry
+            .name()
+            .map_err(|error| ArchiveError::Corrupt(format!("entry {index}: {error}")))?
+            .into_owned();
+        if entry.encrypted() {
+            return Err(ArchiveError::Corrupt(format!(
+                "{name}: encrypted entries are not supported"
+            )));
+        }
+        let file_type = entry.unix_mode().map(|mode| mode & FILE_TYPE_MASK);
+        match file_type {
+            Some(SYMLINK) => return Err(ArchiveError::Link { entry: name }),
+            Some(0 | REGULAR_FILE | DIRECTORY) | None => {}
+            Some(other) => {
+                return Err(ArchiveError::SpecialFile {
+                    entry: name,
+                    kind: format!("file type {other:o}"),
+                });
+            }
+        }
+        if entry.is_dir() || file_type == Some(DIRECTORY) {
+            sink.create_dir(&name)?;
+        } else {
+            sink.write_file(&name, &mut entry)?;
+        }
+    }
+    Ok(())
+}

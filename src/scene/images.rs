@@ -1,0 +1,124 @@
+//! Decoding frame images for validation and for the engine.
+//!
+//! Pixel values stay in the images' sRGB encoding as 0..1 floats (what 3DGS trains on); RGBA is
+//! composited on the scene background in that same encoding.
+
+use std::io;
+use std::path::Path;
+
+use image::imageops::FilterType;
+use image::{DynamicImage, ImageReader, Rgb32FImage};
+
+use super::{Scene, SceneError};
+
+/// Image size after scaling by `factor`, rounded, at least one pixel per side.
+pub fn scaled_size(width: u32, height: u32, factor: f64) -> (u32, u32) {
+    let scale = |side: u32| ((f64::from(side) * factor).round() as u32).max(1);
+    (scale(width), scale(height))
+}
+
+/// The factor (at most 1) that brings the longest side down to `max_side`.
+pub fn scale_for_max_side(width: u32, height: u32, max_side: u32) -> f64 {
+    let longest = width.max(height);
+    if longest <= max_side || longest == 0 {
+        1.0
+    } else {
+        f64::from(max_side.max(1)) / f64::from(longest)
+    }
+}
+
+/// Decodes the image at `relative_path` under `root`; errors name that relative path.
+pub(crate) fn decode_image(root: &Path, relative_path: &Path) -> Result<DynamicImage, SceneError> {
+    let file = relative_path.display().to_string();
+    let reader =
+        ImageReader::open(root.join(relative_path)).map_err(|source| match source.kind() {
+            io::ErrorKind::NotFound => SceneError::MissingImage { file: file.clone() },
+            _ => SceneError::Io {
+                file: file.clone(),
+                source,
+            },
+        })?;
+    let reader = reader
+        .with_guessed_format()
+        .map_err(|source| SceneError::Io {
+            file: file.clone(),
+            source,
+        })?;
+    reader
+        .decode()
+        .map_err(|error| SceneError::UndecodableImage {
+            file,
+            message: error.to_string(),
+        })
+}
+
+/// Frame `frame_index` as 0..1 RGB floats, RGBA composited on `scene.background`, downscaled so
+/// the longest side is at most `max_side` (Lanczos3, never upscaled). Scale the frame's
+/// intrinsics with [`crate::scene::Intrinsics::scaled`] and the same
+/// [`scale_for_max_side`] factor to match.
+pub fn load_frame_rgb(
+    scene: &Scene,
+    frame_index: usize,
+    max_side: Option<u32>,
+) -> Result<Rgb32FImage, SceneError> {
+    let frame = scene
+        .frames
+        .get(frame_index)
+        .ok_or_else(|| SceneError::Inconsistent {
+            file: scene.root.display().to_string(),
+            message: format!(
+                "frame {frame_index} requested but the scene has {} frames",
+                scene.frames.len()
+            ),
+        })?;
+    let decoded = decode_image(&scene.root, &frame.image_path)?;
+    let (width, height) = (decoded.width(), decoded.height());
+    if (width, height) != (frame.intrinsics.width, frame.intrinsics.height) {
+        return Err(size_mismatch(
+            &frame.image_path,
+            (width, height),
+            (frame.intrinsics.width, frame.intrinsics.height),
+        ));
+    }
+    let rgb = composite_on_background(decoded, scene.background);
+    let factor = max_side.map_or(1.0, |max_side| scale_for_max_side(width, height, max_side));
+    if factor >= 1.0 {
+        return Ok(rgb);
+    }
+    let (scaled_width, scaled_height) = scaled_size(width, height, factor);
+    let mut resized =
+        image::imageops::resize(&rgb, scaled_width, scaled_height, FilterType::Lanczos3);
+    // Lanczos rings slightly past the input range at hard edges.
+    for value in resized.iter_mut() {
+        *value = value.clamp(0.0, 1.0);
+    }
+    Ok(resized)
+}
+
+pub(crate) fn size_mismatch(file: &Path, actual: (u32, u32), expected: (u32, u32)) -> SceneError {
+    SceneError::Inconsistent {
+        file: file.display().to_string(),
+        message: format!(
+            "image is {}x{} but its camera says {}x{}",
+            actual.0, actual.1, expected.0, expected.1
+        ),
+    }
+}
+
+fn composite_on_background(decoded: DynamicImage, background: [f32; 3]) -> Rgb32FImage {
+    if !decoded.color().has_alpha() {
+        return decoded.into_rgb32f();
+    }
+    let rgba = decoded.into_rgba32f();
+    let mut rgb = Rgb32FImage::new(rgba.width(), rgba.height());
+    for (out, pixel) in rgb.pixels_mut().zip(rgba.pixels()) {
+        let [red, green, blue, alpha] = pixel.0;
+        let alpha = alpha.clamp(0.0, 1.0);
+        out.0 = [
+            red * alpha + background[0] * (1.0 - alpha),
+            green * alpha + background[1] * (1.0 - alpha),
+            blue * alpha + background[2] * (1.0 - alpha),
+        ];
+    }
+    rgb
+}

@@ -1,0 +1,487 @@
+//! Small, valid, self-consistent datasets written to a directory, for tests across the project.
+//!
+//! The world is a few coloured spheres around the origin; cameras sit on a circle looking at the
+//! origin; each image is an exact ray-cast of the spheres, masks are the sphere ids at three
+//! granularities, and the sparse points lie on the sphere surfaces with tracks to the frames
+//! that actually see them. So poses, images, points and masks all agree.
+
+use std::f32::consts::TAU;
+use std::fs;
+use std::io;
+use std::path::Path;
+
+use glam::{Mat4, Vec3};
+use image::{ImageFormat, Luma, Rgb, Rgba};
+use serde_json::json;
+
+use super::colmap::{
+    self, CameraModel, ColmapCamera, ColmapEncoding, ColmapImage, ColmapKeypoint, ColmapModel,
+    ColmapPoint, ColmapTrackElement,
+};
+use super::masks::mask_path;
+use super::transforms_json::opencv_from_opengl_camera;
+use super::{Intrinsics, Level, blender, nerfstudio};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SyntheticImageFormat {
+    Png,
+    Jpeg,
+}
+
+impl SyntheticImageFormat {
+    fn extension(self) -> &'static str {
+        match self {
+            SyntheticImageFormat::Png => "png",
+            SyntheticImageFormat::Jpeg => "jpg",
+        }
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct SyntheticSpec {
+    pub frame_count: usize,
+    pub width: u32,
+    pub height: u32,
+    /// Mask levels to write (`masks/<level>/...`); `None` writes no masks.
+    pub with_masks: Option<Vec<Level>>,
+    /// Image encoding for COLMAP and nerfstudio (Blender always writes RGBA PNG).
+    pub image_format: SyntheticImageFormat,
+    /// Blender only: write a D-NeRF `time` per frame (frame index / (count - 1)).
+    pub with_time: bool,
+}
+
+impl Default for SyntheticSpec {
+    fn default() -> Self {
+        Self {
+            frame_count: 6,
+            width: 32,
+            height: 24,
+            with_masks: None,
+            image_format: SyntheticImageFormat::Png,
+            with_time: false,
+        }
+    }
+}
+
+/// One sphere of the synthetic world, with its instance id at each mask level.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SyntheticObject {
+    pub center: Vec3,
+    pub radius: f32,
+    pub color: [u8; 3],
+    /// Instance ids at small, middle, large.
+    pub ids: [u32; 3],
+}
+
+/// Three spheres: at the small level each is its own object, at the middle level the first two
+/// are one object, at the large level all three are one.
+pub fn synthetic_objects() -> [SyntheticObject; 3] {
+    [
+        SyntheticObject {
+            center: Vec3::new(-0.6, 0.0, 0.0),
+            radius: 0.45,
+            color: [220, 60, 50],
+            ids: [1, 1, 1],
+        },
+        SyntheticObject {
+            center: Vec3::new(0.5, -0.3, 0.1),
+            radius: 0.4,
+            color: [60, 190, 80],
+            ids: [2, 1, 1],
+        },
+        SyntheticObject {
+            center: Vec3::new(0.1, 0.6, -0.2),
+            radius: 0.35,
+            color: [50, 90, 220],
+            ids: [3, 2, 1],
+        },
+    ]
+}
+
+/// Background grey of the COLMAP and nerfstudio images.
+pub const SYNTHETIC_BACKGROUND: [u8; 3] = [40, 40, 40];
+
+const CAMERA_DISTANCE: f32 = 4.0;
+const CAMERA_HEIGHT: f32 = 1.5;
+const POINTS_PER_OBJECT: usize = 48;
+
+/// Pinhole intrinsics shared by every synthetic frame (horizontal field of view about 58 degrees).
+pub fn synthetic_intrinsics(spec: &SyntheticSpec) -> Intrinsics {
+    let focal = 0.9 * f64::from(spec.width);
+    Intrinsics {
+        width: spec.width,
+        height: spec.height,
+        fx: focal,
+        fy: focal,
+        cx: f64::from(spec.width) / 2.0,
+        cy: f64::from(spec.height) / 2.0,
+        model: CameraModel::Pinhole.name().to_string(),
+        distortion: Vec::new(),
+    }
+}
+
+/// Camera-to-world poses (OpenCV convention), on a circle around the z axis (world up = +z),
+/// each looking at the origin.
+pub fn synthetic_world_from_cameras(spec: &SyntheticSpec) -> Vec<Mat4> {
+    (0..spec.frame_count)
+        .map(|index| {
+            let angle = TAU * index as f32 / spec.frame_count.max(1) as f32;
+            let eye = Vec3::new(
+                CAMERA_DISTANCE * angle.cos(),
+                CAMERA_DISTANCE * angle.sin(),
+                CAMERA_HEIGHT,
+            );
+            let forward = (-eye).normalize();
+            let right = forward.cross(Vec3::Z).normalize();
+            let down = forward.cross(right);
+            Mat4::from_cols(
+                right.extend(0.0),
+                down.extend(0.0),
+                forward.extend(0.0),
+                eye.extend(1.0),
+            )
+        })
+        .collect()
+}
+
+/// What a camera sees through one pixel centre: the nearest object hit, with the hit distance
+/// and the surface normal there.
+struct RayHit {
+    object_index: usize,
+    distance: f32,
+    normal: Vec3,
+}
+
+fn cast_ray(origin: Vec3, direction: Vec3, objects: &[SyntheticObject]) -> Option<RayHit> {
+    objects
+        .iter()
+        .enumerate()
+        .filter_map(|(object_index, object)| {
+            let to_origin = origin - object.center;
+            let b = to_origin.dot(direction);
+            let c = to_origin.length_squared() - object.radius * object.radius;
+            let discriminant = b * b - c;
+            if discriminant < 0.0 {
+                return None;
+            }
+            let distance = -b - discriminant.sqrt();
+            (distance > 0.0).then(|| RayHit {
+                object_index,
+                distance,
+                normal: (origin + direction * distance - object.center).normalize(),
+            })
+        })
+        .min_by(|a, b| a.distance.total_cmp(&b.distance))
+}
+
+fn pixel_ray(intrinsics: &Intrinsics, world_from_camera: Mat4, u: f32, v: f32) -> (Vec3, Vec3) {
+    let camera_direction = Vec3::new(
+        (u - intrinsics.cx as f32) / intrinsics.fx as f32,
+        (v - intrinsics.cy as f32) / intrinsics.fy as f32,
+        1.0,
+    );
+    let origin = world_from_camera.transform_point3(Vec3::ZERO);
+    let direction = world_from_camera
+        .transform_vector3(camera_direction)
+        .normalize();
+    (origin, direction)
+}
+
+/// One rendered view: colour with coverage, and the object index per pixel.
+struct RenderedView {
+    rgba: image::RgbaImage,
+    object_from_pixel: Vec<Option<usize>>,
+}
+
+fn render_view(intrinsics: &Intrinsics, world_from_camera: Mat4) -> RenderedView {
+    let objects = synthetic_objects();
+    let (width, height) = (intrinsics.width, intrinsics.height);
+    let mut rgba = image::RgbaImage::new(width, height);
+    let mut object_from_pixel = Vec::with_capacity((width * height) as usize);
+    for y in 0..height {
+        for x in 0..width {
+            let (origin, direction) = pixel_ray(
+                intrinsics,
+                world_from_camera,
+                x as f32 + 0.5,
+                y as f32 + 0.5,
+            );
+            let hit = cast_ray(origin, direction, &objects);
+            let pixel = match &hit {
+                Some(hit) => {
+                    let shade = 0.55 + 0.45 * hit.normal.dot(-direction).max(0.0);
+                    let color = objects[hit.object_index].color;
+                    let [r, g, b] = color.map(|channel| (f32::from(channel) * shade) as u8);
+                    Rgba([r, g, b, 255])
+                }
+                None => {
+                    let [r, g, b] = SYNTHETIC_BACKGROUND;
+                    Rgba([r, g, b, 0])
+                }
+            };
+            rgba.put_pixel(x, y, pixel);
+            object_from_pixel.push(hit.map(|hit| hit.object_index));
+        }
+    }
+    RenderedView {
+        rgba,
+        object_from_pixel,
+    }
+}
+
+/// Points spread evenly over each sphere (Fibonacci lattice).
+fn surface_points() -> Vec<(usize, Vec3)> {
+    let golden_angle = std::f32::consts::PI * (3.0 - 5f32.sqrt());
+    synthetic_objects()
+        .iter()
+        .enumerate()
+        .flat_map(|(object_index, object)| {
+            (0..POINTS_PER_OBJECT).map(move |index| {
+                let z = 1.0 - 2.0 * (index as f32 + 0.5) / POINTS_PER_OBJECT as f32;
+                let ring = (1.0 - z * z).sqrt();
+                let angle = golden_angle * index as f32;
+                let unit = Vec3::new(ring * angle.cos(), ring * angle.sin(), z);
+                (object_index, object.center + unit * object.radius)
+            })
+        })
+        .collect()
+}
+
+/// Pixel position of `point` in a view, when the view sees that point unoccluded.
+fn observe(
+    point: Vec3,
+    object_index: usize,
+    intrinsics: &Intrinsics,
+    world_from_camera: Mat4,
+) -> Option<[f64; 2]> {
+    let camera_point = world_from_camera.inverse().transform_point3(point);
+    if camera_point.z <= 0.0 {
+        return None;
+    }
+    let u = intrinsics.fx as f32 * camera_point.x / camera_point.z + intrinsics.cx as f32;
+    let v = intrinsics.fy as f32 * camera_point.y / camera_point.z + intrinsics.cy as f32;
+    let inside =
+        u >= 0.0 && v >= 0.0 && u < intrinsics.width as f32 && v < intrinsics.height as f32;
+    if !inside {
+        return None;
+    }
+    let (origin, direction) = pixel_ray(intrinsics, world_from_camera, u, v);
+    let hit = cast_ray(origin, direction, &synthetic_objects())?;
+    let distance = (point - origin).length();
+    let visible = hit.object_index == object_index && (hit.distance - distance).abs() < 1e-2;
+    visible.then_some([f64::from(u), f64::from(v)])
+}
+
+fn write_image(path: &Path, view: &RenderedView, format: SyntheticImageFormat) -> io::Result<()> {
+    if let Some(parent) = path.parent() {
+        fs::create_dir_all(parent)?;
+    }
+    let rgb = image::RgbImage::from_fn(view.rgba.width(), view.rgba.height(), |x, y| {
+        let [r, g, b, _] = view.rgba.get_pixel(x, y).0;
+        Rgb([r, g, b])
+    });
+    let image_format = match format {
+        SyntheticImageFormat::Png => ImageFormat::Png,
+        SyntheticImageFormat::Jpeg => ImageFormat::Jpeg,
+    };
+    rgb.save_with_format(path, image_format)
+        .map_err(io::Error::other)
+}
+
+/// Writes masks for `frame_name` at every requested level: small and large as 8-bit, middle as
+/// 16-bit, so both depths get exercised.
+fn write_masks(
+    dir: &Path,
+    spec: &SyntheticSpec,
+    frame_name: &str,
+    view: &RenderedView,
+) -> io::Result<()> {
+    let Some(levels) = &spec.with_masks else {
+        return Ok(());
+    };
+    let objects = synthetic_objects();
+    for level in levels {
+        let path = dir.join(mask_path(*level, frame_name));
+        if let Some(parent) = path.parent() {
+            fs::create_dir_all(parent)?;
+        }
+        let id_at = |x: u32, y: u32| {
+            view.object_from_pixel[(y * spec.width + x) as usize]
+                .map_or(0, |object_index| objects[object_index].ids[level.index()])
+        };
+        let saved = if *level == Level::Middle {
+            image::ImageBuffer::<Luma<u16>, Vec<u16>>::from_fn(spec.width, spec.height, |x, y| {
+                Luma([id_at(x, y) as u16])
+            })
+            .save_with_format(&path, ImageFormat::Png)
+        } else {
+            image::GrayImage::from_fn(spec.width, spec.height, |x, y| Luma([id_at(x, y) as u8]))
+                .save_with_format(&path, ImageFormat::Png)
+        };
+        saved.map_err(io::Error::other)?;
+    }
+    Ok(())
+}
+
+/// A COLMAP dataset: `images/frame_NNNN.<ext>` and `sparse/0/` in the given encoding, one
+/// PINHOLE camera, images listed in reverse name order (loaders must sort), points with tracks.
+pub fn write_colmap(dir: &Path, spec: &SyntheticSpec, encoding: ColmapEncoding) -> io::Result<()> {
+    let intrinsics = synthetic_intrinsics(spec);
+    let poses = synthetic_world_from_cameras(spec);
+    let mut model = ColmapModel::default();
+    model.cameras.insert(
+        1,
+        ColmapCamera {
+            id: 1,
+            model: CameraModel::Pinhole,
+            width: u64::from(spec.width),
+            height: u64::from(spec.height),
+            params: CameraModel::Pinhole.params_from_intrinsics(&intrinsics),
+        },
+    );
+    for (index, world_from_camera) in poses.iter().enumerate() {
+        let name = format!("frame_{index:04}.{}", spec.image_format.extension());
+        let view = render_view(&intrinsics, *world_from_camera);
+        write_image(
+            &dir.join(colmap::IMAGES_DIR).join(&name),
+            &view,
+            spec.image_format,
+        )?;
+        write_masks(dir, spec, &name, &view)?;
+        let (qvec, tvec) = colmap::colmap_pose_from_world_from_camera(*world_from_camera);
+        model.images.push(ColmapImage {
+            id: index as u32 + 1,
+            qvec,
+            tvec,
+            camera_id: 1,
+            name,
+            points2d: Vec::new(),
+        });
+    }
+    for (point_index, (object_index, position)) in surface_points().into_iter().enumerate() {
+        let point_id = point_index as u64 + 1;
+        let mut track = Vec::new();
+        for (image, world_from_camera) in model.images.iter_mut().zip(&poses) {
+            if let Some(xy) = observe(position, object_index, &intrinsics, *world_from_camera) {
+                track.push(ColmapTrackElement {
+                    image_id: image.id,
+                    point2d_index: image.points2d.len() as u32,
+                });
+                image.points2d.push(ColmapKeypoint {
+                    xy,
+                    point3d_id: point_id as i64,
+                });
+            }
+        }
+        model.points.push(ColmapPoint {
+            id: point_id,
+            xyz: position.as_dvec3().to_array(),
+            rgb: synthetic_objects()[object_index].color,
+            error: 0.5,
+            track,
+        });
+    }
+    model.images.reverse();
+    colmap::write_model(&dir.join("sparse/0"), &model, encoding)
+}
+
+/// Rows of an OpenGL camera-to-world matrix, as the transforms files store it.
+fn opengl_matrix_rows(world_from_camera: Mat4) -> Vec<Vec<f64>> {
+    let opengl = world_from_camera * opencv_from_opengl_camera();
+    (0..4)
+        .map(|row| {
+            opengl
+                .row(row)
+                .to_array()
+                .iter()
+                .map(|v| f64::from(*v))
+                .collect()
+        })
+        .collect()
+}
+
+/// A nerfstudio dataset: `transforms.json` (global OPENCV intrinsics with zero distortion,
+/// frames in reverse order) and `images/frame_NNNN.<ext>`.
+pub fn write_nerfstudio(dir: &Path, spec: &SyntheticSpec) -> io::Result<()> {
+    let intrinsics = synthetic_intrinsics(spec);
+    let mut frames = Vec::new();
+    for (index, world_from_camera) in synthetic_world_from_cameras(spec).into_iter().enumerate() {
+        let name = format!("frame_{index:04}.{}", spec.image_format.extension());
+        let view = render_view(&intrinsics, world_from_camera);
+        write_image(&dir.join("images").join(&name), &view, spec.image_format)?;
+        write_masks(dir, spec, &name, &view)?;
+        frames.push(json!({
+            "file_path": format!("images/{name}"),
+            "transform_matrix": opengl_matrix_rows(world_from_camera),
+        }));
+    }
+    frames.reverse();
+    let transforms = json!({
+        "camera_model": "OPENCV",
+        "fl_x": intrinsics.fx, "fl_y": intrinsics.fy,
+        "cx": intrinsics.cx, "cy": intrinsics.cy,
+        "w": intrinsics.width, "h": intrinsics.height,
+        "k1": 0.0, "k2": 0.0, "p1": 0.0, "p2": 0.0,
+        "frames": frames,
+    });
+    write_json(&dir.join(nerfstudio::TRANSFORMS_FILE), &transforms)
+}
+
+/// Which frames the Blender writer puts in the test split: every fourth, starting at index 3.
+pub fn is_synthetic_test_frame(index: usize) -> bool {
+    index % 4 == 3
+}
+
+/// A Blender NeRF dataset: RGBA PNGs (transparent background) under `train/` and `test/`,
+/// `file_path` without extension, `transforms_train.json` and `transforms_test.json`.
+pub fn write_blender(dir: &Path, spec: &SyntheticSpec) -> io::Result<()> {
+    let intrinsics = synthetic_intrinsics(spec);
+    let camera_angle_x = 2.0 * (0.5 * f64::from(spec.width) / intrinsics.fx).atan();
+    let (mut train, mut test) = (Vec::new(), Vec::new());
+    for (index, world_from_camera) in synthetic_world_from_cameras(spec).into_iter().enumerate() {
+        let split = if is_synthetic_test_frame(index) {
+            "test"
+        } else {
+            "train"
+        };
+        let stem = format!("{split}/r_{index}");
+        let view = render_view(&intrinsics, world_from_camera);
+        let path = dir.join(format!("{stem}.png"));
+        if let Some(parent) = path.parent() {
+            fs::create_dir_all(parent)?;
+        }
+        view.rgba
+            .save_with_format(&path, ImageFormat::Png)
+            .map_err(io::Error::other)?;
+        write_masks(dir, spec, &format!("{stem}.png"), &view)?;
+        let mut frame = json!({
+            "file_path": format!("./{stem}"),
+            "rotation": 0.0,
+            "transform_matrix": opengl_matrix_rows(world_from_camera),
+        });
+        if spec.with_time {
+            let time = index as f64 / (spec.frame_count.max(2) - 1) as f64;
+            frame["time"] = json!(time);
+        }
+        if split == "test" {
+            test.push(frame)
+        } else {
+            train.push(frame)
+        }
+    }
+    for (file, frames) in [
+        (blender::TRAIN_TRANSFORMS_FILE, train),
+        (blender::TEST_TRANSFORMS_FILE, test),
+    ] {
+        write_json(
+            &dir.join(file),
+            &json!({ "camera_angle_x": camera_angle_x, "frames": frames }),
+        )?;
+    }
+    Ok(())
+}
+
+fn write_json(path: &Path, value: &serde_json::Value) -> io::Result<()> {
+    let text = serde_json::to_string_pretty(value).map_err(io::Error::other)?;
+    fs::write(path, text)
+}

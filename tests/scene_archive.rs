@@ -1,0 +1,309 @@
+//! Archive unpacking: every accepted kind and every rejection, with archives built in the test.
+
+use std::fs;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use segsplat::scene::{ArchiveError, InputErrorClass, UnpackLimits, UnpackStats, unpack_archive};
+use zip::write::SimpleFileOptions;
+
+fn limits() -> UnpackLimits {
+    UnpackLimits {
+        max_unpacked_bytes: 1 << 20,
+        max_files: 100,
+    }
+}
+
+struct Workspace {
+    _dir: tempfile::TempDir,
+    dest: PathBuf,
+}
+
+fn unpack(bytes: &[u8]) -> (Result<UnpackStats, ArchiveError>, Workspace) {
+    unpack_with(bytes, &limits())
+}
+
+fn unpack_with(
+    bytes: &[u8],
+    limits: &UnpackLimits,
+) -> (Result<UnpackStats, ArchiveError>, Workspace) {
+    let dir = tempfile::tempdir().unwrap();
+    let archive = dir.path().join("upload.bin");
+    fs::write(&archive, bytes).unwrap();
+    let dest = dir.path().join("out");
+    fs::create_dir(&dest).unwrap();
+    let result = unpack_archive(&archive, &dest, limits);
+    (result, Workspace { _dir: dir, dest })
+}
+
+fn zip_of(files: &[(&str, &[u8])]) -> Vec<u8> {
+    let mut writer = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    for (name, content) in files {
+        writer
+            .start_file(*name, SimpleFileOptions::default())
+            .unwrap();
+        writer.write_all(content).unwrap();
+    }
+    writer.finish().unwrap().into_inner()
+}
+
+/// A tar entry written with a raw header so unsafe names reach the archive unchanged.
+fn raw_tar_entry(
+    builder: &mut tar::Builder<Vec<u8>>,
+    name: &str,
+    kind: tar::EntryType,
+    data: &[u8],
+) {
+    let mut header = tar::Header::new_gnu();
+    header.as_old_mut().name[..name.len()].copy_from_slice(name.as_bytes());
+    header.set_entry_type(kind);
+    header.set_size(data.len() as u64);
+    header.set_mode(0o644);
+    header.set_cksum();
+    builder.append(&header, data).unwrap();
+}
+
+fn tar_of(entries: &[(&str, tar::EntryType, &[u8])]) -> Vec<u8> {
+    let mut builder = tar::Builder::new(Vec::new());
+    for (name, kind, data) in entries {
+        raw_tar_entry(&mut builder, name, *kind, data);
+    }
+    builder.into_inner().unwrap()
+}
+
+fn gzip(bytes: &[u8]) -> Vec<u8> {
+    let mut encoder = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    encoder.write_all(bytes).unwrap();
+    encoder.finish().unwrap()
+}
+
+fn read(dest: &Path, relative: &str) -> Vec<u8> {
+    fs::read(dest.join(relative)).unwrap()
+}
+
+#[test]
+fn zip_tar_and_tar_gz_unpack_to_the_same_files() {
+    let files: [(&str, &[u8]); 2] = [
+        ("scene/images/a.png", b"aaa"),
+        ("scene/notes.txt", b"hello"),
+    ];
+    let tar = tar_of(&[
+        ("scene/", tar::EntryType::Directory, b""),
+        ("scene/images/a.png", tar::EntryType::Regular, b"aaa"),
+        ("scene/notes.txt", tar::EntryType::Regular, b"hello"),
+    ]);
+    for bytes in [zip_of(&files), tar.clone(), gzip(&tar)] {
+        let (result, workspace) = unpack(&bytes);
+        let stats = result.unwrap();
+        assert_eq!(stats.files, 2);
+        assert_eq!(stats.bytes, 8);
+        assert_eq!(read(&workspace.dest, "scene/images/a.png"), b"aaa");
+        assert_eq!(read(&workspace.dest, "scene/notes.txt"), b"hello");
+    }
+}
+
+#[test]
+fn empty_zip_unpacks_to_nothing() {
+    let bytes = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()))
+        .finish()
+        .unwrap()
+        .into_inner();
+    let (result, workspace) = unpack(&bytes);
+    assert_eq!(result.unwrap().files, 0);
+    assert_eq!(fs::read_dir(&workspace.dest).unwrap().count(), 0);
+}
+
+#[test]
+fn unknown_bytes_are_an_unsupported_kind() {
+    let (result, _) = unpack(b"%PDF-1.7 this is not an archive at all");
+    let error = result.unwrap_err();
+    assert!(matches!(error, ArchiveError::UnsupportedKind), "{error}");
+    assert_eq!(error.class(), InputErrorClass::UnsupportedFormat);
+    // A gzip of something that is not a tar is not a scene archive either.
+    let (result, _) = unpack(&gzip(&[b'x'; 2000]));
+    assert!(matches!(result, Err(ArchiveError::UnsupportedKind)));
+}
+
+#[test]
+fn zip_slip_names_are_rejected() {
+    for name in [
+        "../evil.txt",
+        "a/../../evil.txt",
+        "/etc/evil.txt",
+        "..\\evil.txt",
+        "C:/evil.txt",
+    ] {
+        let (result, workspace) = unpack(&zip_of(&[("ok.txt", b"ok"), (name, b"evil")]));
+        let error = result.unwrap_err();
+        assert!(
+            matches!(error, ArchiveError::UnsafePath { .. }),
+            "{name}: {error}"
+        );
+        assert_eq!(error.class(), InputErrorClass::Malformed);
+        assert!(!workspace.dest.parent().unwrap().join("evil.txt").exists());
+    }
+}
+
+#[test]
+fn tar_slip_names_are_rejected() {
+    for name in ["../evil.txt", "/abs/evil.txt", "a/../../evil.txt"] {
+        let bytes = tar_of(&[(name, tar::EntryType::Regular, b"evil")]);
+        let (result, _) = unpack(&bytes);
+        assert!(
+            matches!(result, Err(ArchiveError::UnsafePath { .. })),
+            "{name}: {result:?}"
+        );
+    }
+}
+
+#[test]
+fn zip_symlinks_are_rejected() {
+    let mut writer = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    writer
+        .add_symlink("link", "/etc/passwd", SimpleFileOptions::default())
+        .unwrap();
+    let bytes = writer.finish().unwrap().into_inner();
+    let (result, workspace) = unpack(&bytes);
+    let error = result.unwrap_err();
+    assert!(matches!(error, ArchiveError::Link { .. }), "{error}");
+    assert!(fs::symlink_metadata(workspace.dest.join("link")).is_err());
+}
+
+#[test]
+fn zip_special_files_are_rejected() {
+    let mut writer = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    let fifo_mode = 0o010644u32;
+    let options = SimpleFileOptions::default()
+        .system(zip::System::Unix)
+        .external_attributes(fifo_mode << 16);
+    writer.start_file("pipe", options).unwrap();
+    let bytes = writer.finish().unwrap().into_inner();
+    let (result, _) = unpack(&bytes);
+    assert!(
+        matches!(result, Err(ArchiveError::SpecialFile { .. })),
+        "{result:?}"
+    );
+}
+
+#[test]
+fn tar_links_and_devices_are_rejected() {
+    for (kind, expect_link) in [
+        (tar::EntryType::Symlink, true),
+        (tar::EntryType::Link, true),
+        (tar::EntryType::Char, false),
+        (tar::EntryType::Block, false),
+        (tar::EntryType::Fifo, false),
+    ] {
+        let bytes = tar_of(&[("thing", kind, b"")]);
+        let (result, _) = unpack(&bytes);
+        let error = result.unwrap_err();
+        if expect_link {
+            assert!(
+                matches!(error, ArchiveError::Link { .. }),
+                "{kind:?}: {error}"
+            );
+        } else {
+            assert!(
+                matches!(error, ArchiveError::SpecialFile { .. }),
+                "{kind:?}: {error}"
+            );
+        }
+    }
+}
+
+#[test]
+fn byte_cap_counts_written_bytes_for_zip_bombs() {
+    // 2 MiB of zeros deflates to a few KiB; the cap is 1 MiB.
+    let zeros = vec![0u8; 2 << 20];
+    let bytes = zip_of(&[("bomb.bin", &zeros)]);
+    assert!(bytes.len() < 64 * 1024);
+    let (result, _) = unpack(&bytes);
+    let error = result.unwrap_err();
+    assert!(
+        matches!(error, ArchiveError::TooManyBytes { .. }),
+        "{error}"
+    );
+    assert_eq!(error.class(), InputErrorClass::TooLarge);
+
+    let tar_bomb = gzip(&tar_of(&[("bomb.bin", tar::EntryType::Regular, &zeros)]));
+    let (result, _) = unpack(&tar_bomb);
+    assert!(matches!(result, Err(ArchiveError::TooManyBytes { .. })));
+}
+
+#[test]
+fn byte_cap_spans_many_files() {
+    let chunk = vec![7u8; 300 * 1024];
+    let bytes = zip_of(&[("a", &chunk), ("b", &chunk), ("c", &chunk), ("d", &chunk)]);
+    let (result, _) = unpack(&bytes);
+    assert!(matches!(result, Err(ArchiveError::TooManyBytes { .. })));
+}
+
+#[test]
+fn file_count_is_capped() {
+    let names: Vec<String> = (0..6).map(|index| format!("f{index}")).collect();
+    let files: Vec<(&str, &[u8])> = names
+        .iter()
+        .map(|name| (name.as_str(), &b"x"[..]))
+        .collect();
+    let small_limits = UnpackLimits {
+        max_unpacked_bytes: 1 << 20,
+        max_files: 5,
+    };
+    let (result, _) = unpack_with(&zip_of(&files), &small_limits);
+    assert!(matches!(
+        result,
+        Err(ArchiveError::TooManyFiles { limit: 5 })
+    ));
+    let entries: Vec<(&str, tar::EntryType, &[u8])> = names
+        .iter()
+        .map(|name| (name.as_str(), tar::EntryType::Regular, &b"x"[..]))
+        .collect();
+    let (result, _) = unpack_with(&tar_of(&entries), &small_limits);
+    assert!(matches!(
+        result,
+        Err(ArchiveError::TooManyFiles { limit: 5 })
+    ));
+}
+
+#[test]
+fn truncated_archives_are_corrupt() {
+    let content = vec![42u8; 5000];
+    let zip = zip_of(&[("a.bin", &content), ("b.bin", &content)]);
+    let tar = tar_of(&[
+        ("a.bin", tar::EntryType::Regular, &content),
+        ("b.bin", tar::EntryType::Regular, &content),
+    ]);
+    let tar_gz = gzip(&tar);
+    // Cut inside the data, and (for tar) exactly at an entry boundary, where the tar reader alone
+    // would see a clean end.
+    let a_entry_end = 512 + 5120;
+    let cuts: [(&str, &[u8]); 4] = [
+        ("zip", &zip[..zip.len() / 2]),
+        ("tar mid-entry", &tar[..3000]),
+        ("tar at boundary", &tar[..a_entry_end]),
+        ("tar.gz", &tar_gz[..tar_gz.len() - 10]),
+    ];
+    for (label, bytes) in cuts {
+        let (result, _) = unpack(bytes);
+        let error = result.unwrap_err();
+        assert!(
+            matches!(error, ArchiveError::Corrupt(_)),
+            "{label}: {error}"
+        );
+        assert_eq!(error.class(), InputErrorClass::Malformed);
+    }
+}
+
+#[test]
+fn duplicate_entries_do_not_overwrite() {
+    let bytes = tar_of(&[
+        ("a.txt", tar::EntryType::Regular, b"first"),
+        ("a.txt", tar::EntryType::Regular, b"second"),
+    ]);
+    let (result, workspace) = unpack(&bytes);
+    assert!(
+        matches!(result, Err(ArchiveError::Corrupt(_))),
+        "{result:?}"
+    );
+    assert_eq!(read(&workspace.dest, "a.txt"), b"first");
+}
