@@ -71,26 +71,11 @@ fn unpack_validate_store(request: &IngestRequest) -> Result<SceneSummary, Ingest
             source,
         })?;
     unpack_archive(&request.archive, unpack_dir.path(), &request.limits)?;
-    let root = dataset_root(unpack_dir.path());
-    let scene = load_scene(&root, &request.load_options)?;
+    // The loader looks through a single wrapping folder; `scene.root` is the dataset itself.
+    let scene = load_scene(unpack_dir.path(), &request.load_options)?;
     let summary = validate_scene(&scene)?;
-    store_tree(&root, &root, request)?;
+    store_tree(&scene.root, &scene.root, request)?;
     Ok(summary)
-}
-
-/// Archives often wrap the dataset in one top-level folder; descend through such wrappers.
-fn dataset_root(unpacked: &Path) -> PathBuf {
-    let mut root = unpacked.to_path_buf();
-    loop {
-        let Ok(entries) = std::fs::read_dir(&root) else {
-            return root;
-        };
-        let entries: Vec<_> = entries.filter_map(Result::ok).collect();
-        match entries.as_slice() {
-            [only] if only.file_type().is_ok_and(|kind| kind.is_dir()) => root = only.path(),
-            _ => return root,
-        }
-    }
 }
 
 fn store_tree(root: &Path, dir: &Path, request: &IngestRequest) -> Result<(), IngestError> {

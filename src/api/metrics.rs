@@ -16,21 +16,22 @@ const LATENCY_BUCKETS_SECS: [f64; 14] = [
     0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 10.0, 60.0, 600.0,
 ];
 
-static HANDLE: OnceLock<PrometheusHandle> = OnceLock::new();
+static HANDLE: OnceLock<Option<PrometheusHandle>> = OnceLock::new();
 
 /// The process's Prometheus recorder, installed on first use. Later calls (a second service in
 /// the same test process) share it. `None` when another recorder was installed first.
 pub fn prometheus_handle() -> Option<PrometheusHandle> {
-    if let Some(handle) = HANDLE.get() {
-        return Some(handle.clone());
-    }
-    let builder = PrometheusBuilder::new().set_buckets(&LATENCY_BUCKETS_SECS).ok()?;
-    let recorder = builder.build_recorder();
-    let handle = recorder.handle();
-    if metrics::set_global_recorder(recorder).is_err() {
-        return HANDLE.get().cloned();
-    }
-    Some(HANDLE.get_or_init(|| handle).clone())
+    HANDLE
+        .get_or_init(|| {
+            let builder = PrometheusBuilder::new()
+                .set_buckets(&LATENCY_BUCKETS_SECS)
+                .ok()?;
+            let recorder = builder.build_recorder();
+            let handle = recorder.handle();
+            metrics::set_global_recorder(recorder).ok()?;
+            Some(handle)
+        })
+        .clone()
 }
 
 /// Counts requests and records their latency, labelled by route template (not raw path, to keep
