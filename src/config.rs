@@ -198,11 +198,10 @@ impl Config {
         environment: impl IntoIterator<Item = (String, String)>,
         overrides: &ConfigOverrides,
     ) -> Result<Config, ConfigError> {
-        let mut layered = toml::Table::try_from(Config::default()).map_err(|error| {
-            ConfigError::Merge {
+        let mut layered =
+            toml::Table::try_from(Config::default()).map_err(|error| ConfigError::Merge {
                 message: error.to_string(),
-            }
-        })?;
+            })?;
         if let Some(path) = file {
             let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
                 path: path.display().to_string(),
@@ -423,7 +422,10 @@ mod tests {
             &ConfigOverrides::default(),
         )
         .unwrap_err();
-        assert!(error.to_string().starts_with("jobs.heartbeat_secs:"), "{error}");
+        assert!(
+            error.to_string().starts_with("jobs.heartbeat_secs:"),
+            "{error}"
+        );
     }
 
     #[test]

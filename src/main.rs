@@ -10,7 +10,11 @@ use segsplat::api::{ServiceBuilder, ServiceMode};
 use segsplat::config::{Config, ConfigOverrides, LogFormat};
 
 #[derive(Parser)]
-#[command(name = "segsplat", version, about = "Open-vocabulary 3D segmentation with Segment-then-Splat Gaussian scenes")]
+#[command(
+    name = "segsplat",
+    version,
+    about = "Open-vocabulary 3D segmentation with Segment-then-Splat Gaussian scenes"
+)]
 struct Cli {
     /// TOML configuration file (keys as in README; SEGSPLAT_* variables and flags override it).
     #[arg(long, global = true, env = "SEGSPLAT_CONFIG")]

@@ -56,9 +56,17 @@ async fn job_runs_to_success_and_sse_delivers_progress() {
         .await
         .unwrap();
     assert_eq!(response.status().as_u16(), 200);
-    assert!(response.headers()["content-type"].to_str().unwrap().starts_with("text/event-stream"));
+    assert!(
+        response.headers()["content-type"]
+            .to_str()
+            .unwrap()
+            .starts_with("text/event-stream")
+    );
     // The stream ends by itself after the final state.
-    let text = tokio::time::timeout(WAIT, response.text()).await.unwrap().unwrap();
+    let text = tokio::time::timeout(WAIT, response.text())
+        .await
+        .unwrap()
+        .unwrap();
     let events = parse_sse(&text);
     let states: Vec<&str> = events
         .iter()
@@ -76,13 +84,20 @@ async fn job_runs_to_success_and_sse_delivers_progress() {
     assert_eq!(progress[4]["total_steps"], 5);
     assert_eq!(progress[4]["stage"], "count");
     assert!(progress[4]["metrics"]["loss"].as_f64().unwrap() > 0.0);
-    assert!(progress[2]["eta_secs"].as_f64().unwrap() > 0.0, "{}", progress[2]);
+    assert!(
+        progress[2]["eta_secs"].as_f64().unwrap() > 0.0,
+        "{}",
+        progress[2]
+    );
 
     let job = service.job(&job_id).await;
     assert_eq!(job["state"], "succeeded");
     assert_eq!(job["attempts"], 1);
     assert_eq!(job["progress"]["step"], 5);
-    assert_eq!(job["config"], json!({"steps": 5, "step_ms": 30, "fail_attempts": 0}));
+    assert_eq!(
+        job["config"],
+        json!({"steps": 5, "step_ms": 30, "fail_attempts": 0})
+    );
     assert_eq!(handler.stats.runs.load(Ordering::SeqCst), 1);
 
     // Replay after the fact: same events, and resuming with Last-Event-ID skips the seen ones.
@@ -120,12 +135,18 @@ async fn job_requests_are_validated() {
     let (status, body) = service.post_json(&path, json!({"kind": "teleport"})).await;
     assert_eq!(status, 422, "{body}");
     let message = body["error"]["message"].as_str().unwrap();
-    assert!(message.contains("teleport") && message.contains(STEPS_KIND), "{message}");
+    assert!(
+        message.contains("teleport") && message.contains(STEPS_KIND),
+        "{message}"
+    );
     let (status, body) = service
         .post_json(&path, json!({"kind": STEPS_KIND, "config": {"steps": 0}}))
         .await;
     assert_eq!(status, 422, "{body}");
-    assert!(body["error"]["message"].as_str().unwrap().contains("steps"), "{body}");
+    assert!(
+        body["error"]["message"].as_str().unwrap().contains("steps"),
+        "{body}"
+    );
     let (status, _) = service
         .post_json("/v1/scenes/no-such-scene/jobs", json!({"kind": STEPS_KIND}))
         .await;
@@ -142,7 +163,9 @@ async fn cancel_stops_queued_and_running_jobs_and_guards_scene_deletion() {
     let service = start_with(dir.path(), 1, &handler).await;
     let scene_id = service.upload_test_scene().await;
     let long = json!({"steps": 100000, "step_ms": 5});
-    let running = service.create_job(&scene_id, STEPS_KIND, long.clone()).await;
+    let running = service
+        .create_job(&scene_id, STEPS_KIND, long.clone())
+        .await;
     service.wait_for_state(&running, "running", WAIT).await;
     let queued = service.create_job(&scene_id, STEPS_KIND, long).await;
     assert_eq!(service.job(&queued).await["state"], "queued");
@@ -156,15 +179,21 @@ async fn cancel_stops_queued_and_running_jobs_and_guards_scene_deletion() {
         .unwrap();
     assert_eq!(response.status().as_u16(), 409);
 
-    let (status, body) = service.post_json(&format!("/v1/jobs/{queued}/cancel"), json!({})).await;
+    let (status, body) = service
+        .post_json(&format!("/v1/jobs/{queued}/cancel"), json!({}))
+        .await;
     assert_eq!(status, 200, "{body}");
     assert_eq!(body["state"], "cancelled");
-    let (status, body) = service.post_json(&format!("/v1/jobs/{running}/cancel"), json!({})).await;
+    let (status, body) = service
+        .post_json(&format!("/v1/jobs/{running}/cancel"), json!({}))
+        .await;
     assert_eq!(status, 202, "{body}");
     assert_eq!(body["cancel_requested"], true);
     let job = service.wait_for_state(&running, "cancelled", WAIT).await;
     assert!(job["progress"]["step"].as_u64().unwrap() < 100000);
-    let (status, _) = service.post_json(&format!("/v1/jobs/{running}/cancel"), json!({})).await;
+    let (status, _) = service
+        .post_json(&format!("/v1/jobs/{running}/cancel"), json!({}))
+        .await;
     assert_eq!(status, 409);
     // The cancelled queued job never ran.
     assert_eq!(handler.stats.runs.load(Ordering::SeqCst), 1);
@@ -203,7 +232,9 @@ async fn a_dead_workers_lease_expires_and_another_worker_reruns_the_job() {
     let api_handler = StepsHandler::new();
     let api = start_with(dir.path(), 0, &api_handler).await;
     let scene_id = api.upload_test_scene().await;
-    let job_id = api.create_job(&scene_id, STEPS_KIND, json!({"steps": 3})).await;
+    let job_id = api
+        .create_job(&scene_id, STEPS_KIND, json!({"steps": 3}))
+        .await;
     // A worker claims the job and dies: it never heartbeats nor runs anything.
     let claimed = api
         .service
@@ -221,7 +252,10 @@ async fn a_dead_workers_lease_expires_and_another_worker_reruns_the_job() {
     let job = api.wait_for_state(&job_id, "succeeded", WAIT).await;
     assert_eq!(job["attempts"], 2, "{job}");
     assert_eq!(worker_handler.stats.runs.load(Ordering::SeqCst), 1);
-    assert_eq!(worker_handler.stats.steps_executed.load(Ordering::SeqCst), 3);
+    assert_eq!(
+        worker_handler.stats.steps_executed.load(Ordering::SeqCst),
+        3
+    );
 
     let events = api
         .service
@@ -231,10 +265,20 @@ async fn a_dead_workers_lease_expires_and_another_worker_reruns_the_job() {
         .unwrap();
     let requeue = events
         .iter()
-        .find(|event| event.kind == "state" && event.payload["state"] == "queued"
-            && event.payload["error"].as_str().is_some_and(|e| e.contains("lease expired")))
+        .find(|event| {
+            event.kind == "state"
+                && event.payload["state"] == "queued"
+                && event.payload["error"]
+                    .as_str()
+                    .is_some_and(|e| e.contains("lease expired"))
+        })
         .expect("a re-queue event naming the expired lease");
-    assert!(requeue.payload["error"].as_str().unwrap().contains("dead-worker/0"));
+    assert!(
+        requeue.payload["error"]
+            .as_str()
+            .unwrap()
+            .contains("dead-worker/0")
+    );
     worker.shutdown().await;
     api.shutdown().await;
 }
@@ -283,7 +327,10 @@ async fn jobs_fail_with_the_reason_once_attempts_are_used_up() {
         .unwrap();
     let job = service.wait_for_state(&job_id, "failed", WAIT).await;
     let error = job["error"].as_str().unwrap();
-    assert!(error.contains("lease expired") && error.contains("no attempts left"), "{error}");
+    assert!(
+        error.contains("lease expired") && error.contains("no attempts left"),
+        "{error}"
+    );
     service.shutdown().await;
 }
 
@@ -293,7 +340,9 @@ async fn a_restart_on_the_same_data_dir_resumes_queued_jobs() {
     let handler = StepsHandler::new();
     let first = start_with(dir.path(), 0, &handler).await;
     let scene_id = first.upload_test_scene().await;
-    let job_id = first.create_job(&scene_id, STEPS_KIND, json!({"steps": 2})).await;
+    let job_id = first
+        .create_job(&scene_id, STEPS_KIND, json!({"steps": 2}))
+        .await;
     first.shutdown().await;
 
     let second = start_with(dir.path(), 1, &handler).await;
@@ -311,7 +360,11 @@ async fn shutdown_hands_running_jobs_back_and_the_next_run_resumes_from_the_chec
     let scene_id = first.upload_test_scene().await;
     let steps = 40;
     let job_id = first
-        .create_job(&scene_id, STEPS_KIND, json!({"steps": steps, "step_ms": 25}))
+        .create_job(
+            &scene_id,
+            STEPS_KIND,
+            json!({"steps": steps, "step_ms": 25}),
+        )
         .await;
     let started = std::time::Instant::now();
     loop {
@@ -324,7 +377,9 @@ async fn shutdown_hands_running_jobs_back_and_the_next_run_resumes_from_the_chec
     }
     first.shutdown().await;
 
-    let database = Database::open(&dir.path().join("segsplat.db")).await.unwrap();
+    let database = Database::open(&dir.path().join("segsplat.db"))
+        .await
+        .unwrap();
     let job = database.get_job(&job_id).await.unwrap().unwrap();
     assert_eq!(job.state, JobState::Queued);
     assert_eq!(job.lease_owner, None);
@@ -338,6 +393,10 @@ async fn shutdown_hands_running_jobs_back_and_the_next_run_resumes_from_the_chec
     let job = second.wait_for_state(&job_id, "succeeded", WAIT).await;
     assert_eq!(job["attempts"], 1);
     let done_after = second_handler.stats.steps_executed.load(Ordering::SeqCst);
-    assert_eq!(done_before + done_after, steps, "resumed from the checkpoint, no step twice");
+    assert_eq!(
+        done_before + done_after,
+        steps,
+        "resumed from the checkpoint, no step twice"
+    );
     second.shutdown().await;
 }

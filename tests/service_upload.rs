@@ -3,7 +3,9 @@
 
 mod common;
 
-use common::archives::{self, colmap_files, dataset_files, gzip, small_spec, tar_of, wrapped, zip_of};
+use common::archives::{
+    self, colmap_files, dataset_files, gzip, small_spec, tar_of, wrapped, zip_of,
+};
 use common::{TestService, entries_in, files_under, test_config};
 use segsplat::scene::colmap::ColmapEncoding;
 use segsplat::scene::synthetic::{self, SyntheticSpec};
@@ -17,9 +19,15 @@ async fn assert_no_trace(service: &TestService, data_dir: &std::path::Path) {
     let (status, body) = service.get_json("/v1/scenes").await;
     assert_eq!(status, 200);
     assert_eq!(body["scenes"].as_array().unwrap().len(), 0, "{body}");
-    assert!(files_under(&data_dir.join("blobs")).is_empty(), "blobs left behind");
-    assert!(entries_in(&data_dir.join("tmp")).is_empty(), "temporary files left behind: {:?}",
-        entries_in(&data_dir.join("tmp")));
+    assert!(
+        files_under(&data_dir.join("blobs")).is_empty(),
+        "blobs left behind"
+    );
+    assert!(
+        entries_in(&data_dir.join("tmp")).is_empty(),
+        "temporary files left behind: {:?}",
+        entries_in(&data_dir.join("tmp"))
+    );
 }
 
 #[tokio::test]
@@ -32,17 +40,45 @@ async fn every_format_and_archive_kind_uploads() {
         ..small_spec()
     };
     let cases: Vec<(&str, Vec<u8>, &str, &str, u32)> = vec![
-        ("colmap text zip", zip_of(&colmap_files(spec.clone(), ColmapEncoding::Text)),
-            "application/zip", "colmap", 4),
-        ("colmap binary tar.gz, wrapped in a folder",
-            gzip(&tar_of(&wrapped("garden", colmap_files(masked, ColmapEncoding::Binary)))),
-            "application/gzip", "colmap", 4),
-        ("nerfstudio tar",
+        (
+            "colmap text zip",
+            zip_of(&colmap_files(spec.clone(), ColmapEncoding::Text)),
+            "application/zip",
+            "colmap",
+            4,
+        ),
+        (
+            "colmap binary tar.gz, wrapped in a folder",
+            gzip(&tar_of(&wrapped(
+                "garden",
+                colmap_files(masked, ColmapEncoding::Binary),
+            ))),
+            "application/gzip",
+            "colmap",
+            4,
+        ),
+        (
+            "nerfstudio tar",
             tar_of(&dataset_files(|d| synthetic::write_nerfstudio(d, &spec))),
-            "application/x-tar", "nerfstudio", 4),
-        ("blender zip",
-            zip_of(&dataset_files(|d| synthetic::write_blender(d, &SyntheticSpec { frame_count: 4, ..spec.clone() }))),
-            "application/octet-stream", "blender", 4),
+            "application/x-tar",
+            "nerfstudio",
+            4,
+        ),
+        (
+            "blender zip",
+            zip_of(&dataset_files(|d| {
+                synthetic::write_blender(
+                    d,
+                    &SyntheticSpec {
+                        frame_count: 4,
+                        ..spec.clone()
+                    },
+                )
+            })),
+            "application/octet-stream",
+            "blender",
+            4,
+        ),
     ];
     let mut ids = Vec::new();
     for (label, bytes, content_type, format, frames) in cases {
@@ -50,17 +86,31 @@ async fn every_format_and_archive_kind_uploads() {
         assert_eq!(status, 201, "{label}: {body}");
         assert_eq!(body["format"], format, "{label}");
         assert_eq!(body["frame_count"], frames, "{label}");
-        assert_eq!(body["resolutions"], serde_json::json!([[16, 12]]), "{label}");
+        assert_eq!(
+            body["resolutions"],
+            serde_json::json!([[16, 12]]),
+            "{label}"
+        );
         ids.push(body["id"].as_str().unwrap().to_string());
     }
     // Sparse points come with COLMAP; masks were given at one level for the wrapped upload.
     let (_, colmap) = service.get_json(&format!("/v1/scenes/{}", ids[0])).await;
-    assert!(colmap["sparse_point_count"].as_u64().unwrap() > 0, "{colmap}");
+    assert!(
+        colmap["sparse_point_count"].as_u64().unwrap() > 0,
+        "{colmap}"
+    );
     let (_, masked) = service.get_json(&format!("/v1/scenes/{}", ids[1])).await;
-    assert_eq!(masked["mask_levels"], serde_json::json!(["small"]), "{masked}");
+    assert_eq!(
+        masked["mask_levels"],
+        serde_json::json!(["small"]),
+        "{masked}"
+    );
     // The files are stored under the scene (the wrapping folder removed).
     let stored = files_under(&dir.path().join("blobs/scenes").join(&ids[1]).join("files"));
-    assert!(stored.iter().any(|p| p.starts_with("sparse/0")), "{stored:?}");
+    assert!(
+        stored.iter().any(|p| p.starts_with("sparse/0")),
+        "{stored:?}"
+    );
     assert!(stored.iter().any(|p| p.starts_with("images")), "{stored:?}");
 
     let (status, list) = service.get_json("/v1/scenes").await;
@@ -68,8 +118,12 @@ async fn every_format_and_archive_kind_uploads() {
     assert_eq!(list["scenes"].as_array().unwrap().len(), 4);
 
     // Delete removes the row and the files.
-    let response = service.client.delete(service.url(&format!("/v1/scenes/{}", ids[1])))
-        .send().await.unwrap();
+    let response = service
+        .client
+        .delete(service.url(&format!("/v1/scenes/{}", ids[1])))
+        .send()
+        .await
+        .unwrap();
     assert_eq!(response.status().as_u16(), 204);
     let (status, body) = service.get_json(&format!("/v1/scenes/{}", ids[1])).await;
     assert_eq!(status, 404);
@@ -87,8 +141,13 @@ async fn multipart_upload_is_accepted_and_named_after_the_file() {
         .mime_str("application/zip")
         .unwrap();
     let form = reqwest::multipart::Form::new().part("file", part);
-    let response = service.client.post(service.url("/v1/scenes")).multipart(form)
-        .send().await.unwrap();
+    let response = service
+        .client
+        .post(service.url("/v1/scenes"))
+        .multipart(form)
+        .send()
+        .await
+        .unwrap();
     assert_eq!(response.status().as_u16(), 201);
     let body: serde_json::Value = response.json().await.unwrap();
     assert_eq!(body["name"], "kitchen");
@@ -109,23 +168,34 @@ fn tar_with_symlink() -> Vec<u8> {
         let mut header = tar::Header::new_gnu();
         header.set_size(bytes.len() as u64);
         header.set_mode(0o644);
-        builder.append_data(&mut header, name, bytes.as_slice()).unwrap();
+        builder
+            .append_data(&mut header, name, bytes.as_slice())
+            .unwrap();
     }
     let mut header = tar::Header::new_gnu();
     header.set_entry_type(tar::EntryType::Symlink);
     header.set_size(0);
     header.set_mode(0o777);
-    builder.append_link(&mut header, "images/evil.png", "/etc/passwd").unwrap();
+    builder
+        .append_link(&mut header, "images/evil.png", "/etc/passwd")
+        .unwrap();
     builder.into_inner().unwrap()
 }
 
 fn zip_slip() -> Vec<u8> {
     let mut writer = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
     for (name, bytes) in colmap_files(small_spec(), ColmapEncoding::Text) {
-        writer.start_file(name, zip::write::SimpleFileOptions::default()).unwrap();
+        writer
+            .start_file(name, zip::write::SimpleFileOptions::default())
+            .unwrap();
         std::io::Write::write_all(&mut writer, &bytes).unwrap();
     }
-    writer.start_file("../../escaped.txt", zip::write::SimpleFileOptions::default()).unwrap();
+    writer
+        .start_file(
+            "../../escaped.txt",
+            zip::write::SimpleFileOptions::default(),
+        )
+        .unwrap();
     std::io::Write::write_all(&mut writer, b"outside").unwrap();
     writer.finish().unwrap().into_inner()
 }
@@ -136,7 +206,8 @@ async fn malformed_uploads_are_rejected_without_a_trace() {
     let service = start(dir.path()).await;
     let valid_tar = tar_of(&colmap_files(small_spec(), ColmapEncoding::Text));
     let truncated = gzip(&valid_tar)[..valid_tar.len() / 8].to_vec();
-    let missing_image = colmap_with(|files| files.retain(|(name, _)| name != "images/frame_0001.png"));
+    let missing_image =
+        colmap_with(|files| files.retain(|(name, _)| name != "images/frame_0001.png"));
     let undecodable = colmap_with(|files| {
         for (name, bytes) in files.iter_mut() {
             if name == "images/frame_0002.png" {
@@ -145,16 +216,56 @@ async fn malformed_uploads_are_rejected_without_a_trace() {
         }
     });
     let cases: Vec<(&str, Vec<u8>, &str, u16, &str)> = vec![
-        ("zip-slip entry", zip_slip(), "application/zip", 400, "escaped.txt"),
-        ("symlink entry", tar_with_symlink(), "application/x-tar", 400, "evil.png"),
+        (
+            "zip-slip entry",
+            zip_slip(),
+            "application/zip",
+            400,
+            "escaped.txt",
+        ),
+        (
+            "symlink entry",
+            tar_with_symlink(),
+            "application/x-tar",
+            400,
+            "evil.png",
+        ),
         ("truncated tar.gz", truncated, "application/gzip", 400, ""),
-        ("not an archive", b"hello, this is plain text".to_vec(), "application/octet-stream", 415, ""),
-        ("no dataset inside", zip_of(&[("notes.txt".to_string(), b"hi".to_vec())]),
-            "application/zip", 415, "no dataset found"),
-        ("missing image", zip_of(&missing_image), "application/zip", 422, "frame_0001.png"),
-        ("undecodable image", zip_of(&undecodable), "application/zip", 422, "frame_0002.png"),
-        ("wrong content type", zip_of(&colmap_files(small_spec(), ColmapEncoding::Text)),
-            "text/plain", 415, "Content-Type"),
+        (
+            "not an archive",
+            b"hello, this is plain text".to_vec(),
+            "application/octet-stream",
+            415,
+            "",
+        ),
+        (
+            "no dataset inside",
+            zip_of(&[("notes.txt".to_string(), b"hi".to_vec())]),
+            "application/zip",
+            415,
+            "no dataset found",
+        ),
+        (
+            "missing image",
+            zip_of(&missing_image),
+            "application/zip",
+            422,
+            "frame_0001.png",
+        ),
+        (
+            "undecodable image",
+            zip_of(&undecodable),
+            "application/zip",
+            422,
+            "frame_0002.png",
+        ),
+        (
+            "wrong content type",
+            zip_of(&colmap_files(small_spec(), ColmapEncoding::Text)),
+            "text/plain",
+            415,
+            "Content-Type",
+        ),
     ];
     for (label, bytes, content_type, expected_status, message_part) in cases {
         let (status, body) = service.upload(bytes, content_type).await;
@@ -178,14 +289,26 @@ async fn uploads_over_the_size_limits_get_413() {
     let service = TestService::start(config, vec![]).await;
     let (status, body) = service.upload(archive.clone(), "application/zip").await;
     assert_eq!(status, 413, "{body}");
-    assert!(body["error"]["message"].as_str().unwrap().contains("max_upload_bytes"), "{body}");
+    assert!(
+        body["error"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("max_upload_bytes"),
+        "{body}"
+    );
     // Streamed without a Content-Length: the limit is enforced while receiving.
-    let chunks: Vec<Result<Vec<u8>, std::io::Error>> =
-        archive.chunks(1024).map(|chunk| Ok(chunk.to_vec())).collect();
-    let response = service.client.post(service.url("/v1/scenes"))
+    let chunks: Vec<Result<Vec<u8>, std::io::Error>> = archive
+        .chunks(1024)
+        .map(|chunk| Ok(chunk.to_vec()))
+        .collect();
+    let response = service
+        .client
+        .post(service.url("/v1/scenes"))
         .header("content-type", "application/zip")
         .body(reqwest::Body::wrap_stream(futures::stream::iter(chunks)))
-        .send().await.unwrap();
+        .send()
+        .await
+        .unwrap();
     assert_eq!(response.status().as_u16(), 413);
     assert_no_trace(&service, dir.path()).await;
     service.shutdown().await;

@@ -40,9 +40,9 @@ impl TokenCheck {
         }) else {
             return false;
         };
-        self.tokens
-            .iter()
-            .fold(false, |found, accepted| found | constant_time_eq(accepted, token.trim()))
+        self.tokens.iter().fold(false, |found, accepted| {
+            found | constant_time_eq(accepted, token.trim())
+        })
     }
 }
 
@@ -58,7 +58,11 @@ fn constant_time_eq(left: &str, right: &str) -> bool {
         == 0
 }
 
-pub async fn require_token(State(check): State<TokenCheck>, request: Request, next: Next) -> Response {
+pub async fn require_token(
+    State(check): State<TokenCheck>,
+    request: Request,
+    next: Next,
+) -> Response {
     if OPEN_PATHS.contains(&request.uri().path()) {
         return next.run(request).await;
     }

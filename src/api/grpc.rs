@@ -142,7 +142,9 @@ impl SceneQuery for SceneQueryService {
         &self,
         _request: Request<tonic::Streaming<proto::StreamQueryRequest>>,
     ) -> Result<Response<Self::StreamQueryStream>, Status> {
-        Err(Status::unimplemented(format!("StreamQuery {PIPELINE_PENDING}")))
+        Err(Status::unimplemented(format!(
+            "StreamQuery {PIPELINE_PENDING}"
+        )))
     }
 
     async fn list_objects(
@@ -150,8 +152,9 @@ impl SceneQuery for SceneQueryService {
         request: Request<proto::ListObjectsRequest>,
     ) -> Result<Response<proto::ListObjectsResponse>, Status> {
         let request = request.into_inner();
-        let level = proto::Level::try_from(request.level)
-            .map_err(|_| Status::invalid_argument(format!("level: unknown value {}", request.level)))?;
+        let level = proto::Level::try_from(request.level).map_err(|_| {
+            Status::invalid_argument(format!("level: unknown value {}", request.level))
+        })?;
         if self
             .database
             .get_scene(&request.scene_id)
@@ -159,7 +162,10 @@ impl SceneQuery for SceneQueryService {
             .map_err(internal)?
             .is_none()
         {
-            return Err(Status::not_found(format!("scene {} not found", request.scene_id)));
+            return Err(Status::not_found(format!(
+                "scene {} not found",
+                request.scene_id
+            )));
         }
         let objects = self
             .database
@@ -175,7 +181,9 @@ impl SceneQuery for SceneQueryService {
         &self,
         _request: Request<proto::RenderMaskRequest>,
     ) -> Result<Response<proto::RenderMaskResponse>, Status> {
-        Err(Status::unimplemented(format!("RenderMask {PIPELINE_PENDING}")))
+        Err(Status::unimplemented(format!(
+            "RenderMask {PIPELINE_PENDING}"
+        )))
     }
 
     async fn get_job(

@@ -5,8 +5,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use crate::scene::{
-    ArchiveError, InputErrorClass, LoadOptions, SceneError, SceneSummary, UnpackLimits,
-    load_scene, unpack_archive, validate_scene,
+    ArchiveError, InputErrorClass, LoadOptions, SceneError, SceneSummary, UnpackLimits, load_scene,
+    unpack_archive, validate_scene,
 };
 use crate::store::{BlobError, BlobStore};
 

@@ -114,7 +114,12 @@ pub async fn create_job(
         .map_err(|message| ApiError::unprocessable(format!("config: {message}")))?;
     let job = state
         .database
-        .insert_job(&scene_id, &request.kind, &config, state.config.jobs.max_attempts)
+        .insert_job(
+            &scene_id,
+            &request.kind,
+            &config,
+            state.config.jobs.max_attempts,
+        )
         .await?
         .ok_or_else(|| ApiError::not_found(format!("scene {scene_id} not found")))?;
     state.bus.notify(&job.id);

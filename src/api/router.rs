@@ -8,7 +8,7 @@ use tower_http::trace::TraceLayer;
 use super::auth::{TokenCheck, require_token};
 use super::metrics::track_requests;
 use super::state::AppState;
-use super::{jobs, ops, openapi, scenes};
+use super::{jobs, openapi, ops, scenes};
 
 pub fn router(state: AppState) -> Router {
     let tokens = TokenCheck::new(state.config.auth.tokens.clone());

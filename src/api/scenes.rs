@@ -96,9 +96,11 @@ pub async fn upload_scene(
 ) -> ApiResult<(StatusCode, HeaderMap, Json<SceneResponse>)> {
     let config = &state.config;
     let scratch_dir = config.scratch_dir();
-    tokio::fs::create_dir_all(&scratch_dir).await.map_err(|error| {
-        ApiError::internal(format!("cannot create {}: {error}", scratch_dir.display()))
-    })?;
+    tokio::fs::create_dir_all(&scratch_dir)
+        .await
+        .map_err(|error| {
+            ApiError::internal(format!("cannot create {}: {error}", scratch_dir.display()))
+        })?;
     let temp = tempfile::Builder::new()
         .prefix("upload-")
         .tempfile_in(&scratch_dir)
@@ -124,8 +126,7 @@ pub async fn upload_scene(
         .await
         .map_err(|error| ApiError::internal(format!("scene ingest crashed: {error}")))?
         .map_err(|error| {
-            metrics::counter!("segsplat_scene_uploads_total", "outcome" => "rejected")
-                .increment(1);
+            metrics::counter!("segsplat_scene_uploads_total", "outcome" => "rejected").increment(1);
             ApiError::from_input_class(error.class(), error.to_string())
         })?;
     drop(temp);
@@ -152,7 +153,11 @@ pub async fn upload_scene(
     if let Ok(location) = format!("/v1/scenes/{}", record.id).parse() {
         headers.insert(header::LOCATION, location);
     }
-    Ok((StatusCode::CREATED, headers, Json(SceneResponse::from(&record))))
+    Ok((
+        StatusCode::CREATED,
+        headers,
+        Json(SceneResponse::from(&record)),
+    ))
 }
 
 /// Streams the archive into `file`, enforcing the size limit; returns the uploaded file's name
@@ -208,7 +213,10 @@ async fn receive_upload(
             }
             uploaded_name = field.file_name().and_then(file_stem);
             while let Some(chunk) = field.chunk().await.map_err(multipart_error)? {
-                writer.write(&chunk).await.map_err(|error| error.unwrap_or_else(too_large))?;
+                writer
+                    .write(&chunk)
+                    .await
+                    .map_err(|error| error.unwrap_or_else(too_large))?;
             }
             found = true;
             break;
@@ -223,7 +231,10 @@ async fn receive_upload(
         while let Some(chunk) = body.next().await {
             let chunk = chunk
                 .map_err(|error| ApiError::bad_request(format!("upload interrupted: {error}")))?;
-            writer.write(&chunk).await.map_err(|error| error.unwrap_or_else(too_large))?;
+            writer
+                .write(&chunk)
+                .await
+                .map_err(|error| error.unwrap_or_else(too_large))?;
         }
     } else {
         return Err(ApiError::unsupported_media_type(format!(
@@ -244,7 +255,10 @@ fn multipart_error(error: axum::extract::multipart::MultipartError) -> ApiError 
 }
 
 fn file_stem(file_name: &str) -> Option<String> {
-    let base = Path::new(file_name).file_name()?.to_string_lossy().into_owned();
+    let base = Path::new(file_name)
+        .file_name()?
+        .to_string_lossy()
+        .into_owned();
     let stem = base
         .trim_end_matches(".tar.gz")
         .trim_end_matches(".tgz")
@@ -268,7 +282,9 @@ impl UploadWriter {
             return Err(None);
         }
         self.file.write_all(chunk).await.map_err(|error| {
-            Some(ApiError::internal(format!("cannot write the upload: {error}")))
+            Some(ApiError::internal(format!(
+                "cannot write the upload: {error}"
+            )))
         })
     }
 }
@@ -307,11 +323,16 @@ pub async fn delete_scene(
     State(state): State<AppState>,
     UrlPath(id): UrlPath<String>,
 ) -> ApiResult<StatusCode> {
-    let (record, job_ids) = state.database.delete_scene(&id).await.map_err(|error| match error {
-        DeleteSceneError::NotFound(_) => ApiError::not_found(error.to_string()),
-        DeleteSceneError::Busy { .. } => ApiError::conflict(error.to_string()),
-        DeleteSceneError::Store(store) => store.into(),
-    })?;
+    let (record, job_ids) =
+        state
+            .database
+            .delete_scene(&id)
+            .await
+            .map_err(|error| match error {
+                DeleteSceneError::NotFound(_) => ApiError::not_found(error.to_string()),
+                DeleteSceneError::Busy { .. } => ApiError::conflict(error.to_string()),
+                DeleteSceneError::Store(store) => store.into(),
+            })?;
     let blobs = state.blobs.clone();
     tokio::task::spawn_blocking(move || {
         blobs.delete_prefix(&record.blob_prefix)?;

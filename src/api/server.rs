@@ -109,7 +109,11 @@ impl ServiceBuilder {
         let bus = JobEventBus::default();
         let job_queued = Arc::new(Notify::new());
         let shutdown = CancellationToken::new();
-        let instance = format!("{}-{}", host_name(), &uuid::Uuid::new_v4().simple().to_string()[..8]);
+        let instance = format!(
+            "{}-{}",
+            host_name(),
+            &uuid::Uuid::new_v4().simple().to_string()[..8]
+        );
 
         let workers_enabled = config.workers.enabled;
         let (gpus, mut problems) = if workers_enabled && self.detect_gpus {

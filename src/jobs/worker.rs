@@ -106,10 +106,17 @@ impl Worker {
             .await
         {
             Ok(Some(finished)) => {
-                info!(outcome = outcome_label, state = finished.state.as_str(),
-                    elapsed_secs = started.elapsed().as_secs_f64(), "attempt finished");
+                info!(
+                    outcome = outcome_label,
+                    state = finished.state.as_str(),
+                    elapsed_secs = started.elapsed().as_secs_f64(),
+                    "attempt finished"
+                );
             }
-            Ok(None) => warn!(outcome = outcome_label, "lease lost before the outcome was recorded"),
+            Ok(None) => warn!(
+                outcome = outcome_label,
+                "lease lost before the outcome was recorded"
+            ),
             Err(error) => warn!(%error, "recording the outcome failed; the lease will expire"),
         }
         metrics::counter!("segsplat_job_outcomes_total", "kind" => job.kind.clone(),

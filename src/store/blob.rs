@@ -272,14 +272,19 @@ mod tests {
         store.put_bytes("scenes/a/files/x.txt", b"one").unwrap();
         store.put_bytes("scenes/a/files/sub/y.txt", b"two").unwrap();
         store.put_bytes("scenes/ab/z.txt", b"three").unwrap();
-        store.put_bytes("scenes/a/files/x.txt", b"replaced").unwrap();
+        store
+            .put_bytes("scenes/a/files/x.txt", b"replaced")
+            .unwrap();
         // A leftover temporary file from a crashed write is not a blob.
         std::fs::write(
             dir.path().join("scenes/a/files/.x.txt.segsplat-tmp-123"),
             b"half",
         )
         .unwrap();
-        assert_eq!(store.get_bytes("scenes/a/files/x.txt").unwrap(), b"replaced");
+        assert_eq!(
+            store.get_bytes("scenes/a/files/x.txt").unwrap(),
+            b"replaced"
+        );
         assert_eq!(
             store.list_prefix("scenes/a").unwrap(),
             vec!["scenes/a/files/sub/y.txt", "scenes/a/files/x.txt"]
@@ -299,7 +304,10 @@ mod tests {
         let store = LocalBlobStore::open(dir.path()).unwrap();
         for key in ["../x", "a//b", "/abs", "a/./b", ""] {
             assert!(
-                matches!(store.put_bytes(key, b"x"), Err(BlobError::InvalidKey { .. })),
+                matches!(
+                    store.put_bytes(key, b"x"),
+                    Err(BlobError::InvalidKey { .. })
+                ),
                 "{key}"
             );
         }

@@ -45,7 +45,9 @@ impl JobState {
     }
 
     pub fn parse(text: &str) -> Option<JobState> {
-        JobState::ALL.into_iter().find(|state| state.as_str() == text)
+        JobState::ALL
+            .into_iter()
+            .find(|state| state.as_str() == text)
     }
 
     pub fn is_terminal(self) -> bool {
@@ -93,7 +95,9 @@ pub enum AttemptOutcome {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum HeartbeatOutcome {
-    Renewed { cancel_requested: bool },
+    Renewed {
+        cancel_requested: bool,
+    },
     /// Another worker or the lease reaper took the job; stop working on it.
     LeaseLost,
 }

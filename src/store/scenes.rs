@@ -54,12 +54,11 @@ fn scene_from_row(row: &SqliteRow) -> Result<SceneRecord, StoreError> {
 
 impl Database {
     pub async fn insert_scene(&self, scene: &SceneRecord) -> Result<(), StoreError> {
-        let summary_json = serde_json::to_string(&scene.summary).map_err(|error| {
-            StoreError::Corrupt {
+        let summary_json =
+            serde_json::to_string(&scene.summary).map_err(|error| StoreError::Corrupt {
                 what: "scene summary".to_string(),
                 message: error.to_string(),
-            }
-        })?;
+            })?;
         let format = serde_json::to_value(scene.summary.format)
             .ok()
             .and_then(|value| value.as_str().map(str::to_string))

@@ -84,7 +84,10 @@ impl JobHandler for StepsHandler {
                     ctx.attempt
                 )));
             }
-            assert!(ctx.scene_dir.join("sparse").is_dir(), "scene files are reachable");
+            assert!(
+                ctx.scene_dir.join("sparse").is_dir(),
+                "scene files are reachable"
+            );
             let resume_from = match ctx.load_checkpoint("step") {
                 Ok(Some(bytes)) => u64::from_le_bytes(bytes.try_into().unwrap_or([0; 8])),
                 Ok(None) => 0,
@@ -102,7 +105,9 @@ impl JobHandler for StepsHandler {
                     total_steps: config.steps,
                     ..Progress::default()
                 };
-                progress.metrics.insert("loss".to_string(), 1.0 / (step + 1) as f64);
+                progress
+                    .metrics
+                    .insert("loss".to_string(), 1.0 / (step + 1) as f64);
                 ctx.progress
                     .report(progress)
                     .await

@@ -59,13 +59,25 @@ impl TestService {
     pub async fn get_json(&self, path: &str) -> (u16, serde_json::Value) {
         let response = self.client.get(self.url(path)).send().await.unwrap();
         let status = response.status().as_u16();
-        (status, response.json().await.unwrap_or(serde_json::Value::Null))
+        (
+            status,
+            response.json().await.unwrap_or(serde_json::Value::Null),
+        )
     }
 
     pub async fn post_json(&self, path: &str, body: serde_json::Value) -> (u16, serde_json::Value) {
-        let response = self.client.post(self.url(path)).json(&body).send().await.unwrap();
+        let response = self
+            .client
+            .post(self.url(path))
+            .json(&body)
+            .send()
+            .await
+            .unwrap();
         let status = response.status().as_u16();
-        (status, response.json().await.unwrap_or(serde_json::Value::Null))
+        (
+            status,
+            response.json().await.unwrap_or(serde_json::Value::Null),
+        )
     }
 
     /// Uploads an archive as the raw body.
@@ -79,19 +91,30 @@ impl TestService {
             .await
             .unwrap();
         let status = response.status().as_u16();
-        (status, response.json().await.unwrap_or(serde_json::Value::Null))
+        (
+            status,
+            response.json().await.unwrap_or(serde_json::Value::Null),
+        )
     }
 
     /// Uploads a small valid COLMAP scene and returns its id.
     pub async fn upload_test_scene(&self) -> String {
         let (status, body) = self
-            .upload(archives::colmap_zip(archives::small_spec()), "application/zip")
+            .upload(
+                archives::colmap_zip(archives::small_spec()),
+                "application/zip",
+            )
             .await;
         assert_eq!(status, 201, "{body}");
         body["id"].as_str().unwrap().to_string()
     }
 
-    pub async fn create_job(&self, scene_id: &str, kind: &str, config: serde_json::Value) -> String {
+    pub async fn create_job(
+        &self,
+        scene_id: &str,
+        kind: &str,
+        config: serde_json::Value,
+    ) -> String {
         let (status, body) = self
             .post_json(
                 &format!("/v1/scenes/{scene_id}/jobs"),
@@ -109,7 +132,12 @@ impl TestService {
     }
 
     /// Polls until the job is in `state` (panics after `timeout`).
-    pub async fn wait_for_state(&self, job_id: &str, state: &str, timeout: Duration) -> serde_json::Value {
+    pub async fn wait_for_state(
+        &self,
+        job_id: &str,
+        state: &str,
+        timeout: Duration,
+    ) -> serde_json::Value {
         let started = Instant::now();
         loop {
             let job = self.job(job_id).await;
