@@ -1,1 +1,441 @@
-//! Typed configuration: TOML file, then SEGSPLAT_* environment, then flags.
+//! The one typed service configuration, layered: defaults < TOML file < `SEGSPLAT_*` environment
+//! < command-line flags, then validated once at start so a bad value fails loudly, naming its key.
+//!
+//! Environment variables map onto keys by lower-casing the name after `SEGSPLAT_` and reading `__`
+//! as a nesting step: `SEGSPLAT_HTTP_ADDR` is `http_addr`, `SEGSPLAT_JOBS__LEASE_SECS` is
+//! `jobs.lease_secs`. Values are read as TOML values when they parse as one (`5`, `true`,
+//! `["a","b"]`) and as plain strings otherwise. Variables whose first segment is not a top-level
+//! key (e.g. `SEGSPLAT_SKIP_GPU_TESTS`) belong to other tools and are ignored.
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::gpu::AdapterFilter;
+
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("cannot read config file {path}: {source}")]
+    Read {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("config file {path}: {message}")]
+    Parse { path: String, message: String },
+    #[error("environment variable {variable}: {message}")]
+    Env { variable: String, message: String },
+    #[error("configuration: {message}")]
+    Merge { message: String },
+    #[error("{key}: {reason}")]
+    Invalid { key: String, reason: String },
+}
+
+/// Environment variable prefix for configuration keys.
+pub const ENV_PREFIX: &str = "SEGSPLAT_";
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Config {
+    /// Everything the service keeps: the SQLite database, blobs and temporary uploads.
+    pub data_dir: PathBuf,
+    pub http_addr: SocketAddr,
+    pub grpc_addr: SocketAddr,
+    pub auth: AuthConfig,
+    pub limits: LimitsConfig,
+    pub scene: SceneConfig,
+    pub jobs: JobsConfig,
+    pub workers: WorkersConfig,
+    pub log: LogConfig,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self {
+            data_dir: PathBuf::from("./data"),
+            http_addr: SocketAddr::from(([127, 0, 0, 1], 8080)),
+            grpc_addr: SocketAddr::from(([127, 0, 0, 1], 50051)),
+            auth: AuthConfig::default(),
+            limits: LimitsConfig::default(),
+            scene: SceneConfig::default(),
+            jobs: JobsConfig::default(),
+            workers: WorkersConfig::default(),
+            log: LogConfig::default(),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AuthConfig {
+    /// Accepted bearer tokens. Empty turns authentication off.
+    pub tokens: Vec<String>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LimitsConfig {
+    /// Largest accepted upload body (the archive as sent).
+    pub max_upload_bytes: u64,
+    /// Largest total size an archive may unpack to (zip bombs).
+    pub max_unpacked_bytes: u64,
+    /// Most files an archive may hold.
+    pub max_files: u64,
+}
+
+impl Default for LimitsConfig {
+    fn default() -> Self {
+        Self {
+            max_upload_bytes: 2 << 30,
+            max_unpacked_bytes: 8 << 30,
+            max_files: 100_000,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SceneConfig {
+    /// Background composited under RGBA (Blender) images, linear RGB in 0..1.
+    pub background: [f32; 3],
+}
+
+impl Default for SceneConfig {
+    fn default() -> Self {
+        Self {
+            background: [1.0, 1.0, 1.0],
+        }
+    }
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct JobsConfig {
+    /// How long a claimed job stays leased without a heartbeat before it is re-queued.
+    pub lease_secs: f64,
+    /// How often a worker renews its lease; well under `lease_secs`.
+    pub heartbeat_secs: f64,
+    /// Claims per job before it fails for good.
+    pub max_attempts: u32,
+    /// How often an idle worker looks for work (it is also woken when a job is queued here).
+    pub poll_interval_ms: u64,
+}
+
+impl Default for JobsConfig {
+    fn default() -> Self {
+        Self {
+            lease_secs: 60.0,
+            heartbeat_secs: 10.0,
+            max_attempts: 3,
+            poll_interval_ms: 1000,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct WorkersConfig {
+    /// Run job workers inside `serve` (off = API only; workers run as `segsplat worker`).
+    pub enabled: bool,
+    /// Concurrent jobs per GPU adapter.
+    pub slots_per_adapter: u32,
+    /// Which adapters workers use.
+    pub adapters: AdapterFilter,
+    /// Workers without a GPU, for job kinds that do not need one.
+    pub cpu_slots: u32,
+}
+
+impl Default for WorkersConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            slots_per_adapter: 1,
+            adapters: AdapterFilter::default(),
+            cpu_slots: 0,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LogFormat {
+    #[default]
+    Human,
+    Json,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LogConfig {
+    pub format: LogFormat,
+    /// A `tracing` filter directive, e.g. `info` or `segsplat=debug,info`.
+    pub level: String,
+}
+
+impl Default for LogConfig {
+    fn default() -> Self {
+        Self {
+            format: LogFormat::Human,
+            level: "info".to_string(),
+        }
+    }
+}
+
+/// Values given on the command line; they win over file and environment.
+#[derive(Debug, Clone, Default)]
+pub struct ConfigOverrides {
+    pub data_dir: Option<PathBuf>,
+    pub http_addr: Option<SocketAddr>,
+    pub grpc_addr: Option<SocketAddr>,
+}
+
+impl Config {
+    /// Layers defaults, the optional TOML file, the given `SEGSPLAT_*` variables and the flags,
+    /// then validates.
+    pub fn load(
+        file: Option<&Path>,
+        environment: impl IntoIterator<Item = (String, String)>,
+        overrides: &ConfigOverrides,
+    ) -> Result<Config, ConfigError> {
+        let mut layered =
+            toml::Table::try_from(Config::default()).map_err(|error| ConfigError::Merge {
+                message: error.to_string(),
+            })?;
+        if let Some(path) = file {
+            let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+                path: path.display().to_string(),
+                source,
+            })?;
+            let from_file: toml::Table =
+                toml::from_str(&text).map_err(|error| ConfigError::Parse {
+                    path: path.display().to_string(),
+                    message: error.to_string(),
+                })?;
+            merge_tables(&mut layered, from_file);
+        }
+        let top_level_keys: Vec<String> = layered.keys().cloned().collect();
+        for (variable, value) in environment {
+            let Some(key_path) = variable.strip_prefix(ENV_PREFIX) else {
+                continue;
+            };
+            let segments: Vec<String> = key_path.split("__").map(str::to_lowercase).collect();
+            if !top_level_keys.contains(&segments[0]) {
+                continue;
+            }
+            insert_env_value(&mut layered, &segments, &value).map_err(|message| {
+                ConfigError::Env {
+                    variable: variable.clone(),
+                    message,
+                }
+            })?;
+        }
+        let mut config: Config =
+            layered
+                .try_into()
+                .map_err(|error: toml::de::Error| ConfigError::Merge {
+                    message: error.to_string(),
+                })?;
+        if let Some(data_dir) = &overrides.data_dir {
+            config.data_dir = data_dir.clone();
+        }
+        if let Some(addr) = overrides.http_addr {
+            config.http_addr = addr;
+        }
+        if let Some(addr) = overrides.grpc_addr {
+            config.grpc_addr = addr;
+        }
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// Checks every value that deserialization alone cannot, naming the key and the reason.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        fn invalid(key: &str, reason: &str) -> Result<(), ConfigError> {
+            Err(ConfigError::Invalid {
+                key: key.to_string(),
+                reason: reason.to_string(),
+            })
+        }
+        if self.data_dir.as_os_str().is_empty() {
+            return invalid("data_dir", "must not be empty");
+        }
+        if self.auth.tokens.iter().any(|token| token.trim().is_empty()) {
+            return invalid("auth.tokens", "tokens must not be empty strings");
+        }
+        if self.limits.max_upload_bytes == 0 {
+            return invalid("limits.max_upload_bytes", "must be > 0");
+        }
+        if self.limits.max_unpacked_bytes == 0 {
+            return invalid("limits.max_unpacked_bytes", "must be > 0");
+        }
+        if self.limits.max_files == 0 {
+            return invalid("limits.max_files", "must be > 0");
+        }
+        if self
+            .scene
+            .background
+            .iter()
+            .any(|channel| !(0.0..=1.0).contains(channel))
+        {
+            return invalid("scene.background", "each channel must be within 0..1");
+        }
+        if !(self.jobs.lease_secs.is_finite() && self.jobs.lease_secs > 0.0) {
+            return invalid("jobs.lease_secs", "must be > 0");
+        }
+        if !(self.jobs.heartbeat_secs.is_finite() && self.jobs.heartbeat_secs > 0.0) {
+            return invalid("jobs.heartbeat_secs", "must be > 0");
+        }
+        if self.jobs.heartbeat_secs >= self.jobs.lease_secs {
+            return invalid(
+                "jobs.heartbeat_secs",
+                "must be less than jobs.lease_secs, or leases expire between heartbeats",
+            );
+        }
+        if self.jobs.max_attempts == 0 {
+            return invalid("jobs.max_attempts", "must be >= 1");
+        }
+        if self.jobs.poll_interval_ms == 0 {
+            return invalid("jobs.poll_interval_ms", "must be > 0");
+        }
+        if self.workers.slots_per_adapter == 0 {
+            return invalid("workers.slots_per_adapter", "must be >= 1");
+        }
+        if let Err(error) = tracing_subscriber::EnvFilter::try_new(&self.log.level) {
+            return invalid("log.level", &format!("not a tracing filter: {error}"));
+        }
+        Ok(())
+    }
+
+    pub fn database_path(&self) -> PathBuf {
+        self.data_dir.join("segsplat.db")
+    }
+
+    pub fn blob_dir(&self) -> PathBuf {
+        self.data_dir.join("blobs")
+    }
+
+    /// Uploads and unpacking happen here, on the same filesystem as the blobs.
+    pub fn scratch_dir(&self) -> PathBuf {
+        self.data_dir.join("tmp")
+    }
+}
+
+fn merge_tables(base: &mut toml::Table, overlay: toml::Table) {
+    for (key, value) in overlay {
+        match (base.get_mut(&key), value) {
+            (Some(toml::Value::Table(base_table)), toml::Value::Table(overlay_table)) => {
+                merge_tables(base_table, overlay_table);
+            }
+            (_, value) => {
+                base.insert(key, value);
+            }
+        }
+    }
+}
+
+fn insert_env_value(table: &mut toml::Table, segments: &[String], raw: &str) -> Result<(), String> {
+    let Some((last, parents)) = segments.split_last() else {
+        return Err("empty key".to_string());
+    };
+    let mut current = table;
+    for segment in parents {
+        let entry = current
+            .entry(segment.clone())
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        current = match entry {
+            toml::Value::Table(inner) => inner,
+            _ => return Err(format!("{segment} is not a section")),
+        };
+    }
+    current.insert(last.clone(), parse_env_value(raw));
+    Ok(())
+}
+
+/// A TOML value when the text is one (`5`, `true`, `["a"]`), the text as a string otherwise.
+fn parse_env_value(raw: &str) -> toml::Value {
+    let document = format!("value = {raw}");
+    match toml::from_str::<toml::Table>(&document) {
+        Ok(mut parsed) => parsed
+            .remove("value")
+            .unwrap_or_else(|| toml::Value::String(raw.to_string())),
+        Err(_) => toml::Value::String(raw.to_string()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn env(pairs: &[(&str, &str)]) -> Vec<(String, String)> {
+        pairs
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .collect()
+    }
+
+    #[test]
+    fn layers_file_then_env_then_flags() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("segsplat.toml");
+        std::fs::write(
+            &file,
+            "http_addr = \"127.0.0.1:9000\"\n[jobs]\nmax_attempts = 7\nlease_secs = 30\n",
+        )
+        .unwrap();
+        let config = Config::load(
+            Some(&file),
+            env(&[
+                ("SEGSPLAT_JOBS__LEASE_SECS", "20"),
+                ("SEGSPLAT_AUTH__TOKENS", "[\"secret\"]"),
+                ("SEGSPLAT_GRPC_ADDR", "127.0.0.1:6000"),
+                ("SEGSPLAT_SKIP_GPU_TESTS", "1"),
+                ("HOME", "/root"),
+            ]),
+            &ConfigOverrides {
+                grpc_addr: Some("127.0.0.1:7000".parse().unwrap()),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(config.http_addr.port(), 9000);
+        assert_eq!(config.jobs.max_attempts, 7);
+        assert_eq!(config.jobs.lease_secs, 20.0);
+        assert_eq!(config.auth.tokens, vec!["secret".to_string()]);
+        assert_eq!(config.grpc_addr.port(), 7000);
+        assert_eq!(config.data_dir, PathBuf::from("./data"));
+    }
+
+    #[test]
+    fn invalid_values_name_their_key() {
+        let error = Config::load(
+            None,
+            env(&[("SEGSPLAT_LIMITS__MAX_UPLOAD_BYTES", "0")]),
+            &ConfigOverrides::default(),
+        )
+        .unwrap_err();
+        assert_eq!(error.to_string(), "limits.max_upload_bytes: must be > 0");
+
+        let error = Config::load(
+            None,
+            env(&[("SEGSPLAT_JOBS__HEARTBEAT_SECS", "120")]),
+            &ConfigOverrides::default(),
+        )
+        .unwrap_err();
+        assert!(
+            error.to_string().starts_with("jobs.heartbeat_secs:"),
+            "{error}"
+        );
+    }
+
+    #[test]
+    fn unknown_keys_are_rejected() {
+        let error = Config::load(
+            None,
+            env(&[("SEGSPLAT_JOBS__LEASE_SECONDS", "5")]),
+            &ConfigOverrides::default(),
+        )
+        .unwrap_err();
+        assert!(error.to_string().contains("lease_seconds"), "{error}");
+    }
+}

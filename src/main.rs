@@ -1,3 +1,153 @@
-fn main() -> anyhow::Result<()> {
+//! The `segsplat` command line: parse, load the configuration, call into the library.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Context;
+use clap::{Args, Parser, Subcommand};
+use segsplat::api::{ServiceBuilder, ServiceMode};
+use segsplat::config::{Config, ConfigOverrides, LogFormat};
+
+#[derive(Parser)]
+#[command(
+    name = "segsplat",
+    version,
+    about = "Open-vocabulary 3D segmentation with Segment-then-Splat Gaussian scenes"
+)]
+struct Cli {
+    /// TOML configuration file (keys as in README; SEGSPLAT_* variables and flags override it).
+    #[arg(long, global = true, env = "SEGSPLAT_CONFIG")]
+    config: Option<PathBuf>,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run the REST and gRPC APIs and the GPU workers in one process.
+    Serve(ServeArgs),
+    /// Run GPU workers only, against the data dir shared with a `serve` process.
+    Worker(WorkerArgs),
+    /// List the GPU adapters wgpu can see, as JSON.
+    Adapters,
+    /// Train a scene locally.
+    Train(FutureArgs),
+    /// Query a trained scene.
+    Query(FutureArgs),
+    /// Export Gaussians and object labels.
+    Export(FutureArgs),
+    /// Evaluate segmentation and rendering quality.
+    Eval(FutureArgs),
+    /// Run kernel and query benchmarks.
+    Bench(FutureArgs),
+    /// Manage ONNX models.
+    Models(FutureArgs),
+}
+
+#[derive(Args)]
+struct ServeArgs {
+    /// Where the database, blobs and temporary uploads live.
+    #[arg(long)]
+    data_dir: Option<PathBuf>,
+    /// REST listen address.
+    #[arg(long = "http")]
+    http_addr: Option<SocketAddr>,
+    /// gRPC listen address.
+    #[arg(long = "grpc")]
+    grpc_addr: Option<SocketAddr>,
+}
+
+#[derive(Args)]
+struct WorkerArgs {
+    #[arg(long)]
+    data_dir: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct FutureArgs {
+    #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
+    args: Vec<String>,
+}
+
+/// Exit code for commands that exist but are not built yet.
+const EXIT_NOT_AVAILABLE: u8 = 2;
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let not_available = |command: &str, feature: &str| {
+        eprintln!("segsplat {command}: not available yet: arrives with {feature}");
+        ExitCode::from(EXIT_NOT_AVAILABLE)
+    };
+    let result = match cli.command {
+        Command::Serve(args) => {
+            let overrides = ConfigOverrides {
+                data_dir: args.data_dir,
+                http_addr: args.http_addr,
+                grpc_addr: args.grpc_addr,
+            };
+            run_service(cli.config, overrides, ServiceMode::All)
+        }
+        Command::Worker(args) => {
+            let overrides = ConfigOverrides {
+                data_dir: args.data_dir,
+                ..Default::default()
+            };
+            run_service(cli.config, overrides, ServiceMode::WorkersOnly)
+        }
+        Command::Adapters => print_adapters(),
+        Command::Train(_) => return not_available("train", "the Segment-then-Splat pipeline"),
+        Command::Query(_) => return not_available("query", "the Segment-then-Splat pipeline"),
+        Command::Export(_) => return not_available("export", "the Segment-then-Splat pipeline"),
+        Command::Eval(_) => return not_available("eval", "the evaluation issue"),
+        Command::Bench(_) => return not_available("bench", "the engine benchmarks"),
+        Command::Models(_) => return not_available("models", "the model store"),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("segsplat: {error:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run_service(
+    config_file: Option<PathBuf>,
+    overrides: ConfigOverrides,
+    mode: ServiceMode,
+) -> anyhow::Result<()> {
+    let config = Config::load(config_file.as_deref(), std::env::vars(), &overrides)
+        .context("invalid configuration")?;
+    init_logging(&config)?;
+    let runtime = tokio::runtime::Runtime::new().context("cannot start the async runtime")?;
+    runtime.block_on(async move {
+        let service = ServiceBuilder::new(config)
+            .mode(mode)
+            .start()
+            .await
+            .context("cannot start segsplat")?;
+        service.run_until_signal().await;
+        Ok(())
+    })
+}
+
+fn init_logging(config: &Config) -> anyhow::Result<()> {
+    let filter = tracing_subscriber::EnvFilter::try_new(&config.log.level)
+        .with_context(|| format!("log.level {:?}", config.log.level))?;
+    let builder = tracing_subscriber::fmt().with_env_filter(filter);
+    let installed = match config.log.format {
+        LogFormat::Human => builder.try_init(),
+        LogFormat::Json => builder.json().try_init(),
+    };
+    installed.map_err(|error| anyhow::anyhow!("cannot install the logger: {error}"))
+}
+
+fn print_adapters() -> anyhow::Result<()> {
+    let reports: Vec<_> = segsplat::gpu::context::enumerate_adapters()
+        .into_iter()
+        .map(|(_, report)| report)
+        .collect();
+    println!("{}", serde_json::to_string_pretty(&reports)?);
     Ok(())
 }

@@ -1,1 +1,18 @@
-//! api: see DESIGN.md.
+//! The service edge: REST (axum) and gRPC (tonic) APIs, authentication, metrics, health, and
+//! the process lifecycle that ties them to the store and the worker pool.
+
+mod auth;
+pub mod error;
+mod grpc;
+mod ingest;
+mod jobs;
+mod metrics;
+mod openapi;
+mod ops;
+mod router;
+mod scenes;
+mod server;
+mod state;
+
+pub use openapi::ApiDoc;
+pub use server::{RunningService, ServiceBuilder, ServiceError, ServiceMode};

@@ -1,1 +1,24 @@
-//! jobs: see DESIGN.md.
+//! Running queued jobs: the handler interface job kinds implement, the context a handler gets
+//! (scene files, GPU, progress, cancellation, checkpoints), and the worker pool that leases jobs
+//! from the database queue (`store::jobs`) and runs them.
+
+mod context;
+mod events;
+mod handler;
+mod pool;
+mod progress;
+mod worker;
+
+pub use context::JobContext;
+pub use events::JobEventBus;
+pub use handler::{HandlerRegistry, JobFailure, JobHandler};
+pub use pool::{LeaseReaper, WorkerPool, WorkerPoolOptions, WorkerSlot, open_adapters};
+pub use progress::{Progress, ProgressReporter};
+
+#[derive(Debug, thiserror::Error)]
+pub enum JobsError {
+    #[error(transparent)]
+    Store(#[from] crate::store::StoreError),
+    #[error(transparent)]
+    Blob(#[from] crate::store::BlobError),
+}

@@ -1,0 +1,104 @@
+//! The blocking half of a scene upload: unpack the archive, detect and validate the dataset, and
+//! copy its files into the blob store. On any error everything written so far is removed.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use crate::scene::{
+    ArchiveError, InputErrorClass, LoadOptions, SceneError, SceneSummary, UnpackLimits, load_scene,
+    unpack_archive, validate_scene,
+};
+use crate::store::{BlobError, BlobStore};
+
+#[derive(Debug, thiserror::Error)]
+pub enum IngestError {
+    #[error(transparent)]
+    Archive(#[from] ArchiveError),
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error("storing the scene failed: {0}")]
+    Blob(#[from] BlobError),
+    #[error("{context}: {source}")]
+    Io {
+        context: String,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+impl IngestError {
+    pub fn class(&self) -> InputErrorClass {
+        match self {
+            IngestError::Archive(error) => error.class(),
+            IngestError::Scene(error) => error.class(),
+            IngestError::Blob(_) | IngestError::Io { .. } => InputErrorClass::Internal,
+        }
+    }
+}
+
+pub struct IngestRequest {
+    pub archive: PathBuf,
+    /// Unpacking happens in a temporary folder here.
+    pub scratch_dir: PathBuf,
+    pub limits: UnpackLimits,
+    pub load_options: LoadOptions,
+    pub blobs: Arc<dyn BlobStore>,
+    /// Where the files go: `{blob_prefix}/files/<relative path>`.
+    pub blob_prefix: String,
+}
+
+/// Unpacks, validates and stores; on error removes whatever reached the blob store.
+pub fn ingest_scene(request: &IngestRequest) -> Result<SceneSummary, IngestError> {
+    let result = unpack_validate_store(request);
+    if result.is_err()
+        && let Err(error) = request.blobs.delete_prefix(&request.blob_prefix)
+    {
+        tracing::error!(%error, prefix = %request.blob_prefix,
+            "cannot remove the blobs of a failed upload");
+    }
+    result
+}
+
+fn unpack_validate_store(request: &IngestRequest) -> Result<SceneSummary, IngestError> {
+    let unpack_dir = tempfile::Builder::new()
+        .prefix("unpack-")
+        .tempdir_in(&request.scratch_dir)
+        .map_err(|source| IngestError::Io {
+            context: format!(
+                "cannot create a folder to unpack into under {}",
+                request.scratch_dir.display()
+            ),
+            source,
+        })?;
+    unpack_archive(&request.archive, unpack_dir.path(), &request.limits)?;
+    // The loader looks through a single wrapping folder; `scene.root` is the dataset itself.
+    let scene = load_scene(unpack_dir.path(), &request.load_options)?;
+    let summary = validate_scene(&scene)?;
+    store_tree(&scene.root, &scene.root, request)?;
+    Ok(summary)
+}
+
+fn store_tree(root: &Path, dir: &Path, request: &IngestRequest) -> Result<(), IngestError> {
+    let io_error = |source| IngestError::Io {
+        context: format!("cannot read unpacked folder {}", dir.display()),
+        source,
+    };
+    for entry in std::fs::read_dir(dir).map_err(io_error)? {
+        let entry = entry.map_err(io_error)?;
+        let path = entry.path();
+        let kind = entry.file_type().map_err(io_error)?;
+        if kind.is_dir() {
+            store_tree(root, &path, request)?;
+        } else if kind.is_file() {
+            let relative: Vec<String> = path
+                .strip_prefix(root)
+                .unwrap_or(&path)
+                .components()
+                .map(|component| component.as_os_str().to_string_lossy().into_owned())
+                .collect();
+            let key = format!("{}/files/{}", request.blob_prefix, relative.join("/"));
+            request.blobs.put_file(&key, &path)?;
+        }
+    }
+    Ok(())
+}

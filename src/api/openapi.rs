@@ -1,0 +1,59 @@
+//! The OpenAPI document, generated from the handlers' annotations.
+
+use axum::Json;
+use utoipa::OpenApi;
+
+use super::{error, jobs, ops, scenes};
+
+#[derive(OpenApi)]
+#[openapi(
+    info(title = "segsplat", description = "Open-vocabulary 3D segmentation service"),
+    paths(
+        scenes::upload_scene,
+        scenes::list_scenes,
+        scenes::get_scene,
+        scenes::delete_scene,
+        jobs::create_job,
+        jobs::get_job,
+        jobs::list_jobs,
+        jobs::cancel_job,
+        jobs::job_events,
+        ops::healthz,
+        ops::readyz,
+        ops::metrics,
+    ),
+    components(schemas(
+        error::ErrorBody,
+        error::ErrorDetail,
+        scenes::SceneResponse,
+        scenes::SceneList,
+        jobs::CreateJobRequest,
+        jobs::JobResponse,
+        jobs::JobList,
+        ops::HealthResponse,
+        ops::ReadinessResponse,
+    )),
+    modifiers(&BearerAuth),
+    security(("bearer" = [])),
+)]
+pub struct ApiDoc;
+
+/// Declares the optional bearer-token scheme.
+struct BearerAuth;
+
+impl utoipa::Modify for BearerAuth {
+    fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
+        use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
+        let components = openapi.components.get_or_insert_with(Default::default);
+        components.add_security_scheme(
+            "bearer",
+            SecurityScheme::Http(HttpBuilder::new().scheme(HttpAuthScheme::Bearer).build()),
+        );
+    }
+}
+
+#[utoipa::path(get, path = "/v1/openapi.json", tag = "ops",
+    responses((status = 200, description = "this document")))]
+pub async fn openapi_json() -> Json<utoipa::openapi::OpenApi> {
+    Json(ApiDoc::openapi())
+}

@@ -1,0 +1,40 @@
+//! The REST routes and their middleware.
+
+use axum::Router;
+use axum::extract::DefaultBodyLimit;
+use axum::routing::{get, post};
+use tower_http::trace::TraceLayer;
+
+use super::auth::{TokenCheck, require_token};
+use super::metrics::track_requests;
+use super::state::AppState;
+use super::{jobs, openapi, ops, scenes};
+
+pub fn router(state: AppState) -> Router {
+    let tokens = TokenCheck::new(state.config.auth.tokens.clone());
+    Router::new()
+        .route(
+            "/v1/scenes",
+            post(scenes::upload_scene)
+                .layer(DefaultBodyLimit::disable())
+                .get(scenes::list_scenes),
+        )
+        .route(
+            "/v1/scenes/{id}",
+            get(scenes::get_scene).delete(scenes::delete_scene),
+        )
+        .route("/v1/scenes/{id}/jobs", post(jobs::create_job))
+        .route("/v1/jobs", get(jobs::list_jobs))
+        .route("/v1/jobs/{id}", get(jobs::get_job))
+        .route("/v1/jobs/{id}/cancel", post(jobs::cancel_job))
+        .route("/v1/jobs/{id}/events", get(jobs::job_events))
+        .route("/v1/openapi.json", get(openapi::openapi_json))
+        .route("/healthz", get(ops::healthz))
+        .route("/readyz", get(ops::readyz))
+        .route("/metrics", get(ops::metrics))
+        .fallback(|| async { super::error::ApiError::not_found("no such endpoint") })
+        .layer(axum::middleware::from_fn_with_state(tokens, require_token))
+        .layer(axum::middleware::from_fn(track_requests))
+        .layer(TraceLayer::new_for_http())
+        .with_state(state)
+}

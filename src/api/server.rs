@@ -1,0 +1,373 @@
+//! Starting and stopping the service: database, blob store, GPU workers, lease reaper, and the
+//! REST and gRPC listeners, with a graceful shutdown that finishes in-flight requests and hands
+//! running jobs back to the queue.
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+
+use tokio::net::TcpListener;
+use tokio::sync::Notify;
+use tokio::task::JoinHandle;
+use tokio_util::sync::CancellationToken;
+use tracing::{info, warn};
+
+use super::auth::{TokenCheck, grpc_interceptor};
+use super::grpc::SceneQueryService;
+use super::metrics::prometheus_handle;
+use super::router::router;
+use super::state::{AppState, WorkerReadiness};
+use crate::config::Config;
+use crate::jobs::{
+    HandlerRegistry, JobEventBus, JobHandler, LeaseReaper, WorkerPool, WorkerPoolOptions,
+    WorkerSlot, open_adapters,
+};
+use crate::proto::scene_query_server::SceneQueryServer;
+use crate::store::{BlobStore, Database, LocalBlobStore, StoreError};
+
+#[derive(Debug, thiserror::Error)]
+pub enum ServiceError {
+    #[error(transparent)]
+    Store(#[from] StoreError),
+    #[error("blob store: {0}")]
+    Blob(#[from] crate::store::BlobError),
+    #[error("cannot create {path}: {source}")]
+    CreateDir {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("cannot listen on {addr} ({what}): {source}")]
+    Bind {
+        addr: SocketAddr,
+        what: &'static str,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("metrics recorder: another recorder is already installed in this process")]
+    Metrics,
+    #[error("gRPC reflection: {0}")]
+    Reflection(String),
+    #[error("GPU discovery crashed: {0}")]
+    GpuDiscovery(String),
+}
+
+/// Which parts run in this process.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ServiceMode {
+    /// REST + gRPC + workers (`segsplat serve`).
+    All,
+    /// Workers and the lease reaper only (`segsplat worker`).
+    WorkersOnly,
+}
+
+pub struct ServiceBuilder {
+    config: Config,
+    handlers: HandlerRegistry,
+    mode: ServiceMode,
+    detect_gpus: bool,
+}
+
+impl ServiceBuilder {
+    pub fn new(config: Config) -> Self {
+        Self {
+            config,
+            handlers: HandlerRegistry::default(),
+            mode: ServiceMode::All,
+            detect_gpus: true,
+        }
+    }
+
+    /// Registers a job kind.
+    pub fn handler(mut self, handler: Arc<dyn JobHandler>) -> Self {
+        self.handlers.register(handler);
+        self
+    }
+
+    pub fn mode(mut self, mode: ServiceMode) -> Self {
+        self.mode = mode;
+        self
+    }
+
+    /// Skips GPU discovery (tests exercising the queue with CPU-only slots).
+    pub fn detect_gpus(mut self, detect: bool) -> Self {
+        self.detect_gpus = detect;
+        self
+    }
+
+    pub async fn start(self) -> Result<RunningService, ServiceError> {
+        let config = Arc::new(self.config);
+        for dir in [config.data_dir.clone(), config.scratch_dir()] {
+            std::fs::create_dir_all(&dir).map_err(|source| ServiceError::CreateDir {
+                path: dir.display().to_string(),
+                source,
+            })?;
+        }
+        let database = Database::open(&config.database_path()).await?;
+        let blobs: Arc<dyn BlobStore> = Arc::new(LocalBlobStore::open(&config.blob_dir())?);
+        let metrics = prometheus_handle().ok_or(ServiceError::Metrics)?;
+        let bus = JobEventBus::default();
+        let job_queued = Arc::new(Notify::new());
+        let shutdown = CancellationToken::new();
+        let instance = format!(
+            "{}-{}",
+            host_name(),
+            &uuid::Uuid::new_v4().simple().to_string()[..8]
+        );
+
+        let workers_enabled = config.workers.enabled;
+        let (gpus, mut problems) = if workers_enabled && self.detect_gpus {
+            let filter = config.workers.adapters.clone();
+            tokio::task::spawn_blocking(move || open_adapters(&filter))
+                .await
+                .map_err(|error| ServiceError::GpuDiscovery(error.to_string()))?
+        } else {
+            (Vec::new(), Vec::new())
+        };
+        if workers_enabled && !self.detect_gpus {
+            problems.push("GPU discovery is disabled".to_string());
+        }
+        for problem in &problems {
+            warn!(%problem, "GPU workers unavailable");
+        }
+        let mut slots = Vec::new();
+        if workers_enabled {
+            for gpu in &gpus {
+                for _ in 0..config.workers.slots_per_adapter {
+                    slots.push(WorkerSlot {
+                        gpu: Some(gpu.clone()),
+                    });
+                }
+            }
+            for _ in 0..config.workers.cpu_slots {
+                slots.push(WorkerSlot { gpu: None });
+            }
+        }
+        let readiness = WorkerReadiness {
+            enabled: workers_enabled,
+            gpu_slots: slots.iter().filter(|slot| slot.gpu.is_some()).count(),
+            cpu_slots: slots.iter().filter(|slot| slot.gpu.is_none()).count(),
+            adapters: gpus.iter().map(|gpu| gpu.report.clone()).collect(),
+            problems,
+        };
+
+        let lease = Duration::from_secs_f64(config.jobs.lease_secs);
+        let reaper = LeaseReaper::start(
+            database.clone(),
+            bus.clone(),
+            job_queued.clone(),
+            (lease / 4).clamp(Duration::from_millis(50), Duration::from_secs(5)),
+        );
+        let pool = (!slots.is_empty()).then(|| {
+            WorkerPool::start(WorkerPoolOptions {
+                database: database.clone(),
+                blobs: blobs.clone(),
+                handlers: self.handlers.clone(),
+                bus: bus.clone(),
+                jobs: config.jobs.clone(),
+                scratch_dir: config.scratch_dir(),
+                slots,
+                job_queued: job_queued.clone(),
+                instance: instance.clone(),
+                shutdown_grace: lease,
+            })
+        });
+
+        let state = AppState {
+            config: config.clone(),
+            database: database.clone(),
+            blobs,
+            handlers: self.handlers,
+            bus,
+            job_queued,
+            workers: Arc::new(readiness),
+            metrics,
+            shutdown: shutdown.clone(),
+        };
+        let (http, grpc) = match self.mode {
+            ServiceMode::All => {
+                let http = start_http(&config, state.clone()).await?;
+                let grpc = start_grpc(&config, database.clone(), shutdown.clone()).await?;
+                (Some(http), Some(grpc))
+            }
+            ServiceMode::WorkersOnly => (None, None),
+        };
+        info!(instance = %instance, http = ?http.as_ref().map(|s| s.0),
+            grpc = ?grpc.as_ref().map(|s| s.0), "segsplat started");
+        Ok(RunningService {
+            http,
+            grpc,
+            shutdown,
+            pool,
+            reaper,
+            database,
+            state,
+        })
+    }
+}
+
+async fn start_http(
+    config: &Config,
+    state: AppState,
+) -> Result<(SocketAddr, JoinHandle<()>), ServiceError> {
+    let listener = TcpListener::bind(config.http_addr)
+        .await
+        .map_err(|source| ServiceError::Bind {
+            addr: config.http_addr,
+            what: "HTTP",
+            source,
+        })?;
+    let addr = listener.local_addr().map_err(|source| ServiceError::Bind {
+        addr: config.http_addr,
+        what: "HTTP",
+        source,
+    })?;
+    let shutdown = state.shutdown.clone();
+    let app = router(state);
+    let task = tokio::spawn(async move {
+        let served = axum::serve(listener, app)
+            .with_graceful_shutdown(async move { shutdown.cancelled().await })
+            .await;
+        if let Err(error) = served {
+            warn!(%error, "HTTP server stopped with an error");
+        }
+    });
+    Ok((addr, task))
+}
+
+async fn start_grpc(
+    config: &Config,
+    database: Database,
+    shutdown: CancellationToken,
+) -> Result<(SocketAddr, JoinHandle<()>), ServiceError> {
+    let listener = TcpListener::bind(config.grpc_addr)
+        .await
+        .map_err(|source| ServiceError::Bind {
+            addr: config.grpc_addr,
+            what: "gRPC",
+            source,
+        })?;
+    let addr = listener.local_addr().map_err(|source| ServiceError::Bind {
+        addr: config.grpc_addr,
+        what: "gRPC",
+        source,
+    })?;
+    let tokens = TokenCheck::new(config.auth.tokens.clone());
+    let (health_reporter, health_service) = tonic_health::server::health_reporter();
+    health_reporter
+        .set_serving::<SceneQueryServer<SceneQueryService>>()
+        .await;
+    let reflection = tonic_reflection::server::Builder::configure()
+        .register_encoded_file_descriptor_set(crate::proto::FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+        .build_v1()
+        .map_err(|error| ServiceError::Reflection(error.to_string()))?;
+    let scene_query = SceneQueryServer::with_interceptor(
+        SceneQueryService::new(database),
+        grpc_interceptor(tokens),
+    );
+    let task = tokio::spawn(async move {
+        let served = tonic::transport::Server::builder()
+            .trace_fn(|request| tracing::info_span!("grpc", path = %request.uri().path()))
+            .add_service(health_service)
+            .add_service(reflection)
+            .add_service(scene_query)
+            .serve_with_incoming_shutdown(
+                tokio_stream::wrappers::TcpListenerStream::new(listener),
+                async move { shutdown.cancelled().await },
+            )
+            .await;
+        if let Err(error) = served {
+            warn!(%error, "gRPC server stopped with an error");
+        }
+    });
+    Ok((addr, task))
+}
+
+fn host_name() -> String {
+    std::env::var("HOSTNAME")
+        .ok()
+        .filter(|name| !name.is_empty())
+        .unwrap_or_else(|| "segsplat".to_string())
+}
+
+/// A started service; stop it with [`RunningService::shutdown`].
+pub struct RunningService {
+    http: Option<(SocketAddr, JoinHandle<()>)>,
+    grpc: Option<(SocketAddr, JoinHandle<()>)>,
+    shutdown: CancellationToken,
+    pool: Option<WorkerPool>,
+    reaper: LeaseReaper,
+    database: Database,
+    state: AppState,
+}
+
+impl RunningService {
+    /// The bound REST address (the real port when the config asked for port 0).
+    pub fn http_addr(&self) -> Option<SocketAddr> {
+        self.http.as_ref().map(|(addr, _)| *addr)
+    }
+
+    pub fn grpc_addr(&self) -> Option<SocketAddr> {
+        self.grpc.as_ref().map(|(addr, _)| *addr)
+    }
+
+    pub fn database(&self) -> &Database {
+        &self.database
+    }
+
+    pub fn blobs(&self) -> Arc<dyn BlobStore> {
+        self.state.blobs.clone()
+    }
+
+    pub fn worker_slots(&self) -> usize {
+        self.pool.as_ref().map_or(0, WorkerPool::slot_count)
+    }
+
+    /// Runs until SIGINT or SIGTERM, then shuts down gracefully.
+    pub async fn run_until_signal(self) {
+        wait_for_signal().await;
+        info!("shutdown requested");
+        self.shutdown().await;
+    }
+
+    /// Stops listening (in-flight requests finish), hands running jobs back to the queue, and
+    /// closes the database.
+    pub async fn shutdown(self) {
+        self.shutdown.cancel();
+        for (_, task) in self.http.into_iter().chain(self.grpc) {
+            if let Err(error) = task.await {
+                warn!(%error, "server task ended abnormally");
+            }
+        }
+        if let Some(pool) = self.pool {
+            pool.shutdown().await;
+        }
+        self.reaper.shutdown().await;
+        self.database.close().await;
+        info!("segsplat stopped");
+    }
+}
+
+async fn wait_for_signal() {
+    let interrupt = tokio::signal::ctrl_c();
+    #[cfg(unix)]
+    {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut terminate) => {
+                tokio::select! {
+                    _ = interrupt => {}
+                    _ = terminate.recv() => {}
+                }
+            }
+            Err(error) => {
+                warn!(%error, "cannot listen for SIGTERM; only Ctrl-C stops the service");
+                let _ = interrupt.await;
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = interrupt.await;
+    }
+}

@@ -1,0 +1,40 @@
+//! What every request handler shares.
+
+use std::sync::Arc;
+
+use metrics_exporter_prometheus::PrometheusHandle;
+use serde::Serialize;
+use tokio::sync::Notify;
+use tokio_util::sync::CancellationToken;
+
+use crate::config::Config;
+use crate::gpu::AdapterReport;
+use crate::jobs::{HandlerRegistry, JobEventBus};
+use crate::store::{BlobStore, Database};
+
+#[derive(Clone)]
+pub struct AppState {
+    pub config: Arc<Config>,
+    pub database: Database,
+    pub blobs: Arc<dyn BlobStore>,
+    pub handlers: HandlerRegistry,
+    pub bus: JobEventBus,
+    /// Wakes this process's idle workers when a job is queued.
+    pub job_queued: Arc<Notify>,
+    pub workers: Arc<WorkerReadiness>,
+    pub metrics: PrometheusHandle,
+    /// Cancelled when the service stops; long-lived responses (SSE) end then.
+    pub shutdown: CancellationToken,
+}
+
+/// What `/readyz` reports about GPU workers, fixed at start.
+#[derive(Debug, Clone, Serialize)]
+pub struct WorkerReadiness {
+    /// Workers run in this process at all.
+    pub enabled: bool,
+    pub gpu_slots: usize,
+    pub cpu_slots: usize,
+    pub adapters: Vec<AdapterReport>,
+    /// Why there are no GPU workers, when there are none.
+    pub problems: Vec<String>,
+}

@@ -1,0 +1,69 @@
+//! What a handler gets to run one job.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use tokio_util::sync::CancellationToken;
+
+use super::{JobFailure, ProgressReporter};
+use crate::gpu::GpuContext;
+use crate::store::{BlobError, BlobStore};
+
+pub struct JobContext {
+    pub job_id: String,
+    pub scene_id: String,
+    pub kind: String,
+    /// 1 for the first claim; higher when resuming after a crash or a lost lease.
+    pub attempt: u32,
+    /// The uploaded scene's files (read-only).
+    pub scene_dir: PathBuf,
+    /// Scratch space for this attempt, removed afterwards.
+    pub work_dir: PathBuf,
+    /// The config as the handler's `validate_config` returned it.
+    pub config: serde_json::Value,
+    /// The worker's GPU; `None` on CPU-only slots (only for kinds with `needs_gpu() == false`).
+    pub gpu: Option<Arc<GpuContext>>,
+    pub blobs: Arc<dyn BlobStore>,
+    pub progress: ProgressReporter,
+    /// Cancelled when the user cancels the job or this worker lost its lease.
+    pub cancel: CancellationToken,
+    /// Cancelled when the service shuts down: stop and return [`JobFailure::Interrupted`].
+    pub shutdown: CancellationToken,
+}
+
+impl JobContext {
+    /// `Err` when the handler should stop at this step boundary.
+    pub fn stop_requested(&self) -> Result<(), JobFailure> {
+        if self.cancel.is_cancelled() {
+            Err(JobFailure::Cancelled)
+        } else if self.shutdown.is_cancelled() {
+            Err(JobFailure::Interrupted)
+        } else {
+            Ok(())
+        }
+    }
+
+    /// Blob key of a named checkpoint of this job; stable across attempts so a retry resumes.
+    pub fn checkpoint_key(&self, name: &str) -> String {
+        format!("jobs/{}/checkpoints/{name}", self.job_id)
+    }
+
+    /// Blob key prefix for this job's results.
+    pub fn output_prefix(&self) -> String {
+        format!("jobs/{}/output", self.job_id)
+    }
+
+    /// Saves a checkpoint atomically (blocking I/O).
+    pub fn save_checkpoint(&self, name: &str, bytes: &[u8]) -> Result<(), BlobError> {
+        self.blobs.put_bytes(&self.checkpoint_key(name), bytes)
+    }
+
+    /// The last saved checkpoint of that name, if any (blocking I/O).
+    pub fn load_checkpoint(&self, name: &str) -> Result<Option<Vec<u8>>, BlobError> {
+        match self.blobs.get_bytes(&self.checkpoint_key(name)) {
+            Ok(bytes) => Ok(Some(bytes)),
+            Err(BlobError::NotFound { .. }) => Ok(None),
+            Err(error) => Err(error),
+        }
+    }
+}

@@ -1,0 +1,107 @@
+//! Progress from a running job: stored as `progress` events (and the job's current progress),
+//! announced to SSE subscribers, with an ETA estimated from the current stage's step rate.
+
+use std::collections::BTreeMap;
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+use super::JobEventBus;
+use crate::store::{Database, StoreError};
+
+/// One progress report from a handler.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Progress {
+    /// e.g. `segment`, `train`, `embed`.
+    pub stage: String,
+    pub step: u64,
+    pub total_steps: u64,
+    /// Named numbers worth plotting (loss, Gaussian count, PSNR, ...).
+    #[serde(default)]
+    pub metrics: BTreeMap<String, f64>,
+    /// Seconds left in this stage, estimated from its step rate so far.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub eta_secs: Option<f64>,
+}
+
+/// Where the current stage started, to turn steps into a rate.
+#[derive(Debug)]
+struct StageClock {
+    stage: String,
+    started: Instant,
+    first_step: u64,
+}
+
+#[derive(Debug, Clone)]
+pub struct ProgressReporter {
+    database: Database,
+    bus: JobEventBus,
+    job_id: String,
+    lease_owner: String,
+    clock: Arc<Mutex<Option<StageClock>>>,
+}
+
+impl ProgressReporter {
+    pub(crate) fn new(
+        database: Database,
+        bus: JobEventBus,
+        job_id: String,
+        lease_owner: String,
+    ) -> Self {
+        Self {
+            database,
+            bus,
+            job_id,
+            lease_owner,
+            clock: Arc::new(Mutex::new(None)),
+        }
+    }
+
+    /// Records `progress` (filling in the ETA when the handler gave none). Returns false when
+    /// this worker no longer holds the job's lease.
+    pub async fn report(&self, mut progress: Progress) -> Result<bool, StoreError> {
+        if progress.eta_secs.is_none() {
+            progress.eta_secs = self.estimate_eta(&progress);
+        }
+        let payload = serde_json::to_value(&progress).map_err(|error| StoreError::Corrupt {
+            what: "progress".to_string(),
+            message: error.to_string(),
+        })?;
+        let recorded = self
+            .database
+            .record_progress(&self.job_id, &self.lease_owner, &payload)
+            .await?;
+        if recorded.is_some() {
+            self.bus.notify(&self.job_id);
+        }
+        Ok(recorded.is_some())
+    }
+
+    /// [`Self::report`] from blocking code (inside `spawn_blocking`).
+    pub fn report_blocking(&self, progress: Progress) -> Result<bool, StoreError> {
+        tokio::runtime::Handle::current().block_on(self.report(progress))
+    }
+
+    fn estimate_eta(&self, progress: &Progress) -> Option<f64> {
+        let mut clock = self.clock.lock().ok()?;
+        let restart = clock.as_ref().is_none_or(|current| {
+            current.stage != progress.stage || progress.step < current.first_step
+        });
+        if restart {
+            *clock = Some(StageClock {
+                stage: progress.stage.clone(),
+                started: Instant::now(),
+                first_step: progress.step,
+            });
+            return None;
+        }
+        let current = clock.as_ref()?;
+        let steps_done = progress.step.saturating_sub(current.first_step);
+        if steps_done == 0 || progress.total_steps < progress.step {
+            return None;
+        }
+        let secs_per_step = current.started.elapsed().as_secs_f64() / steps_done as f64;
+        Some(secs_per_step * (progress.total_steps - progress.step) as f64)
+    }
+}

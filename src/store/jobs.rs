@@ -1,0 +1,519 @@
+//! The durable job queue in the `jobs` table.
+//!
+//! A job is claimed atomically (one conditional `UPDATE ... RETURNING` on the oldest queued job of
+//! the kinds a worker runs), which takes a lease owned by the worker and counts an attempt. The
+//! worker renews the lease by heartbeat; every later transition is conditional on the worker
+//! still owning the lease, so a worker that lost its lease cannot overwrite the job. Expired
+//! leases are re-queued (or failed past `max_attempts`) by [`Database::requeue_expired_leases`].
+//! Every state change appends a `state` event to `job_events` in the same transaction.
+//!
+//! On Postgres the claim's inner select becomes `... LIMIT 1 FOR UPDATE SKIP LOCKED`.
+
+use serde::{Deserialize, Serialize};
+use sqlx::sqlite::SqliteRow;
+use sqlx::{Row, Sqlite, Transaction};
+
+use super::{Database, StoreError, now_ms};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum JobState {
+    Queued,
+    Running,
+    Succeeded,
+    Failed,
+    Cancelled,
+}
+
+impl JobState {
+    pub const ALL: [JobState; 5] = [
+        JobState::Queued,
+        JobState::Running,
+        JobState::Succeeded,
+        JobState::Failed,
+        JobState::Cancelled,
+    ];
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JobState::Queued => "queued",
+            JobState::Running => "running",
+            JobState::Succeeded => "succeeded",
+            JobState::Failed => "failed",
+            JobState::Cancelled => "cancelled",
+        }
+    }
+
+    pub fn parse(text: &str) -> Option<JobState> {
+        JobState::ALL
+            .into_iter()
+            .find(|state| state.as_str() == text)
+    }
+
+    pub fn is_terminal(self) -> bool {
+        matches!(
+            self,
+            JobState::Succeeded | JobState::Failed | JobState::Cancelled
+        )
+    }
+}
+
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct JobRecord {
+    pub id: String,
+    pub scene_id: String,
+    pub kind: String,
+    pub state: JobState,
+    pub config: serde_json::Value,
+    /// Claims so far, including the running one.
+    pub attempts: u32,
+    pub max_attempts: u32,
+    pub lease_owner: Option<String>,
+    pub lease_expires_at_ms: Option<i64>,
+    pub cancel_requested: bool,
+    pub error: Option<String>,
+    /// The latest progress event's payload.
+    pub progress: Option<serde_json::Value>,
+    pub created_at_ms: i64,
+    pub updated_at_ms: i64,
+    pub started_at_ms: Option<i64>,
+    pub finished_at_ms: Option<i64>,
+}
+
+/// How a worker's attempt at a job ended.
+#[derive(Debug, Clone, PartialEq)]
+pub enum AttemptOutcome {
+    Succeeded,
+    /// Fails the job for good.
+    Failed(String),
+    /// Re-queues the job, or fails it when its attempts are used up.
+    Retry(String),
+    Cancelled,
+    /// The worker is shutting down: back to the queue without counting the attempt.
+    HandBack,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HeartbeatOutcome {
+    Renewed {
+        cancel_requested: bool,
+    },
+    /// Another worker or the lease reaper took the job; stop working on it.
+    LeaseLost,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum CancelOutcome {
+    /// The job was queued and is now cancelled.
+    Cancelled(JobRecord),
+    /// The job is running; its worker stops at the next step boundary.
+    Requested(JobRecord),
+    AlreadyFinished(JobRecord),
+    NotFound,
+}
+
+/// A job whose lease expired and what became of it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExpiredLease {
+    pub job_id: String,
+    pub previous_owner: Option<String>,
+    pub new_state: JobState,
+}
+
+const COLUMNS: &str = "id, scene_id, kind, state, config_json, attempts, max_attempts, \
+    lease_owner, lease_expires_at_ms, cancel_requested, error, progress_json, created_at_ms, \
+    updated_at_ms, started_at_ms, finished_at_ms";
+
+fn corrupt(job_id: &str, what: &str, message: impl ToString) -> StoreError {
+    StoreError::Corrupt {
+        what: format!("{what} of job {job_id}"),
+        message: message.to_string(),
+    }
+}
+
+fn job_from_row(row: &SqliteRow) -> Result<JobRecord, StoreError> {
+    let id: String = row.try_get("id")?;
+    let state_text: String = row.try_get("state")?;
+    let state = JobState::parse(&state_text)
+        .ok_or_else(|| corrupt(&id, "state", format!("unknown state {state_text:?}")))?;
+    let config_json: String = row.try_get("config_json")?;
+    let config =
+        serde_json::from_str(&config_json).map_err(|error| corrupt(&id, "config", error))?;
+    let progress_json: Option<String> = row.try_get("progress_json")?;
+    let progress = progress_json
+        .map(|text| serde_json::from_str(&text))
+        .transpose()
+        .map_err(|error| corrupt(&id, "progress", error))?;
+    let attempts: i64 = row.try_get("attempts")?;
+    let max_attempts: i64 = row.try_get("max_attempts")?;
+    Ok(JobRecord {
+        scene_id: row.try_get("scene_id")?,
+        kind: row.try_get("kind")?,
+        state,
+        config,
+        attempts: attempts.max(0) as u32,
+        max_attempts: max_attempts.max(0) as u32,
+        lease_owner: row.try_get("lease_owner")?,
+        lease_expires_at_ms: row.try_get("lease_expires_at_ms")?,
+        cancel_requested: row.try_get("cancel_requested")?,
+        error: row.try_get("error")?,
+        progress,
+        created_at_ms: row.try_get("created_at_ms")?,
+        updated_at_ms: row.try_get("updated_at_ms")?,
+        started_at_ms: row.try_get("started_at_ms")?,
+        finished_at_ms: row.try_get("finished_at_ms")?,
+        id,
+    })
+}
+
+/// Appends an event inside `transaction`; returns its id.
+pub(super) async fn insert_event(
+    transaction: &mut Transaction<'_, Sqlite>,
+    job_id: &str,
+    kind: &str,
+    payload: &serde_json::Value,
+) -> Result<i64, StoreError> {
+    let id: i64 = sqlx::query_scalar(
+        "INSERT INTO job_events (job_id, at_ms, kind, payload_json) VALUES (?, ?, ?, ?) \
+         RETURNING id",
+    )
+    .bind(job_id)
+    .bind(now_ms())
+    .bind(kind)
+    .bind(payload.to_string())
+    .fetch_one(&mut **transaction)
+    .await?;
+    Ok(id)
+}
+
+async fn insert_state_event(
+    transaction: &mut Transaction<'_, Sqlite>,
+    job: &JobRecord,
+) -> Result<i64, StoreError> {
+    let payload = serde_json::json!({
+        "state": job.state,
+        "attempts": job.attempts,
+        "max_attempts": job.max_attempts,
+        "error": job.error,
+    });
+    insert_event(transaction, &job.id, "state", &payload).await
+}
+
+impl Database {
+    /// Queues a job for an existing scene; `None` when the scene does not exist.
+    pub async fn insert_job(
+        &self,
+        scene_id: &str,
+        kind: &str,
+        config: &serde_json::Value,
+        max_attempts: u32,
+    ) -> Result<Option<JobRecord>, StoreError> {
+        let id = uuid::Uuid::now_v7().to_string();
+        let now = now_ms();
+        let mut transaction = self.pool().begin().await?;
+        let row = sqlx::query(sqlx::AssertSqlSafe(format!(
+            "INSERT INTO jobs (id, scene_id, kind, state, config_json, attempts, max_attempts, \
+             cancel_requested, created_at_ms, updated_at_ms) \
+             SELECT ?, ?, ?, 'queued', ?, 0, ?, FALSE, ?, ? \
+             WHERE EXISTS (SELECT 1 FROM scenes WHERE id = ?) RETURNING {COLUMNS}"
+        )))
+        .bind(&id)
+        .bind(scene_id)
+        .bind(kind)
+        .bind(config.to_string())
+        .bind(i64::from(max_attempts))
+        .bind(now)
+        .bind(now)
+        .bind(scene_id)
+        .fetch_optional(&mut *transaction)
+        .await?;
+        let Some(row) = row else {
+            return Ok(None);
+        };
+        let job = job_from_row(&row)?;
+        insert_state_event(&mut transaction, &job).await?;
+        transaction.commit().await?;
+        Ok(Some(job))
+    }
+
+    pub async fn get_job(&self, id: &str) -> Result<Option<JobRecord>, StoreError> {
+        let row = sqlx::query(sqlx::AssertSqlSafe(format!(
+            "SELECT {COLUMNS} FROM jobs WHERE id = ?"
+        )))
+        .bind(id)
+        .fetch_optional(self.pool())
+        .await?;
+        row.as_ref().map(job_from_row).transpose()
+    }
+
+    pub async fn list_jobs(&self, state: Option<JobState>) -> Result<Vec<JobRecord>, StoreError> {
+        let rows = match state {
+            Some(state) => {
+                sqlx::query(sqlx::AssertSqlSafe(format!(
+                    "SELECT {COLUMNS} FROM jobs WHERE state = ? ORDER BY created_at_ms, id"
+                )))
+                .bind(state.as_str())
+                .fetch_all(self.pool())
+                .await?
+            }
+            None => {
+                sqlx::query(sqlx::AssertSqlSafe(format!(
+                    "SELECT {COLUMNS} FROM jobs ORDER BY created_at_ms, id"
+                )))
+                .fetch_all(self.pool())
+                .await?
+            }
+        };
+        rows.iter().map(job_from_row).collect()
+    }
+
+    /// Jobs per state, for the queue-depth gauges.
+    pub async fn job_counts_by_state(&self) -> Result<Vec<(JobState, i64)>, StoreError> {
+        let rows: Vec<(String, i64)> =
+            sqlx::query_as("SELECT state, COUNT(*) FROM jobs GROUP BY state")
+                .fetch_all(self.pool())
+                .await?;
+        Ok(JobState::ALL
+            .into_iter()
+            .map(|state| {
+                let count = rows
+                    .iter()
+                    .find(|(name, _)| name == state.as_str())
+                    .map_or(0, |(_, count)| *count);
+                (state, count)
+            })
+            .collect())
+    }
+
+    /// Leases the oldest queued job of one of `kinds` to `owner` for `lease_ms`, counting an
+    /// attempt. `None` when nothing is queued.
+    pub async fn claim_job(
+        &self,
+        owner: &str,
+        kinds: &[&str],
+        lease_ms: i64,
+    ) -> Result<Option<JobRecord>, StoreError> {
+        if kinds.is_empty() {
+            return Ok(None);
+        }
+        let now = now_ms();
+        let placeholders = vec!["?"; kinds.len()].join(", ");
+        let statement = format!(
+            "UPDATE jobs SET state = 'running', lease_owner = ?, lease_expires_at_ms = ?, \
+             attempts = attempts + 1, updated_at_ms = ?, \
+             started_at_ms = COALESCE(started_at_ms, ?), error = NULL \
+             WHERE id = (SELECT id FROM jobs WHERE state = 'queued' AND kind IN ({placeholders}) \
+                         ORDER BY created_at_ms, id LIMIT 1) \
+               AND state = 'queued' \
+             RETURNING {COLUMNS}"
+        );
+        let mut transaction = self.pool().begin().await?;
+        let mut query = sqlx::query(sqlx::AssertSqlSafe(statement))
+            .bind(owner)
+            .bind(now + lease_ms)
+            .bind(now)
+            .bind(now);
+        for kind in kinds {
+            query = query.bind(*kind);
+        }
+        let Some(row) = query.fetch_optional(&mut *transaction).await? else {
+            return Ok(None);
+        };
+        let job = job_from_row(&row)?;
+        insert_state_event(&mut transaction, &job).await?;
+        transaction.commit().await?;
+        Ok(Some(job))
+    }
+
+    /// Extends `owner`'s lease on a running job and reports whether cancel was requested.
+    pub async fn heartbeat(
+        &self,
+        job_id: &str,
+        owner: &str,
+        lease_ms: i64,
+    ) -> Result<HeartbeatOutcome, StoreError> {
+        let now = now_ms();
+        let cancel_requested: Option<bool> = sqlx::query_scalar(
+            "UPDATE jobs SET lease_expires_at_ms = ?, updated_at_ms = ? \
+             WHERE id = ? AND lease_owner = ? AND state = 'running' RETURNING cancel_requested",
+        )
+        .bind(now + lease_ms)
+        .bind(now)
+        .bind(job_id)
+        .bind(owner)
+        .fetch_optional(self.pool())
+        .await?;
+        Ok(match cancel_requested {
+            Some(cancel_requested) => HeartbeatOutcome::Renewed { cancel_requested },
+            None => HeartbeatOutcome::LeaseLost,
+        })
+    }
+
+    /// Records how `owner`'s attempt ended. `None` when `owner` no longer holds the lease (the
+    /// job was re-queued meanwhile); the outcome is then dropped.
+    pub async fn finish_attempt(
+        &self,
+        job_id: &str,
+        owner: &str,
+        outcome: &AttemptOutcome,
+    ) -> Result<Option<JobRecord>, StoreError> {
+        let now = now_ms();
+        let (state_sql, attempts_sql, error, finished) = match outcome {
+            AttemptOutcome::Succeeded => ("'succeeded'", "attempts", None, Some(now)),
+            AttemptOutcome::Failed(message) => {
+                ("'failed'", "attempts", Some(message.clone()), Some(now))
+            }
+            AttemptOutcome::Cancelled => ("'cancelled'", "attempts", None, Some(now)),
+            AttemptOutcome::Retry(message) => (
+                "CASE WHEN attempts >= max_attempts THEN 'failed' ELSE 'queued' END",
+                "attempts",
+                Some(message.clone()),
+                None,
+            ),
+            AttemptOutcome::HandBack => ("'queued'", "attempts - 1", None, None),
+        };
+        let statement = format!(
+            "UPDATE jobs SET state = {state_sql}, attempts = {attempts_sql}, lease_owner = NULL, \
+             lease_expires_at_ms = NULL, error = ?, updated_at_ms = ?, finished_at_ms = ? \
+             WHERE id = ? AND lease_owner = ? AND state = 'running' RETURNING {COLUMNS}"
+        );
+        let mut transaction = self.pool().begin().await?;
+        let row = sqlx::query(sqlx::AssertSqlSafe(statement))
+            .bind(error)
+            .bind(now)
+            .bind(finished)
+            .bind(job_id)
+            .bind(owner)
+            .fetch_optional(&mut *transaction)
+            .await?;
+        let Some(row) = row else {
+            return Ok(None);
+        };
+        let mut job = job_from_row(&row)?;
+        if job.state == JobState::Failed && job.finished_at_ms.is_none() {
+            job = self
+                .mark_finished(&mut transaction, &job.id, now)
+                .await?
+                .unwrap_or(job);
+        }
+        insert_state_event(&mut transaction, &job).await?;
+        transaction.commit().await?;
+        Ok(Some(job))
+    }
+
+    async fn mark_finished(
+        &self,
+        transaction: &mut Transaction<'_, Sqlite>,
+        job_id: &str,
+        now: i64,
+    ) -> Result<Option<JobRecord>, StoreError> {
+        let row = sqlx::query(sqlx::AssertSqlSafe(format!(
+            "UPDATE jobs SET finished_at_ms = ? WHERE id = ? RETURNING {COLUMNS}"
+        )))
+        .bind(now)
+        .bind(job_id)
+        .fetch_optional(&mut **transaction)
+        .await?;
+        row.as_ref().map(job_from_row).transpose()
+    }
+
+    /// Re-queues running jobs whose lease ran out (their worker died or hung); past their
+    /// attempts they fail, and with a pending cancel they are cancelled.
+    pub async fn requeue_expired_leases(&self) -> Result<Vec<ExpiredLease>, StoreError> {
+        let now = now_ms();
+        let mut transaction = self.pool().begin().await?;
+        let expired: Vec<(String, Option<String>)> = sqlx::query_as(
+            "SELECT id, lease_owner FROM jobs WHERE state = 'running' AND lease_expires_at_ms < ?",
+        )
+        .bind(now)
+        .fetch_all(&mut *transaction)
+        .await?;
+        let mut results = Vec::with_capacity(expired.len());
+        for (job_id, previous_owner) in expired {
+            let owner_text = previous_owner.as_deref().unwrap_or("unknown");
+            let row = sqlx::query(sqlx::AssertSqlSafe(format!(
+                "UPDATE jobs SET \
+                   state = CASE WHEN cancel_requested THEN 'cancelled' \
+                                WHEN attempts >= max_attempts THEN 'failed' \
+                                ELSE 'queued' END, \
+                   error = CASE WHEN cancel_requested THEN NULL \
+                                WHEN attempts >= max_attempts \
+                                  THEN 'lease expired on attempt ' || attempts || ' of ' || \
+                                       max_attempts || ' (worker ' || ? || ' stopped renewing); \
+                                       no attempts left' \
+                                ELSE 'lease expired (worker ' || ? || ' stopped renewing); \
+                                      re-queued' END, \
+                   finished_at_ms = CASE WHEN cancel_requested OR attempts >= max_attempts \
+                                         THEN ? ELSE NULL END, \
+                   lease_owner = NULL, lease_expires_at_ms = NULL, updated_at_ms = ? \
+                 WHERE id = ? AND state = 'running' AND lease_expires_at_ms < ? \
+                 RETURNING {COLUMNS}"
+            )))
+            .bind(owner_text)
+            .bind(owner_text)
+            .bind(now)
+            .bind(now)
+            .bind(&job_id)
+            .bind(now)
+            .fetch_optional(&mut *transaction)
+            .await?;
+            if let Some(row) = row {
+                let job = job_from_row(&row)?;
+                insert_state_event(&mut transaction, &job).await?;
+                results.push(ExpiredLease {
+                    job_id,
+                    previous_owner,
+                    new_state: job.state,
+                });
+            }
+        }
+        transaction.commit().await?;
+        Ok(results)
+    }
+
+    /// Cancels a queued job at once, or flags a running one for its worker.
+    pub async fn request_cancel(&self, job_id: &str) -> Result<CancelOutcome, StoreError> {
+        let now = now_ms();
+        let mut transaction = self.pool().begin().await?;
+        let row = sqlx::query(sqlx::AssertSqlSafe(format!(
+            "UPDATE jobs SET state = 'cancelled', cancel_requested = TRUE, updated_at_ms = ?, \
+             finished_at_ms = ? WHERE id = ? AND state = 'queued' RETURNING {COLUMNS}"
+        )))
+        .bind(now)
+        .bind(now)
+        .bind(job_id)
+        .fetch_optional(&mut *transaction)
+        .await?;
+        if let Some(row) = row {
+            let job = job_from_row(&row)?;
+            insert_state_event(&mut transaction, &job).await?;
+            transaction.commit().await?;
+            return Ok(CancelOutcome::Cancelled(job));
+        }
+        let row = sqlx::query(sqlx::AssertSqlSafe(format!(
+            "UPDATE jobs SET cancel_requested = TRUE, updated_at_ms = ? \
+             WHERE id = ? AND state = 'running' RETURNING {COLUMNS}"
+        )))
+        .bind(now)
+        .bind(job_id)
+        .fetch_optional(&mut *transaction)
+        .await?;
+        if let Some(row) = row {
+            let job = job_from_row(&row)?;
+            insert_event(
+                &mut transaction,
+                job_id,
+                "cancel_requested",
+                &serde_json::json!({}),
+            )
+            .await?;
+            transaction.commit().await?;
+            return Ok(CancelOutcome::Requested(job));
+        }
+        transaction.commit().await?;
+        Ok(match self.get_job(job_id).await? {
+            Some(job) => CancelOutcome::AlreadyFinished(job),
+            None => CancelOutcome::NotFound,
+        })
+    }
+}

@@ -1,0 +1,402 @@
+//! The durable job queue end to end, with a CPU-only test job kind: lifecycle, progress over SSE,
+//! cancel, lease expiry and re-run by another worker, retries, restart and graceful hand-back.
+
+mod common;
+
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use common::handlers::{STEPS_KIND, StepsHandler};
+use common::{TestService, test_config};
+use segsplat::api::{ServiceBuilder, ServiceMode};
+use segsplat::store::Database;
+use segsplat::store::jobs::JobState;
+use serde_json::json;
+
+const WAIT: Duration = Duration::from_secs(15);
+
+async fn start_with(dir: &std::path::Path, cpu_slots: u32, handler: &StepsHandler) -> TestService {
+    let mut config = test_config(dir);
+    config.workers.cpu_slots = cpu_slots;
+    TestService::start(config, vec![Arc::new(handler.clone())]).await
+}
+
+/// SSE frames as (event name, data JSON).
+fn parse_sse(text: &str) -> Vec<(String, serde_json::Value)> {
+    text.split("\n\n")
+        .filter_map(|frame| {
+            let mut event = None;
+            let mut data = None;
+            for line in frame.lines() {
+                if let Some(value) = line.strip_prefix("event:") {
+                    event = Some(value.trim().to_string());
+                } else if let Some(value) = line.strip_prefix("data:") {
+                    data = serde_json::from_str(value.trim()).ok();
+                }
+            }
+            Some((event?, data?))
+        })
+        .collect()
+}
+
+#[tokio::test]
+async fn job_runs_to_success_and_sse_delivers_progress() {
+    let dir = tempfile::tempdir().unwrap();
+    let handler = StepsHandler::new();
+    let service = start_with(dir.path(), 1, &handler).await;
+    let scene_id = service.upload_test_scene().await;
+    let job_id = service
+        .create_job(&scene_id, STEPS_KIND, json!({"steps": 5, "step_ms": 30}))
+        .await;
+    let response = service
+        .client
+        .get(service.url(&format!("/v1/jobs/{job_id}/events")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(response.status().as_u16(), 200);
+    assert!(
+        response.headers()["content-type"]
+            .to_str()
+            .unwrap()
+            .starts_with("text/event-stream")
+    );
+    // The stream ends by itself after the final state.
+    let text = tokio::time::timeout(WAIT, response.text())
+        .await
+        .unwrap()
+        .unwrap();
+    let events = parse_sse(&text);
+    let states: Vec<&str> = events
+        .iter()
+        .filter(|(name, _)| name == "state")
+        .map(|(_, data)| data["payload"]["state"].as_str().unwrap())
+        .collect();
+    assert_eq!(states, vec!["queued", "running", "succeeded"], "{text}");
+    let progress: Vec<&serde_json::Value> = events
+        .iter()
+        .filter(|(name, _)| name == "progress")
+        .map(|(_, data)| &data["payload"])
+        .collect();
+    assert_eq!(progress.len(), 5, "{text}");
+    assert_eq!(progress[4]["step"], 5);
+    assert_eq!(progress[4]["total_steps"], 5);
+    assert_eq!(progress[4]["stage"], "count");
+    assert!(progress[4]["metrics"]["loss"].as_f64().unwrap() > 0.0);
+    assert!(
+        progress[2]["eta_secs"].as_f64().unwrap() > 0.0,
+        "{}",
+        progress[2]
+    );
+
+    let job = service.job(&job_id).await;
+    assert_eq!(job["state"], "succeeded");
+    assert_eq!(job["attempts"], 1);
+    assert_eq!(job["progress"]["step"], 5);
+    assert_eq!(
+        job["config"],
+        json!({"steps": 5, "step_ms": 30, "fail_attempts": 0})
+    );
+    assert_eq!(handler.stats.runs.load(Ordering::SeqCst), 1);
+
+    // Replay after the fact: same events, and resuming with Last-Event-ID skips the seen ones.
+    let first_id = events[0].1["id"].as_i64().unwrap();
+    let replay = service
+        .client
+        .get(service.url(&format!("/v1/jobs/{job_id}/events")))
+        .header("last-event-id", first_id.to_string())
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert_eq!(parse_sse(&replay).len(), events.len() - 1);
+
+    let (status, list) = service.get_json("/v1/jobs?state=succeeded").await;
+    assert_eq!(status, 200);
+    assert_eq!(list["jobs"].as_array().unwrap().len(), 1);
+    let (status, list) = service.get_json("/v1/jobs?state=queued").await;
+    assert_eq!(status, 200);
+    assert!(list["jobs"].as_array().unwrap().is_empty());
+    let (status, body) = service.get_json("/v1/jobs?state=sleeping").await;
+    assert_eq!(status, 400, "{body}");
+    service.shutdown().await;
+}
+
+#[tokio::test]
+async fn job_requests_are_validated() {
+    let dir = tempfile::tempdir().unwrap();
+    let handler = StepsHandler::new();
+    let service = start_with(dir.path(), 0, &handler).await;
+    let scene_id = service.upload_test_scene().await;
+    let path = format!("/v1/scenes/{scene_id}/jobs");
+    let (status, body) = service.post_json(&path, json!({"kind": "teleport"})).await;
+    assert_eq!(status, 422, "{body}");
+    let message = body["error"]["message"].as_str().unwrap();
+    assert!(
+        message.contains("teleport") && message.contains(STEPS_KIND),
+        "{message}"
+    );
+    let (status, body) = service
+        .post_json(&path, json!({"kind": STEPS_KIND, "config": {"steps": 0}}))
+        .await;
+    assert_eq!(status, 422, "{body}");
+    assert!(
+        body["error"]["message"].as_str().unwrap().contains("steps"),
+        "{body}"
+    );
+    let (status, _) = service
+        .post_json("/v1/scenes/no-such-scene/jobs", json!({"kind": STEPS_KIND}))
+        .await;
+    assert_eq!(status, 404);
+    let (status, _) = service.get_json("/v1/jobs/no-such-job").await;
+    assert_eq!(status, 404);
+    service.shutdown().await;
+}
+
+#[tokio::test]
+async fn cancel_stops_queued_and_running_jobs_and_guards_scene_deletion() {
+    let dir = tempfile::tempdir().unwrap();
+    let handler = StepsHandler::new();
+    let service = start_with(dir.path(), 1, &handler).await;
+    let scene_id = service.upload_test_scene().await;
+    let long = json!({"steps": 100000, "step_ms": 5});
+    let running = service
+        .create_job(&scene_id, STEPS_KIND, long.clone())
+        .await;
+    service.wait_for_state(&running, "running", WAIT).await;
+    let queued = service.create_job(&scene_id, STEPS_KIND, long).await;
+    assert_eq!(service.job(&queued).await["state"], "queued");
+
+    // A scene with live jobs cannot be deleted.
+    let response = service
+        .client
+        .delete(service.url(&format!("/v1/scenes/{scene_id}")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(response.status().as_u16(), 409);
+
+    let (status, body) = service
+        .post_json(&format!("/v1/jobs/{queued}/cancel"), json!({}))
+        .await;
+    assert_eq!(status, 200, "{body}");
+    assert_eq!(body["state"], "cancelled");
+    let (status, body) = service
+        .post_json(&format!("/v1/jobs/{running}/cancel"), json!({}))
+        .await;
+    assert_eq!(status, 202, "{body}");
+    assert_eq!(body["cancel_requested"], true);
+    let job = service.wait_for_state(&running, "cancelled", WAIT).await;
+    assert!(job["progress"]["step"].as_u64().unwrap() < 100000);
+    let (status, _) = service
+        .post_json(&format!("/v1/jobs/{running}/cancel"), json!({}))
+        .await;
+    assert_eq!(status, 409);
+    // The cancelled queued job never ran.
+    assert_eq!(handler.stats.runs.load(Ordering::SeqCst), 1);
+
+    let response = service
+        .client
+        .delete(service.url(&format!("/v1/scenes/{scene_id}")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(response.status().as_u16(), 204);
+    let (status, _) = service.get_json(&format!("/v1/jobs/{running}")).await;
+    assert_eq!(status, 404);
+    service.shutdown().await;
+}
+
+/// Starts workers only (no API) on `dir`, as `segsplat worker` does.
+async fn start_worker_process(
+    dir: &std::path::Path,
+    handler: &StepsHandler,
+) -> segsplat::api::RunningService {
+    let mut config = test_config(dir);
+    config.workers.cpu_slots = 1;
+    ServiceBuilder::new(config)
+        .mode(ServiceMode::WorkersOnly)
+        .detect_gpus(false)
+        .handler(Arc::new(handler.clone()))
+        .start()
+        .await
+        .unwrap()
+}
+
+#[tokio::test]
+async fn a_dead_workers_lease_expires_and_another_worker_reruns_the_job() {
+    let dir = tempfile::tempdir().unwrap();
+    let api_handler = StepsHandler::new();
+    let api = start_with(dir.path(), 0, &api_handler).await;
+    let scene_id = api.upload_test_scene().await;
+    let job_id = api
+        .create_job(&scene_id, STEPS_KIND, json!({"steps": 3}))
+        .await;
+    // A worker claims the job and dies: it never heartbeats nor runs anything.
+    let claimed = api
+        .service
+        .database()
+        .claim_job("dead-worker/0", &[STEPS_KIND], 300)
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(claimed.id, job_id);
+    assert_eq!(claimed.attempts, 1);
+    assert_eq!(api.job(&job_id).await["lease_owner"], "dead-worker/0");
+
+    let worker_handler = StepsHandler::new();
+    let worker = start_worker_process(dir.path(), &worker_handler).await;
+    let job = api.wait_for_state(&job_id, "succeeded", WAIT).await;
+    assert_eq!(job["attempts"], 2, "{job}");
+    assert_eq!(worker_handler.stats.runs.load(Ordering::SeqCst), 1);
+    assert_eq!(
+        worker_handler.stats.steps_executed.load(Ordering::SeqCst),
+        3
+    );
+
+    let events = api
+        .service
+        .database()
+        .job_events_after(&job_id, 0, 100)
+        .await
+        .unwrap();
+    let requeue = events
+        .iter()
+        .find(|event| {
+            event.kind == "state"
+                && event.payload["state"] == "queued"
+                && event.payload["error"]
+                    .as_str()
+                    .is_some_and(|e| e.contains("lease expired"))
+        })
+        .expect("a re-queue event naming the expired lease");
+    assert!(
+        requeue.payload["error"]
+            .as_str()
+            .unwrap()
+            .contains("dead-worker/0")
+    );
+    worker.shutdown().await;
+    api.shutdown().await;
+}
+
+#[tokio::test]
+async fn jobs_fail_with_the_reason_once_attempts_are_used_up() {
+    let dir = tempfile::tempdir().unwrap();
+    let handler = StepsHandler::new();
+    let mut config = test_config(dir.path());
+    config.jobs.max_attempts = 2;
+    let service = TestService::start(config, vec![Arc::new(handler.clone())]).await;
+    let scene_id = service.upload_test_scene().await;
+
+    // The handler fails every attempt: retried once, then failed with its message.
+    let failing = service
+        .create_job(&scene_id, STEPS_KIND, json!({"fail_attempts": 10}))
+        .await;
+    let job = service.wait_for_state(&failing, "failed", WAIT).await;
+    assert_eq!(job["attempts"], 2);
+    assert_eq!(job["error"], "simulated failure on attempt 2");
+    assert!(job["finished_at_ms"].is_i64());
+
+    // One failure, then success.
+    let flaky = service
+        .create_job(&scene_id, STEPS_KIND, json!({"fail_attempts": 1}))
+        .await;
+    let job = service.wait_for_state(&flaky, "succeeded", WAIT).await;
+    assert_eq!(job["attempts"], 2);
+    assert!(job["error"].is_null());
+    service.shutdown().await;
+
+    // A lease that expires on the last attempt fails the job, naming the cause.
+    let dir = tempfile::tempdir().unwrap();
+    let mut config = test_config(dir.path());
+    config.jobs.max_attempts = 1;
+    config.workers.cpu_slots = 0;
+    let service = TestService::start(config, vec![Arc::new(handler.clone())]).await;
+    let scene_id = service.upload_test_scene().await;
+    let job_id = service.create_job(&scene_id, STEPS_KIND, json!({})).await;
+    service
+        .service
+        .database()
+        .claim_job("dead-worker/0", &[STEPS_KIND], 200)
+        .await
+        .unwrap()
+        .unwrap();
+    let job = service.wait_for_state(&job_id, "failed", WAIT).await;
+    let error = job["error"].as_str().unwrap();
+    assert!(
+        error.contains("lease expired") && error.contains("no attempts left"),
+        "{error}"
+    );
+    service.shutdown().await;
+}
+
+#[tokio::test]
+async fn a_restart_on_the_same_data_dir_resumes_queued_jobs() {
+    let dir = tempfile::tempdir().unwrap();
+    let handler = StepsHandler::new();
+    let first = start_with(dir.path(), 0, &handler).await;
+    let scene_id = first.upload_test_scene().await;
+    let job_id = first
+        .create_job(&scene_id, STEPS_KIND, json!({"steps": 2}))
+        .await;
+    first.shutdown().await;
+
+    let second = start_with(dir.path(), 1, &handler).await;
+    let job = second.wait_for_state(&job_id, "succeeded", WAIT).await;
+    assert_eq!(job["attempts"], 1);
+    assert_eq!(handler.stats.steps_executed.load(Ordering::SeqCst), 2);
+    second.shutdown().await;
+}
+
+#[tokio::test]
+async fn shutdown_hands_running_jobs_back_and_the_next_run_resumes_from_the_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    let first_handler = StepsHandler::new();
+    let first = start_with(dir.path(), 1, &first_handler).await;
+    let scene_id = first.upload_test_scene().await;
+    let steps = 40;
+    let job_id = first
+        .create_job(
+            &scene_id,
+            STEPS_KIND,
+            json!({"steps": steps, "step_ms": 25}),
+        )
+        .await;
+    let started = std::time::Instant::now();
+    loop {
+        let job = first.job(&job_id).await;
+        if job["progress"]["step"].as_u64().unwrap_or(0) >= 3 {
+            break;
+        }
+        assert!(started.elapsed() < WAIT, "no progress: {job}");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    first.shutdown().await;
+
+    let database = Database::open(&dir.path().join("segsplat.db"))
+        .await
+        .unwrap();
+    let job = database.get_job(&job_id).await.unwrap().unwrap();
+    assert_eq!(job.state, JobState::Queued);
+    assert_eq!(job.lease_owner, None);
+    assert_eq!(job.attempts, 0, "a handed-back attempt is not counted");
+    database.close().await;
+    let done_before = first_handler.stats.steps_executed.load(Ordering::SeqCst);
+    assert!(done_before >= 3 && done_before < steps);
+
+    let second_handler = StepsHandler::new();
+    let second = start_with(dir.path(), 1, &second_handler).await;
+    let job = second.wait_for_state(&job_id, "succeeded", WAIT).await;
+    assert_eq!(job["attempts"], 1);
+    let done_after = second_handler.stats.steps_executed.load(Ordering::SeqCst);
+    assert_eq!(
+        done_before + done_after,
+        steps,
+        "resumed from the checkpoint, no step twice"
+    );
+    second.shutdown().await;
+}
