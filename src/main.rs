@@ -1,5 +1,7 @@
 //! The `segsplat` command line: parse, load the configuration, call into the library.
 
+mod cli;
+
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -31,16 +33,18 @@ enum Command {
     Worker(WorkerArgs),
     /// List the GPU adapters wgpu can see, as JSON.
     Adapters,
-    /// Train a scene locally.
-    Train(FutureArgs),
+    /// Train a scene locally (plain 3DGS) with a progress bar.
+    Train(cli::train::TrainArgs),
+    /// Render a trained scene (PLY) from a dataset's views to PNGs.
+    Render(cli::render::RenderArgs),
     /// Query a trained scene.
     Query(FutureArgs),
     /// Export Gaussians and object labels.
     Export(FutureArgs),
     /// Evaluate segmentation and rendering quality.
     Eval(FutureArgs),
-    /// Run kernel and query benchmarks.
-    Bench(FutureArgs),
+    /// Benchmark training speed and held-out quality on a dataset (JSON).
+    Bench(cli::bench::BenchArgs),
     /// Manage ONNX models.
     Models(FutureArgs),
 }
@@ -96,11 +100,12 @@ fn main() -> ExitCode {
             run_service(cli.config, overrides, ServiceMode::WorkersOnly)
         }
         Command::Adapters => print_adapters(),
-        Command::Train(_) => return not_available("train", "the Segment-then-Splat pipeline"),
+        Command::Train(args) => init_cli_logging().and_then(|()| cli::train::run(args)),
+        Command::Render(args) => init_cli_logging().and_then(|()| cli::render::run(args)),
         Command::Query(_) => return not_available("query", "the Segment-then-Splat pipeline"),
         Command::Export(_) => return not_available("export", "the Segment-then-Splat pipeline"),
         Command::Eval(_) => return not_available("eval", "the evaluation issue"),
-        Command::Bench(_) => return not_available("bench", "the engine benchmarks"),
+        Command::Bench(args) => init_cli_logging().and_then(|()| cli::bench::run(args)),
         Command::Models(_) => return not_available("models", "the model store"),
     };
     match result {
@@ -123,6 +128,7 @@ fn run_service(
     let runtime = tokio::runtime::Runtime::new().context("cannot start the async runtime")?;
     runtime.block_on(async move {
         let service = ServiceBuilder::new(config)
+            .handler(std::sync::Arc::new(segsplat::pipeline::ReconstructHandler))
             .mode(mode)
             .start()
             .await
@@ -130,6 +136,18 @@ fn run_service(
         service.run_until_signal().await;
         Ok(())
     })
+}
+
+/// Logging for local commands: warnings and up unless `RUST_LOG` says otherwise, on stderr so
+/// stdout stays machine-readable (`bench --json`).
+fn init_cli_logging() -> anyhow::Result<()> {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init()
+        .map_err(|error| anyhow::anyhow!("cannot install the logger: {error}"))
 }
 
 fn init_logging(config: &Config) -> anyhow::Result<()> {

@@ -1,1 +1,5 @@
-//! pipeline: see DESIGN.md.
+//! Job kinds that turn uploaded scenes into trained ones.
+
+pub mod reconstruct;
+
+pub use reconstruct::ReconstructHandler;

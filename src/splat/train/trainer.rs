@@ -412,17 +412,28 @@ impl Trainer {
         Ok(())
     }
 
-    /// Trains until `steps` (from the config) are done, calling `on_progress` every
-    /// [`SYNC_EVERY`] steps and at the end; stops early when it returns `false` (cancel).
+    /// Trains until the configured `steps` are done; see [`Trainer::run_until`].
     pub fn run(
         &mut self,
+        on_progress: impl FnMut(&TrainProgress) -> bool,
+    ) -> Result<TrainProgress, TrainError> {
+        self.run_until(self.config.steps, on_progress)
+    }
+
+    /// Trains until step `last_step` (capped at the configured steps), calling `on_progress`
+    /// every [`SYNC_EVERY`] steps and at `last_step`; stops early when it returns `false`
+    /// (cancel). Step rates in the reports count from this call.
+    pub fn run_until(
+        &mut self,
+        last_step: u32,
         mut on_progress: impl FnMut(&TrainProgress) -> bool,
     ) -> Result<TrainProgress, TrainError> {
+        let last_step = last_step.min(self.config.steps);
         self.started = Instant::now();
         self.steps_at_start = self.step;
-        while self.step < self.config.steps {
+        while self.step < last_step {
             let step = self.train_step()?;
-            if step % SYNC_EVERY == 0 || step == self.config.steps {
+            if step % SYNC_EVERY == 0 || step == last_step {
                 let progress = self.progress()?;
                 if !on_progress(&progress) {
                     return Ok(progress);
@@ -529,6 +540,82 @@ impl Trainer {
             self.accumulators.upload(&ctx, stats);
         }
         Ok(())
+    }
+
+    /// Times the render passes on the training views without changing the model: forward alone,
+    /// and forward + loss + backward, each submitted and waited for (wall clock, so it includes
+    /// submission overhead). Returns (forward ms, backward-with-loss ms) averaged over `repeats`.
+    pub fn time_passes(&mut self, repeats: u32) -> Result<(f64, f64), TrainError> {
+        let settings = RenderSettings {
+            filter: ObjectFilter::All,
+            background: self.config.background,
+            sh_degree: sh_degree_at(
+                self.step,
+                self.config.sh_degree_interval,
+                self.config.max_sh_degree,
+            ),
+        };
+        let ctx = self.ctx.clone();
+        let (mut forward_secs, mut full_secs) = (0.0, 0.0);
+        for repeat in 0..repeats.max(1) {
+            let view = &self.views.train[repeat as usize % self.views.train.len()];
+            let camera = view.camera;
+            for with_backward in [false, true] {
+                let started = Instant::now();
+                let mut encoder =
+                    ctx.device
+                        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                            label: Some("timing"),
+                        });
+                let output = self.renderer.forward(
+                    &ctx,
+                    &mut encoder,
+                    &self.gaussians,
+                    &camera,
+                    &settings,
+                )?;
+                if with_backward {
+                    self.grads.encode_zero(&mut encoder);
+                    self.loss.encode(
+                        &ctx,
+                        &mut encoder,
+                        &LossImages {
+                            rendered: output.image(),
+                            target: &view.target,
+                            target_mask: None,
+                            width: camera.width,
+                            height: camera.height,
+                        },
+                        1.0,
+                        &LossOutputs {
+                            rendered_grad: &self.grad_image,
+                            loss_values: &self.loss_values,
+                            loss_slot: 0,
+                        },
+                    )?;
+                    self.renderer.backward(
+                        &ctx,
+                        &mut encoder,
+                        &self.gaussians,
+                        &output,
+                        &self.grad_image,
+                        &mut self.grads,
+                    )?;
+                }
+                ctx.queue.submit([encoder.finish()]);
+                ctx.wait_idle()?;
+                let secs = started.elapsed().as_secs_f64();
+                if with_backward {
+                    full_secs += secs;
+                } else {
+                    forward_secs += secs;
+                }
+            }
+        }
+        let repeats = repeats.max(1) as f64;
+        let forward_ms = forward_secs / repeats * 1e3;
+        let full_ms = full_secs / repeats * 1e3;
+        Ok((forward_ms, (full_ms - forward_ms).max(0.0)))
     }
 
     /// Renders every held-out view and compares it with its image.

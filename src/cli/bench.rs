@@ -1,0 +1,97 @@
+//! `segsplat bench DIR`: trains plain 3DGS and reports speed and held-out quality as one JSON
+//! object (see the README for figures measured with it).
+
+use std::path::PathBuf;
+
+use clap::Args;
+use segsplat::splat::train::{TrainConfig, Trainer};
+use serde::Serialize;
+
+#[derive(Args)]
+pub struct BenchArgs {
+    pub dataset: PathBuf,
+    #[arg(long, default_value_t = 500)]
+    pub steps: u32,
+    #[arg(long, default_value_t = 256)]
+    pub max_resolution: u32,
+    #[arg(long, default_value_t = 8)]
+    pub eval_split_every: u32,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Render passes timed for the forward / backward figures.
+    #[arg(long, default_value_t = 10)]
+    pub timing_repeats: u32,
+    /// Print one JSON object (otherwise a readable summary).
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Serialize)]
+struct BenchReport {
+    adapter: String,
+    backend: String,
+    image_width: u32,
+    image_height: u32,
+    train_views: usize,
+    test_views: usize,
+    steps: u32,
+    gaussians_start: usize,
+    gaussians_end: usize,
+    /// Mean wall time of one forward render (submit to completion), at the start and the end.
+    forward_ms_start: f64,
+    forward_ms_end: f64,
+    /// Mean wall time of loss + backward, at the start and the end.
+    backward_ms_start: f64,
+    backward_ms_end: f64,
+    /// Training loop only (setup, timing and evaluation excluded).
+    steps_per_sec: f64,
+    train_seconds: f64,
+    psnr: f64,
+    ssim: f64,
+    peak_resident_mib: Option<f64>,
+}
+
+pub fn run(args: BenchArgs) -> anyhow::Result<()> {
+    let scene = super::open_scene(&args.dataset)?;
+    let ctx = super::open_gpu()?;
+    let config = TrainConfig {
+        steps: args.steps,
+        max_resolution: Some(args.max_resolution),
+        eval_split_every: args.eval_split_every,
+        seed: args.seed,
+        ..Default::default()
+    };
+    let mut trainer = Trainer::new(&ctx, &scene, config, None)?;
+    let gaussians_start = trainer.gaussian_count();
+    let (forward_ms_start, backward_ms_start) = trainer.time_passes(args.timing_repeats)?;
+    let progress = trainer.run(|_| true)?;
+    let (forward_ms_end, backward_ms_end) = trainer.time_passes(args.timing_repeats)?;
+    let eval = trainer.evaluate()?;
+    let [image_width, image_height] = trainer.views().max_size();
+    let report = BenchReport {
+        adapter: ctx.report.name.clone(),
+        backend: ctx.report.backend.clone(),
+        image_width,
+        image_height,
+        train_views: trainer.views().train.len(),
+        test_views: trainer.views().test.len(),
+        steps: progress.step,
+        gaussians_start,
+        gaussians_end: progress.gaussians,
+        forward_ms_start,
+        forward_ms_end,
+        backward_ms_start,
+        backward_ms_end,
+        steps_per_sec: progress.steps_per_sec,
+        train_seconds: progress.elapsed_secs,
+        psnr: eval.psnr,
+        ssim: eval.ssim,
+        peak_resident_mib: super::peak_resident_mib(),
+    };
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    }
+    Ok(())
+}
