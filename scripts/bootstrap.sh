@@ -6,7 +6,7 @@
 set -euo pipefail
 
 need_apt=()
-for package in mesa-vulkan-drivers libvulkan1; do
+for package in mesa-vulkan-drivers libvulkan1 curl; do
   dpkg -s "$package" >/dev/null 2>&1 || need_apt+=("$package")
 done
 if [ ${#need_apt[@]} -gt 0 ]; then

@@ -33,6 +33,8 @@ enum Command {
     Worker(WorkerArgs),
     /// List the GPU adapters wgpu can see, as JSON.
     Adapters,
+    /// Write a small synthetic COLMAP dataset (three spheres, 32 views, masks) for demos.
+    SyntheticScene(SyntheticSceneArgs),
     /// Train a scene locally (plain 3DGS) with a progress bar.
     Train(cli::train::TrainArgs),
     /// Render a trained scene (PLY) from a dataset's views to PNGs.
@@ -60,6 +62,18 @@ struct ServeArgs {
     /// gRPC listen address.
     #[arg(long = "grpc")]
     grpc_addr: Option<SocketAddr>,
+}
+
+#[derive(Args)]
+struct SyntheticSceneArgs {
+    /// Directory to create.
+    dir: PathBuf,
+    #[arg(long, default_value_t = 32)]
+    frames: usize,
+    #[arg(long, default_value_t = 160)]
+    width: u32,
+    #[arg(long, default_value_t = 120)]
+    height: u32,
 }
 
 #[derive(Args)]
@@ -100,6 +114,7 @@ fn main() -> ExitCode {
             run_service(cli.config, overrides, ServiceMode::WorkersOnly)
         }
         Command::Adapters => print_adapters(),
+        Command::SyntheticScene(args) => write_synthetic_scene(&args),
         Command::Train(args) => init_cli_logging().and_then(|()| cli::train::run(args)),
         Command::Render(args) => init_cli_logging().and_then(|()| cli::render::run(args)),
         Command::Query(_) => return not_available("query", "the Segment-then-Splat pipeline"),
@@ -159,6 +174,26 @@ fn init_logging(config: &Config) -> anyhow::Result<()> {
         LogFormat::Json => builder.json().try_init(),
     };
     installed.map_err(|error| anyhow::anyhow!("cannot install the logger: {error}"))
+}
+
+fn write_synthetic_scene(args: &SyntheticSceneArgs) -> anyhow::Result<()> {
+    use segsplat::scene::Level;
+    use segsplat::scene::synthetic::{SyntheticSpec, write_colmap};
+    let spec = SyntheticSpec {
+        frame_count: args.frames,
+        width: args.width,
+        height: args.height,
+        with_masks: Some(Level::ALL.to_vec()),
+        ..SyntheticSpec::default()
+    };
+    write_colmap(
+        &args.dir,
+        &spec,
+        segsplat::scene::colmap::ColmapEncoding::Binary,
+    )
+    .with_context(|| format!("cannot write {}", args.dir.display()))?;
+    println!("wrote a synthetic COLMAP dataset to {}", args.dir.display());
+    Ok(())
 }
 
 fn print_adapters() -> anyhow::Result<()> {

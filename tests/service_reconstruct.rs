@@ -1,0 +1,97 @@
+//! The `reconstruct` job end to end through the service on the GPU worker (lavapipe in CI):
+//! upload, submit, progress over the job record, artifacts in the blob store.
+
+mod common;
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use common::{TestService, archives, test_config};
+use segsplat::api::ServiceBuilder;
+use segsplat::scene::colmap::ColmapEncoding;
+use segsplat::scene::synthetic::SyntheticSpec;
+use segsplat::splat::labels::read_labels;
+use segsplat::splat::ply::read_ply;
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn reconstruct_job_trains_and_stores_artifacts() {
+    if segsplat::gpu::GpuContext::new_default().is_err() {
+        if std::env::var("SEGSPLAT_SKIP_GPU_TESTS").is_ok() {
+            eprintln!("skipping: no GPU adapter");
+            return;
+        }
+        panic!("no GPU adapter (lavapipe is installed by scripts/bootstrap.sh)");
+    }
+    let data = tempfile::tempdir().unwrap();
+    let mut config = test_config(data.path());
+    config.workers.cpu_slots = 0;
+    config.jobs.lease_secs = 30.0;
+    config.jobs.heartbeat_secs = 1.0;
+    let service = ServiceBuilder::new(config)
+        .handler(Arc::new(segsplat::pipeline::ReconstructHandler))
+        .start()
+        .await
+        .unwrap();
+    let base_url = format!("http://{}", service.http_addr().unwrap());
+    let client = TestService {
+        service,
+        base_url,
+        client: reqwest::Client::new(),
+    };
+    let spec = SyntheticSpec {
+        frame_count: 9,
+        width: 48,
+        height: 36,
+        ..SyntheticSpec::default()
+    };
+    let archive = archives::zip_of(&archives::colmap_files(spec, ColmapEncoding::Binary));
+    let (status, scene) = client.upload(archive, "application/zip").await;
+    assert_eq!(status, 201, "{scene}");
+    let scene_id = scene["id"].as_str().unwrap();
+
+    let (status, body) = client
+        .post_json(
+            &format!("/v1/scenes/{scene_id}/jobs"),
+            serde_json::json!({"kind": "reconstruct", "config": {"steps": -1}}),
+        )
+        .await;
+    assert_eq!(status, 422, "a bad config is refused: {body}");
+
+    let job_id = client
+        .create_job(
+            scene_id,
+            "reconstruct",
+            serde_json::json!({"steps": 60, "checkpoint_every": 25, "densify_from": 20,
+                               "densify_interval": 20, "densify_until": 50}),
+        )
+        .await;
+    let job = client
+        .wait_for_state(&job_id, "succeeded", Duration::from_secs(240))
+        .await;
+    assert_eq!(job["progress"]["stage"], "evaluate", "{job}");
+    assert!(
+        job["progress"]["metrics"]["psnr"].as_f64().unwrap() > 10.0,
+        "{job}"
+    );
+
+    let blobs = client.service.blobs();
+    let prefix = format!("jobs/{job_id}/output");
+    let ply = blobs.get_bytes(&format!("{prefix}/scene.ply")).unwrap();
+    let model = read_ply(ply.as_slice()).unwrap().model;
+    assert!(!model.is_empty());
+    let labels = blobs.get_bytes(&format!("{prefix}/labels.npy")).unwrap();
+    assert_eq!(
+        read_labels(labels.as_slice(), model.len()).unwrap().len(),
+        model.len()
+    );
+    let metrics: serde_json::Value =
+        serde_json::from_slice(&blobs.get_bytes(&format!("{prefix}/metrics.json")).unwrap())
+            .unwrap();
+    assert_eq!(metrics["steps"], 60);
+    assert!(
+        blobs
+            .exists(&format!("jobs/{job_id}/checkpoints/train"))
+            .unwrap()
+    );
+    client.shutdown().await;
+}
