@@ -520,6 +520,36 @@ class ReferenceWriter:
             f.write("\n")
 
 
+def compare_with_official_predictor(spec, model, image, prompts, decoder_outputs):
+    """The wrappers must agree with the official predictor API (SamPredictor / SAM2ImagePredictor,
+    which append the padding point themselves) on the prompts without a mask input: channels 1-3
+    vs multimask_output=True, and for SAM 1 / MobileSAM channel 0 vs multimask_output=False.
+    (SAM2ImagePredictor's single-mask answer falls back to the most stable multimask when token 0
+    is unstable; the exported channel 0 is the raw token, so it is not compared for SAM 2.)"""
+    if spec.family == "sam2":
+        from sam2.sam2_image_predictor import SAM2ImagePredictor as Predictor
+    elif spec.family == "mobile_sam":
+        from mobile_sam import SamPredictor as Predictor
+    else:
+        from segment_anything import SamPredictor as Predictor
+    predictor = Predictor(model)
+    predictor.set_image(image)
+    worst = 0.0
+    for prompt in range(2):  # prompt 2 carries a mask input, which the predictor API takes differently
+        kwargs = {"point_coords": prompts["point_coords_original"][prompt:prompt + 1],
+                  "point_labels": np.array([1]), "return_logits": True}
+        masks, scores, _ = predictor.predict(multimask_output=True, **kwargs)
+        worst = max(worst, np.abs(masks - decoder_outputs["masks"][prompt, 1:]).max(),
+                    np.abs(scores - decoder_outputs["iou_predictions"][prompt, 1:]).max())
+        if spec.family != "sam2":
+            single, _, _ = predictor.predict(multimask_output=False, **kwargs)
+            worst = max(worst, np.abs(single[0] - decoder_outputs["masks"][prompt, 0]).max())
+    scale = max(1.0, float(np.abs(decoder_outputs["masks"]).max()))
+    log(f"  official predictor vs exported decoder module: max abs err {worst:.2e}")
+    if worst / scale > TOLERANCES["masks"]:
+        raise VerificationError(f"{spec.key}: decoder wrapper disagrees with the official predictor ({worst:.2e})")
+
+
 # ---------------------------------------------------------------------------------------------
 # Per-family exports; each returns manifest entries and a timing summary
 # ---------------------------------------------------------------------------------------------
@@ -602,6 +632,7 @@ def export_sam_family(spec, checkpoint, image, out_dir, reference_root):
     timings["decoder export"] = export_onnx(decoder, example, decoder_path, decoder_in, decoder_out)
     decoder_outputs, timings["decoder torch"] = eager(decoder, decoder_feeds, [o["name"] for o in decoder_out])
     timings["decoder onnxruntime"] = verify(decoder_path, decoder_feeds, decoder_outputs)
+    compare_with_official_predictor(spec, model, image, prompts, decoder_outputs)
     # A second image size proves the output size is not baked into the graph.
     other_size = {**decoder_feeds, "orig_im_size": np.array([image.shape[1] // 2 + 7, image.shape[0] + 13], np.float32)}
     other_outputs, _ = eager(decoder, other_size, [o["name"] for o in decoder_out])
