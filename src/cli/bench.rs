@@ -21,6 +21,13 @@ pub struct BenchArgs {
     /// Render passes timed for the forward / backward figures.
     #[arg(long, default_value_t = 10)]
     pub timing_repeats: u32,
+    /// Start from this many random Gaussians in the cameras' bounds instead of the dataset's
+    /// sparse points (to measure how step time scales with the Gaussian count).
+    #[arg(long)]
+    pub init_random: Option<usize>,
+    /// Keep the Gaussian count fixed (no densification, pruning or opacity reset).
+    #[arg(long)]
+    pub no_densify: bool,
     /// Print one JSON object (otherwise a readable summary).
     #[arg(long)]
     pub json: bool,
@@ -52,15 +59,22 @@ struct BenchReport {
 }
 
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
-    let scene = super::open_scene(&args.dataset)?;
+    let mut scene = super::open_scene(&args.dataset)?;
     let ctx = super::open_gpu()?;
-    let config = TrainConfig {
+    let mut config = TrainConfig {
         steps: args.steps,
         max_resolution: Some(args.max_resolution),
         eval_split_every: args.eval_split_every,
         seed: args.seed,
         ..Default::default()
     };
+    if let Some(count) = args.init_random {
+        scene.points = None;
+        config.random_init_count = count;
+    }
+    if args.no_densify {
+        config.densify_until = 0;
+    }
     let mut trainer = Trainer::new(&ctx, &scene, config, None)?;
     let gaussians_start = trainer.gaussian_count();
     let (forward_ms_start, backward_ms_start) = trainer.time_passes(args.timing_repeats)?;

@@ -4,6 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::splat::densify::DensifyConfig;
 use crate::splat::schedule::LearningRates;
+use crate::splat::train::object_loss::ObjectLossConfig;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -35,6 +36,9 @@ pub struct TrainConfig {
     pub max_gaussians: usize,
     /// Random initial Gaussians when the dataset has no sparse points.
     pub random_init_count: usize,
+    /// The Segment-then-Splat object loss; `None` trains plain 3DGS. It acts once the trainer
+    /// is given object masks ([`crate::splat::train::Trainer::set_object_targets`]).
+    pub object_loss: Option<ObjectLossConfig>,
 }
 
 impl Default for TrainConfig {
@@ -55,6 +59,7 @@ impl Default for TrainConfig {
             opacity_reset_interval: 3000,
             max_gaussians: 6_000_000,
             random_init_count: 100_000,
+            object_loss: None,
         }
     }
 }
@@ -95,6 +100,11 @@ impl TrainConfig {
         }
         if self.max_gaussians == 0 {
             return fail("max_gaussians", "must be at least 1");
+        }
+        if let Some(object_loss) = &self.object_loss
+            && let Err((field, problem)) = object_loss.validate()
+        {
+            return fail(field, &problem);
         }
         Ok(())
     }

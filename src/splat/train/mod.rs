@@ -2,8 +2,10 @@
 
 pub mod config;
 pub mod densify_stats;
+pub mod object_loss;
 pub mod trainer;
 pub mod views;
 
 pub use config::TrainConfig;
+pub use object_loss::{ObjectLossConfig, ObjectTargets, SkippedPair};
 pub use trainer::{EvalReport, TrainError, TrainProgress, Trainer, TrainerMeta};

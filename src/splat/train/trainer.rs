@@ -7,6 +7,9 @@
 //! growth), and (b) at densification / opacity reset, which re-lays out every per-Gaussian buffer
 //! on the CPU (every 100 steps; see `splat::densify`).
 
+mod object_step;
+
+use std::collections::BTreeSet;
 use std::time::Instant;
 
 use glam::Vec3;
@@ -29,6 +32,7 @@ use crate::splat::render::{RenderError, Renderer};
 use crate::splat::schedule::{scene_extent, sh_degree_at};
 use crate::splat::train::config::{ConfigError, TrainConfig};
 use crate::splat::train::densify_stats::DensifyAccumulators;
+use crate::splat::train::object_loss::{MAX_OBJECTS_PER_LEVEL, ObjectTargets, SkippedPair};
 use crate::splat::train::views::{Views, ViewsError};
 use crate::splat::{ObjectFilter, RenderSettings};
 
@@ -36,6 +40,8 @@ use crate::splat::{ObjectFilter, RenderSettings};
 const SYNC_EVERY: u32 = 25;
 /// Capacity headroom when (re)allocating Gaussian buffers, so densification rarely reallocates.
 const CAPACITY_GROWTH: f64 = 1.5;
+/// Loss slots per step: the full render, then up to `m` object renders at each of three levels.
+const LOSS_SLOTS: u32 = 1 + 3 * MAX_OBJECTS_PER_LEVEL;
 
 #[derive(Debug, thiserror::Error)]
 pub enum TrainError {
@@ -55,6 +61,8 @@ pub enum TrainError {
     Gpu(#[from] GpuError),
     #[error(transparent)]
     Checkpoint(#[from] CheckpointError),
+    #[error(transparent)]
+    ObjectTargets(#[from] object_step::ObjectTargetsError),
     #[error("checkpoint does not match this scene or config: {0}")]
     CheckpointMismatch(String),
     #[error("the initial model is empty: the scene has no points and random_init_count is 0")]
@@ -68,6 +76,8 @@ pub struct TrainProgress {
     pub total_steps: u32,
     /// Loss of the latest step (0.8 L1 + 0.2 D-SSIM).
     pub loss: f32,
+    /// Sum of the latest step's weighted object losses (0 without the object loss).
+    pub object_loss: f32,
     pub gaussians: usize,
     pub elapsed_secs: f64,
     pub steps_per_sec: f64,
@@ -91,6 +101,9 @@ pub struct TrainerMeta {
     pub intersection_capacity: u32,
     pub config: TrainConfig,
     pub train_views: usize,
+    /// (object, view) pairs the partial-mask filter has left out.
+    #[serde(default)]
+    pub skipped_pairs: Vec<SkippedPair>,
 }
 
 pub struct Trainer {
@@ -112,6 +125,8 @@ pub struct Trainer {
     rng: ChaCha8Rng,
     view_queue: Vec<usize>,
     prune_guard: Option<Box<dyn PruneGuard + Send>>,
+    object_targets: Option<ObjectTargets>,
+    skipped_pairs: BTreeSet<SkippedPair>,
     started: Instant,
     steps_at_start: u32,
 }
@@ -192,7 +207,7 @@ impl Trainer {
             loss,
             adam: Adam::new(ctx, AdamSettings::default())?,
             grad_image: storage_buffer(ctx, "grad image", pixels * 16),
-            loss_values: storage_buffer(ctx, "loss values", 16),
+            loss_values: storage_buffer(ctx, "loss values", LOSS_SLOTS as u64 * 4),
             ctx: ctx.clone(),
             config,
             views,
@@ -201,6 +216,8 @@ impl Trainer {
             rng: ChaCha8Rng::seed_from_u64(0),
             view_queue: Vec::new(),
             prune_guard: None,
+            object_targets: None,
+            skipped_pairs: BTreeSet::new(),
             started: Instant::now(),
             steps_at_start: 0,
         };
@@ -273,6 +290,7 @@ impl Trainer {
                 label: Some("train step"),
             });
         self.grads.encode_zero(&mut encoder);
+        encoder.clear_buffer(&self.loss_values, 0, None);
         let view = &self.views.train[view_index];
         let camera = view.camera;
         let output =
@@ -312,12 +330,16 @@ impl Trainer {
             count,
             [camera.width, camera.height],
         );
-        self.encode_adam(&mut encoder, step, count)?;
-        ctx.queue.submit([encoder.finish()]);
         drop(output);
+        self.encode_object_losses(&mut encoder, view_index, sh_degree)?;
+        self.encode_adam(&mut encoder, step, count)?;
+        self.ctx.queue.submit([encoder.finish()]);
         self.step = step;
         if self.config.densifies_at(step) || self.config.resets_opacity_at(step) {
             self.densify_and_reset(step)?;
+        }
+        if self.partial_filter_due(step) {
+            self.filter_partial_masks(sh_degree)?;
         }
         Ok(step)
     }
@@ -452,6 +474,7 @@ impl Trainer {
             step: self.step,
             total_steps: self.config.steps,
             loss: losses.first().copied().unwrap_or(f32::NAN),
+            object_loss: losses.iter().skip(1).sum(),
             gaussians: self.gaussians.count(),
             elapsed_secs: elapsed,
             steps_per_sec: (self.step - self.steps_at_start) as f64 / elapsed.max(1e-9),
@@ -681,6 +704,7 @@ impl Trainer {
             intersection_capacity: self.renderer.intersection_capacity(),
             config: self.config.clone(),
             train_views: self.views.train.len(),
+            skipped_pairs: self.skipped_pairs.iter().copied().collect(),
         });
         put_model(&mut checkpoint, "model", &model);
         put_model(&mut checkpoint, "adam.m", &first);
@@ -721,6 +745,7 @@ impl Trainer {
         trainer.step = meta.step;
         trainer.rng = meta.rng.clone();
         trainer.view_queue = meta.view_queue.clone();
+        trainer.skipped_pairs = meta.skipped_pairs.iter().copied().collect();
         trainer
             .renderer
             .set_intersection_capacity(meta.intersection_capacity);
