@@ -47,6 +47,7 @@ pub struct Config {
     pub scene: SceneConfig,
     pub jobs: JobsConfig,
     pub workers: WorkersConfig,
+    pub models: ModelsConfig,
     pub log: LogConfig,
 }
 
@@ -61,6 +62,7 @@ impl Default for Config {
             scene: SceneConfig::default(),
             jobs: JobsConfig::default(),
             workers: WorkersConfig::default(),
+            models: ModelsConfig::default(),
             log: LogConfig::default(),
         }
     }
@@ -155,6 +157,23 @@ impl Default for WorkersConfig {
             cpu_slots: 0,
         }
     }
+}
+
+/// ONNX models (docs/models.md). Without `dir` the service runs without learned models.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ModelsConfig {
+    /// Model directory with `manifest.json`; unset = no models (classical segmenter, no text
+    /// queries).
+    pub dir: Option<PathBuf>,
+    /// The ONNX Runtime shared library; unset = `ORT_DYLIB_PATH`, then the `onnxruntime` wheel.
+    pub ort_library: Option<PathBuf>,
+    /// Threads inside one operator; 0 = ONNX Runtime's default.
+    pub intra_threads: usize,
+    /// Threads across operators; 0 = ONNX Runtime's default.
+    pub inter_threads: usize,
+    /// Use the CUDA execution provider when the library and a GPU offer it.
+    pub cuda: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -301,6 +320,35 @@ impl Config {
         if self.workers.slots_per_adapter == 0 {
             return invalid("workers.slots_per_adapter", "must be >= 1");
         }
+        if let Some(dir) = &self.models.dir
+            && dir.as_os_str().is_empty()
+        {
+            return invalid(
+                "models.dir",
+                "must not be empty (leave it unset for no models)",
+            );
+        }
+        if let Some(library) = &self.models.ort_library
+            && library.as_os_str().is_empty()
+        {
+            return invalid(
+                "models.ort_library",
+                "must not be empty (leave it unset to search)",
+            );
+        }
+        const MAX_THREADS: usize = 1024;
+        if self.models.intra_threads > MAX_THREADS {
+            return invalid(
+                "models.intra_threads",
+                "must be <= 1024 (0 = ONNX Runtime's default)",
+            );
+        }
+        if self.models.inter_threads > MAX_THREADS {
+            return invalid(
+                "models.inter_threads",
+                "must be <= 1024 (0 = ONNX Runtime's default)",
+            );
+        }
         if let Err(error) = tracing_subscriber::EnvFilter::try_new(&self.log.level) {
             return invalid("log.level", &format!("not a tracing filter: {error}"));
         }
@@ -424,6 +472,36 @@ mod tests {
         .unwrap_err();
         assert!(
             error.to_string().starts_with("jobs.heartbeat_secs:"),
+            "{error}"
+        );
+    }
+
+    #[test]
+    fn models_section_from_environment() {
+        let config = Config::load(
+            None,
+            env(&[
+                ("SEGSPLAT_MODELS__DIR", "/srv/models"),
+                ("SEGSPLAT_MODELS__INTRA_THREADS", "4"),
+                ("SEGSPLAT_MODELS__CUDA", "true"),
+            ]),
+            &ConfigOverrides::default(),
+        )
+        .unwrap();
+        assert_eq!(config.models.dir, Some(PathBuf::from("/srv/models")));
+        assert_eq!(config.models.intra_threads, 4);
+        assert!(config.models.cuda);
+        assert_eq!(config.models.ort_library, None);
+        assert!(Config::default().models.dir.is_none());
+
+        let error = Config::load(
+            None,
+            env(&[("SEGSPLAT_MODELS__INTER_THREADS", "5000")]),
+            &ConfigOverrides::default(),
+        )
+        .unwrap_err();
+        assert!(
+            error.to_string().starts_with("models.inter_threads:"),
             "{error}"
         );
     }

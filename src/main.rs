@@ -47,8 +47,8 @@ enum Command {
     Eval(FutureArgs),
     /// Benchmark training speed and held-out quality on a dataset (JSON).
     Bench(cli::bench::BenchArgs),
-    /// Manage ONNX models.
-    Models(FutureArgs),
+    /// Check ONNX model directories.
+    Models(cli::models::ModelsArgs),
 }
 
 #[derive(Args)]
@@ -121,7 +121,16 @@ fn main() -> ExitCode {
         Command::Export(_) => return not_available("export", "the Segment-then-Splat pipeline"),
         Command::Eval(_) => return not_available("eval", "the evaluation issue"),
         Command::Bench(args) => init_cli_logging().and_then(|()| cli::bench::run(args)),
-        Command::Models(_) => return not_available("models", "the model store"),
+        Command::Models(args) => {
+            return match init_cli_logging().and_then(|()| cli::models::run(args, cli.config)) {
+                Ok(true) => ExitCode::SUCCESS,
+                Ok(false) => ExitCode::FAILURE,
+                Err(error) => {
+                    eprintln!("segsplat models: {error:#}");
+                    ExitCode::FAILURE
+                }
+            };
+        }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -92,9 +92,10 @@ pub async fn readyz(State(state): State<AppState>) -> impl IntoResponse {
             },
         }
     };
+    let (models_ok, models_detail) = state.models.readiness();
     let models = ReadinessCheck {
-        ok: true,
-        detail: "none configured".to_string(),
+        ok: models_ok,
+        detail: models_detail,
     };
     let mut reasons = Vec::new();
     for (name, check) in [

@@ -173,6 +173,13 @@ impl ServiceBuilder {
             })
         });
 
+        let models_config = config.models.clone();
+        let models =
+            tokio::task::spawn_blocking(move || crate::models::ModelsStatus::load(&models_config))
+                .await
+                .unwrap_or_else(|error| {
+                    crate::models::ModelsStatus::Failed(format!("model loading panicked: {error}"))
+                });
         let state = AppState {
             config: config.clone(),
             database: database.clone(),
@@ -181,6 +188,7 @@ impl ServiceBuilder {
             bus,
             job_queued,
             workers: Arc::new(readiness),
+            models: Arc::new(models),
             metrics,
             shutdown: shutdown.clone(),
         };

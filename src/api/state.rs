@@ -22,6 +22,8 @@ pub struct AppState {
     /// Wakes this process's idle workers when a job is queued.
     pub job_queued: Arc<Notify>,
     pub workers: Arc<WorkerReadiness>,
+    /// The ONNX models loaded at start (or why not); `/readyz` reports it.
+    pub models: Arc<crate::models::ModelsStatus>,
     pub metrics: PrometheusHandle,
     /// Cancelled when the service stops; long-lived responses (SSE) end then.
     pub shutdown: CancellationToken,

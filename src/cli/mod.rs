@@ -1,6 +1,7 @@
 //! Local commands over the library: training, rendering and benchmarking a dataset directory.
 
 pub mod bench;
+pub mod models;
 pub mod render;
 pub mod train;
 

@@ -1,0 +1,11 @@
+//! Segment-Anything-family models (SAM 1, MobileSAM, SAM 2.1): encoder preprocessing and the
+//! prompt driver, which also implements the mask generator's `PointPromptSegmenter`.
+
+pub mod predictor;
+pub mod preprocess;
+
+pub use predictor::{
+    DEFAULT_PROMPT_CHUNK, EncodedImage, LOW_RES_SIDE, PointLabel, SamAnswer, SamModel,
+    SamPredictor, SamPrompt,
+};
+pub use preprocess::{EncoderInput, longest_side_size, sam_encoder_input};

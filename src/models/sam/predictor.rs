@@ -1,0 +1,437 @@
+//! SAM-family prompting: the encoder runs once per image, the decoder answers prompts in bounded
+//! chunks, following docs/models.md (coordinates in the encoder frame, padding point (0, 0) with
+//! label -1 unless a box is given, `orig_im_size` = [height, width], every decoder input named
+//! like an encoder output fed from the encoder — how SAM 2.1's `high_res_feats_*` flow).
+
+use std::sync::Arc;
+
+use image::RgbImage;
+
+use super::preprocess::{EncoderInput, sam_encoder_input};
+use crate::models::error::ModelError;
+use crate::models::manifest::{Preprocess, Role, SamDecoderPreprocess, SamEncoderPreprocess};
+use crate::models::session::{InputTensor, ModelSession, OutputTensor};
+use crate::models::store::ModelStore;
+use crate::segment::prompt::{PointMasks, PointPromptSegmenter, PromptError};
+
+/// Side of the decoder's low-resolution mask grid (`mask_input`, `low_res_masks`).
+pub const LOW_RES_SIDE: usize = 256;
+/// Prompts per decoder run unless configured: 16 full-resolution 4-channel answers at
+/// 1000 x 660 are ~170 MB.
+pub const DEFAULT_PROMPT_CHUNK: usize = 16;
+
+/// SAM's point labels, as the decoder reads them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PointLabel {
+    Background,
+    Foreground,
+}
+
+impl PointLabel {
+    fn value(self) -> f32 {
+        match self {
+            PointLabel::Background => 0.0,
+            PointLabel::Foreground => 1.0,
+        }
+    }
+}
+
+/// One prompt, in pixels of the encoded image.
+#[derive(Debug, Clone, Default)]
+pub struct SamPrompt {
+    pub points: Vec<([f32; 2], PointLabel)>,
+    /// `[x0, y0, x1, y1]`.
+    pub bounding_box: Option<[f32; 4]>,
+    /// Low-resolution logits (`256 x 256`, e.g. a previous answer's `low_res_logits`).
+    pub mask_input: Option<Vec<f32>>,
+}
+
+/// The decoder's four answers to one prompt (channel 0 single-mask, 1/2/3 small/middle/large).
+#[derive(Debug, Clone)]
+pub struct SamAnswer {
+    /// Full-resolution logits, `height x width` row-major, per channel.
+    pub logits: Vec<Vec<f32>>,
+    pub predicted_iou: Vec<f32>,
+    /// `256 x 256` logits per channel, to feed back as `mask_input`.
+    pub low_res_logits: Vec<Vec<f32>>,
+}
+
+/// An image after the encoder: its size and every encoder output by name.
+#[derive(Debug, Clone)]
+pub struct EncodedImage {
+    pub width: u32,
+    pub height: u32,
+    coordinate_scale: [f32; 2],
+    features: Vec<(String, OutputTensor)>,
+}
+
+impl EncodedImage {
+    /// Maps a point in image pixels to the encoder frame.
+    pub fn to_encoder_frame(&self, point: [f32; 2]) -> [f32; 2] {
+        [
+            point[0] * self.coordinate_scale[0],
+            point[1] * self.coordinate_scale[1],
+        ]
+    }
+}
+
+/// A SAM-family encoder/decoder pair from a model store; cheap to clone and share.
+#[derive(Debug, Clone)]
+pub struct SamModel {
+    encoder: Arc<ModelSession>,
+    decoder: Arc<ModelSession>,
+    encoder_preprocess: SamEncoderPreprocess,
+    decoder_preprocess: SamDecoderPreprocess,
+}
+
+impl SamModel {
+    pub fn new(store: &ModelStore) -> Result<SamModel, ModelError> {
+        let encoder = store.session(Role::SamEncoder)?;
+        let decoder = store.session(Role::SamDecoder)?;
+        let (
+            Preprocess::SamEncoder(encoder_preprocess),
+            Preprocess::SamDecoder(decoder_preprocess),
+        ) = (
+            encoder.entry().preprocess.clone(),
+            decoder.entry().preprocess.clone(),
+        )
+        else {
+            return Err(ModelError::Input(
+                "sam_encoder/sam_decoder entries lack their preprocessing".to_string(),
+            ));
+        };
+        Ok(SamModel {
+            encoder,
+            decoder,
+            encoder_preprocess,
+            decoder_preprocess,
+        })
+    }
+
+    pub fn encoder_name(&self) -> &str {
+        &self.encoder.entry().name
+    }
+
+    pub fn decoder_name(&self) -> &str {
+        &self.decoder.entry().name
+    }
+
+    /// Decoder channels of small, middle and large.
+    pub fn multimask_channels(&self) -> [usize; 3] {
+        self.decoder_preprocess.multimask_channels
+    }
+
+    /// Runs the encoder on `image` (RGB8, any size).
+    pub fn encode(&self, image: &RgbImage) -> Result<EncodedImage, ModelError> {
+        let (width, height) = image.dimensions();
+        if width == 0 || height == 0 {
+            return Err(ModelError::Input("the image is empty".to_string()));
+        }
+        let EncoderInput {
+            pixels,
+            coordinate_scale,
+        } = sam_encoder_input(image, &self.encoder_preprocess);
+        let size = self.encoder_preprocess.image_size as usize;
+        let output_names: Vec<&str> = self
+            .encoder
+            .entry()
+            .outputs
+            .iter()
+            .map(|spec| spec.name.as_str())
+            .collect();
+        let outputs = self.encoder.run(
+            &[(
+                "image",
+                InputTensor::F32 {
+                    shape: &[1, 3, size, size],
+                    data: &pixels,
+                },
+            )],
+            &output_names,
+        )?;
+        Ok(EncodedImage {
+            width,
+            height,
+            coordinate_scale,
+            features: output_names
+                .iter()
+                .map(|name| (*name).to_string())
+                .zip(outputs)
+                .collect(),
+        })
+    }
+
+    /// Answers `prompts` against `image`, `chunk` prompts per decoder run (prompts with the same
+    /// number of points share a run; different counts run separately).
+    pub fn predict(
+        &self,
+        image: &EncodedImage,
+        prompts: &[SamPrompt],
+        chunk: usize,
+    ) -> Result<Vec<SamAnswer>, ModelError> {
+        let chunk = chunk.max(1);
+        let mut answers = Vec::with_capacity(prompts.len());
+        let mut start = 0;
+        while start < prompts.len() {
+            let tokens = prompt_tokens(image, &prompts[start])?;
+            let mut batch = vec![tokens];
+            let mut end = start + 1;
+            while end < prompts.len() && batch.len() < chunk {
+                let next = prompt_tokens(image, &prompts[end])?;
+                if next.len() != batch[0].len() {
+                    break;
+                }
+                batch.push(next);
+                end += 1;
+            }
+            answers.extend(self.decode(image, &batch, &prompts[start..end])?);
+            start = end;
+        }
+        Ok(answers)
+    }
+
+    fn decode(
+        &self,
+        image: &EncodedImage,
+        tokens: &[Vec<([f32; 2], f32)>],
+        prompts: &[SamPrompt],
+    ) -> Result<Vec<SamAnswer>, ModelError> {
+        let batch = tokens.len();
+        let points = tokens[0].len();
+        let mut coords = Vec::with_capacity(batch * points * 2);
+        let mut labels = Vec::with_capacity(batch * points);
+        for prompt in tokens {
+            for (point, label) in prompt {
+                coords.extend_from_slice(point);
+                labels.push(*label);
+            }
+        }
+        let low_res = LOW_RES_SIDE * LOW_RES_SIDE;
+        let mut mask_input = vec![0f32; batch * low_res];
+        let mut has_mask_input = vec![0f32; batch];
+        for (index, prompt) in prompts.iter().enumerate() {
+            if let Some(mask) = &prompt.mask_input {
+                if mask.len() != low_res {
+                    return Err(ModelError::Input(format!(
+                        "mask_input has {} values, expected {LOW_RES_SIDE} x {LOW_RES_SIDE}",
+                        mask.len()
+                    )));
+                }
+                mask_input[index * low_res..(index + 1) * low_res].copy_from_slice(mask);
+                has_mask_input[index] = 1.0;
+            }
+        }
+        let original_size = [image.height as f32, image.width as f32];
+        let coords_shape = [batch, points, 2];
+        let labels_shape = [batch, points];
+        let mask_shape = [batch, 1, LOW_RES_SIDE, LOW_RES_SIDE];
+        let has_mask_shape = [batch];
+        let size_shape = [2];
+        let mut inputs: Vec<(&str, InputTensor<'_>)> = Vec::new();
+        for spec in &self.decoder.entry().inputs {
+            let name = spec.name.as_str();
+            let tensor = match name {
+                "point_coords" => InputTensor::F32 {
+                    shape: &coords_shape,
+                    data: &coords,
+                },
+                "point_labels" => InputTensor::F32 {
+                    shape: &labels_shape,
+                    data: &labels,
+                },
+                "mask_input" => InputTensor::F32 {
+                    shape: &mask_shape,
+                    data: &mask_input,
+                },
+                "has_mask_input" => InputTensor::F32 {
+                    shape: &has_mask_shape,
+                    data: &has_mask_input,
+                },
+                "orig_im_size" => InputTensor::F32 {
+                    shape: &size_shape,
+                    data: &original_size,
+                },
+                other => {
+                    let Some((_, feature)) = image.features.iter().find(|(name, _)| name == other)
+                    else {
+                        return Err(ModelError::Input(format!(
+                            "decoder input {other} is neither a prompt input nor an output of {}",
+                            self.encoder_name()
+                        )));
+                    };
+                    InputTensor::F32 {
+                        shape: &feature.shape,
+                        data: &feature.data,
+                    }
+                }
+            };
+            inputs.push((name, tensor));
+        }
+        let outputs = self
+            .decoder
+            .run(&inputs, &["masks", "iou_predictions", "low_res_masks"])?;
+        split_answers(self.decoder_name(), image, batch, outputs)
+    }
+}
+
+/// The decoder's points for one prompt in the encoder frame: the points, then the box corners
+/// (labels 2, 3), or the padding point (0, 0) with label -1 when there is no box.
+fn prompt_tokens(
+    image: &EncodedImage,
+    prompt: &SamPrompt,
+) -> Result<Vec<([f32; 2], f32)>, ModelError> {
+    if prompt.points.is_empty() && prompt.bounding_box.is_none() {
+        return Err(ModelError::Input(
+            "a prompt needs at least one point or a box".to_string(),
+        ));
+    }
+    let mut tokens: Vec<([f32; 2], f32)> = prompt
+        .points
+        .iter()
+        .map(|(point, label)| (image.to_encoder_frame(*point), label.value()))
+        .collect();
+    match prompt.bounding_box {
+        Some([x0, y0, x1, y1]) => {
+            tokens.push((image.to_encoder_frame([x0, y0]), 2.0));
+            tokens.push((image.to_encoder_frame([x1, y1]), 3.0));
+        }
+        None => tokens.push(([0.0, 0.0], -1.0)),
+    }
+    if tokens
+        .iter()
+        .any(|(point, _)| !point[0].is_finite() || !point[1].is_finite())
+    {
+        return Err(ModelError::Input(
+            "prompt coordinates must be finite".to_string(),
+        ));
+    }
+    Ok(tokens)
+}
+
+fn split_answers(
+    model: &str,
+    image: &EncodedImage,
+    batch: usize,
+    outputs: Vec<OutputTensor>,
+) -> Result<Vec<SamAnswer>, ModelError> {
+    let [masks, iou, low_res] =
+        <[OutputTensor; 3]>::try_from(outputs).map_err(|_| ModelError::Output {
+            model: model.to_string(),
+            reason: "expected masks, iou_predictions, low_res_masks".to_string(),
+        })?;
+    let pixels = image.width as usize * image.height as usize;
+    let low_res_pixels = LOW_RES_SIDE * LOW_RES_SIDE;
+    let expected_masks = [batch, 4, image.height as usize, image.width as usize];
+    if masks.shape != expected_masks
+        || iou.shape != [batch, 4]
+        || low_res.shape != [batch, 4, LOW_RES_SIDE, LOW_RES_SIDE]
+    {
+        return Err(ModelError::Output {
+            model: model.to_string(),
+            reason: format!(
+                "shapes masks {:?}, iou_predictions {:?}, low_res_masks {:?}; expected masks {expected_masks:?}",
+                masks.shape, iou.shape, low_res.shape
+            ),
+        });
+    }
+    Ok((0..batch)
+        .map(|index| SamAnswer {
+            logits: (0..4)
+                .map(|channel| masks.data[(index * 4 + channel) * pixels..][..pixels].to_vec())
+                .collect(),
+            predicted_iou: iou.data[index * 4..index * 4 + 4].to_vec(),
+            low_res_logits: (0..4)
+                .map(|channel| {
+                    low_res.data[(index * 4 + channel) * low_res_pixels..][..low_res_pixels]
+                        .to_vec()
+                })
+                .collect(),
+        })
+        .collect())
+}
+
+/// [`SamModel`] plus the current image: the [`PointPromptSegmenter`] the mask generator drives.
+#[derive(Debug, Clone)]
+pub struct SamPredictor {
+    model: SamModel,
+    image: Option<Arc<EncodedImage>>,
+    chunk: usize,
+}
+
+impl SamPredictor {
+    pub fn new(model: SamModel) -> SamPredictor {
+        SamPredictor {
+            model,
+            image: None,
+            chunk: DEFAULT_PROMPT_CHUNK,
+        }
+    }
+
+    /// Prompts per decoder run (at least 1).
+    pub fn with_chunk(mut self, chunk: usize) -> SamPredictor {
+        self.chunk = chunk.max(1);
+        self
+    }
+
+    pub fn model(&self) -> &SamModel {
+        &self.model
+    }
+
+    /// The encoding of the image last given to `set_image`.
+    pub fn encoded_image(&self) -> Option<&Arc<EncodedImage>> {
+        self.image.as_ref()
+    }
+
+    /// Arbitrary prompts (points with labels, box, previous mask) against the current image.
+    pub fn predict(&self, prompts: &[SamPrompt]) -> Result<Vec<SamAnswer>, ModelError> {
+        let image = self.image.as_ref().ok_or_else(|| {
+            ModelError::Input("no image has been set before prompting".to_string())
+        })?;
+        self.model.predict(image, prompts, self.chunk)
+    }
+}
+
+impl PointPromptSegmenter for SamPredictor {
+    fn set_image(&mut self, image: &RgbImage) -> Result<(), PromptError> {
+        self.image = None;
+        let encoded = self
+            .model
+            .encode(image)
+            .map_err(|error| PromptError::Model(Box::new(error)))?;
+        self.image = Some(Arc::new(encoded));
+        Ok(())
+    }
+
+    fn predict_points(&mut self, points: &[[f32; 2]]) -> Result<Vec<PointMasks>, PromptError> {
+        let Some(image) = &self.image else {
+            return Err(PromptError::NoImage);
+        };
+        let prompts: Vec<SamPrompt> = points
+            .iter()
+            .map(|point| SamPrompt {
+                points: vec![(*point, PointLabel::Foreground)],
+                ..SamPrompt::default()
+            })
+            .collect();
+        let answers = self
+            .model
+            .predict(image, &prompts, self.chunk)
+            .map_err(|error| PromptError::Model(Box::new(error)))?;
+        let [small, middle, large] = self.model.multimask_channels();
+        Ok(answers
+            .into_iter()
+            .map(|mut answer| PointMasks {
+                predicted_iou: [
+                    answer.predicted_iou[small],
+                    answer.predicted_iou[middle],
+                    answer.predicted_iou[large],
+                ],
+                logits: [
+                    std::mem::take(&mut answer.logits[small]),
+                    std::mem::take(&mut answer.logits[middle]),
+                    std::mem::take(&mut answer.logits[large]),
+                ],
+            })
+            .collect())
+    }
+}
