@@ -70,3 +70,42 @@ fn sessions_are_shared_across_threads() {
         assert!((norm - 1.0).abs() < 1e-5);
     }
 }
+
+#[test]
+fn readiness_reports_a_missing_library_when_models_are_configured() {
+    use segsplat::config::ModelsConfig;
+    use segsplat::models::ModelsStatus;
+    let status = ModelsStatus::load(&ModelsConfig {
+        dir: Some(models_support::tiny_models_dir()),
+        ort_library: Some("/nonexistent/libonnxruntime.so".into()),
+        ..ModelsConfig::default()
+    });
+    let (ok, detail) = status.readiness();
+    assert!(!ok);
+    assert!(
+        detail.contains("/nonexistent/libonnxruntime.so"),
+        "{detail}"
+    );
+    assert!(status.store().is_err());
+
+    let (ok, detail) = ModelsStatus::load(&ModelsConfig::default()).readiness();
+    assert!(ok);
+    assert_eq!(detail, "none configured");
+}
+
+#[test]
+fn readiness_lists_the_loaded_models() {
+    if models_support::runtime().is_none() {
+        return;
+    }
+    let status = segsplat::models::ModelsStatus::load(&segsplat::config::ModelsConfig {
+        dir: Some(models_support::tiny_models_dir()),
+        ..Default::default()
+    });
+    let (ok, detail) = status.readiness();
+    assert!(ok, "{detail}");
+    assert!(
+        detail.contains("clip_text tiny-clip-text (CPUExecutionProvider)"),
+        "{detail}"
+    );
+}

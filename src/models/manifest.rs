@@ -137,12 +137,18 @@ pub struct ClipImagePreprocess {
     pub pixel_scale: f32,
     pub mean: [f32; 3],
     pub std: [f32; 3],
+    /// Whether the graph already L2-normalises `image_embeds`; segsplat normalises either way.
+    #[serde(default)]
+    pub output_normalized: bool,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ClipTextPreprocess {
     pub context_length: usize,
+    /// Whether the graph already L2-normalises `text_embeds`; segsplat normalises either way.
+    #[serde(default)]
+    pub output_normalized: bool,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -5,6 +5,7 @@
 pub mod clip;
 pub mod error;
 pub mod manifest;
+pub mod reference_check;
 pub mod resample;
 pub mod runtime;
 pub mod sam;

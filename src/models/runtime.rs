@@ -52,6 +52,11 @@ struct LoadedLibrary {
 impl OrtRuntime {
     /// Finds and loads the library (once per process) and keeps `options` for new sessions.
     pub fn load(options: RuntimeOptions) -> Result<Arc<OrtRuntime>, ModelError> {
+        // A configured path that does not exist is an error even when another load already
+        // succeeded in this process: the configuration is wrong either way.
+        if let Some(configured) = &options.library {
+            existing(configured, "models.ort_library")?;
+        }
         let mut loaded = LOADED
             .lock()
             .unwrap_or_else(|poisoned| poisoned.into_inner());

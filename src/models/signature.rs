@@ -305,7 +305,10 @@ mod tests {
                 dtype: Dtype::Float32,
                 shape: vec![-1, 512],
             }],
-            preprocess: Preprocess::ClipText(ClipTextPreprocess { context_length: 77 }),
+            preprocess: Preprocess::ClipText(ClipTextPreprocess {
+                context_length: 77,
+                output_normalized: false,
+            }),
         }
     }
 

@@ -66,6 +66,14 @@ pub struct EncodedImage {
 }
 
 impl EncodedImage {
+    /// The encoder output `name` (e.g. `image_embeddings`).
+    pub fn feature(&self, name: &str) -> Option<&OutputTensor> {
+        self.features
+            .iter()
+            .find(|(feature, _)| feature == name)
+            .map(|(_, tensor)| tensor)
+    }
+
     /// Maps a point in image pixels to the encoder frame.
     pub fn to_encoder_frame(&self, point: [f32; 2]) -> [f32; 2] {
         [
