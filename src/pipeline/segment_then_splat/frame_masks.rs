@@ -99,6 +99,11 @@ impl ViewMasks {
         &self.ids[level.index()]
     }
 
+    /// A copy of the ids at every level (small, middle, large).
+    pub fn level_ids(&self) -> [Vec<u32>; 3] {
+        self.ids.clone()
+    }
+
     /// Mask pixels per full-resolution frame pixel.
     pub fn frame_scale(&self) -> f32 {
         self.scale

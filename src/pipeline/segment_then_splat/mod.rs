@@ -3,3 +3,5 @@
 
 pub mod frame_masks;
 pub mod id_voting;
+pub mod objects;
+pub mod training;

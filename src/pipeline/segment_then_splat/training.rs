@@ -1,0 +1,129 @@
+//! Stages 2 and 3 put together: object ids on the initial Gaussians, then a trainer that
+//! optimises with the object loss, keeps every object alive (persistence floor) and filters
+//! partial masks late in training.
+
+use super::frame_masks::{FrameMasks, FrameMasksError};
+use super::id_voting::{Observations, VotingRule, vote_object_ids};
+use crate::gpu::GpuContext;
+use crate::scene::Scene;
+use crate::splat::GaussianModel;
+use crate::splat::densify::ObjectFloor;
+use crate::splat::train::trainer::initial_model;
+use crate::splat::train::views::is_held_out;
+use crate::splat::train::{ObjectLossConfig, ObjectTargets, TrainConfig, TrainError, Trainer};
+
+/// Gaussians each object keeps at least (small, middle, large), or all it has when fewer: the
+/// released code's intended floors.
+pub const DEFAULT_OBJECT_FLOORS: [usize; 3] = [1000, 1000, 10];
+
+#[derive(Debug, thiserror::Error)]
+pub enum SegmentedTrainingError {
+    #[error(transparent)]
+    Masks(#[from] FrameMasksError),
+    #[error(transparent)]
+    Train(#[from] TrainError),
+    #[error(
+        "training view {train_view} is frame {trainer_frame}, but its masks are frame {mask_frame}"
+    )]
+    ViewOrder {
+        train_view: usize,
+        trainer_frame: usize,
+        mask_frame: usize,
+    },
+}
+
+/// How the segmented training is set up beyond the plain training config.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SegmentedTrainingOptions {
+    pub voting: VotingRule,
+    pub object_floors: [usize; 3],
+}
+
+impl Default for SegmentedTrainingOptions {
+    fn default() -> Self {
+        Self {
+            voting: VotingRule::default(),
+            object_floors: DEFAULT_OBJECT_FLOORS,
+        }
+    }
+}
+
+/// The frames the trainer trains on, in its order.
+pub fn training_frames(scene: &Scene, config: &TrainConfig) -> Vec<usize> {
+    (0..scene.frames.len())
+        .filter(|&index| !is_held_out(scene, index, config.eval_split_every))
+        .collect()
+}
+
+/// The initial model with object ids voted from the training views' masks. Sparse points vote
+/// with their tracks where they have them (the views that really saw them).
+pub fn initial_segmented_model(
+    scene: &Scene,
+    masks: &FrameMasks,
+    config: &TrainConfig,
+    voting: VotingRule,
+) -> Result<GaussianModel, SegmentedTrainingError> {
+    let mut model = initial_model(scene, config)?;
+    let view_from_frame = |frame: u32| {
+        masks
+            .views
+            .iter()
+            .position(|view| view.frame_index == frame as usize)
+    };
+    // Tracks in mask-view indices; only meaningful when the model is the sparse points in order.
+    let tracks: Vec<Vec<(usize, [f32; 2])>> = match &scene.points {
+        Some(points) if points.positions.len() == model.len() => points
+            .tracks
+            .iter()
+            .map(|track| {
+                track
+                    .iter()
+                    .filter_map(|seen| Some((view_from_frame(seen.frame_index)?, seen.pixel)))
+                    .collect()
+            })
+            .collect(),
+        _ => vec![Vec::new(); model.len()],
+    };
+    let observations: Vec<Observations> = tracks
+        .iter()
+        .map(|track| (!track.is_empty()).then_some(track.as_slice()))
+        .collect();
+    let positions: Vec<glam::Vec3> = model.means.iter().map(|m| glam::Vec3::from(*m)).collect();
+    model.object_ids = vote_object_ids(&positions, &observations, masks, voting);
+    Ok(model)
+}
+
+/// A trainer for Segment then Splat on `scene` with the user's masks: ids voted onto the initial
+/// Gaussians, the object loss on (its default config unless `config.object_loss` is set), the
+/// persistence floor guarding pruning.
+pub fn segmented_trainer_from_user_masks(
+    ctx: &GpuContext,
+    scene: &Scene,
+    mut config: TrainConfig,
+    options: &SegmentedTrainingOptions,
+) -> Result<Trainer, SegmentedTrainingError> {
+    config
+        .object_loss
+        .get_or_insert_with(ObjectLossConfig::default);
+    let frames = training_frames(scene, &config);
+    let masks = FrameMasks::from_user_masks(scene, &frames, config.max_resolution)?;
+    let model = initial_segmented_model(scene, &masks, &config, options.voting)?;
+    let mut trainer = Trainer::new(ctx, scene, config, Some(model))?;
+    for (train_view, (view, view_masks)) in
+        trainer.views().train.iter().zip(&masks.views).enumerate()
+    {
+        if view.frame_index != view_masks.frame_index {
+            return Err(SegmentedTrainingError::ViewOrder {
+                train_view,
+                trainer_frame: view.frame_index,
+                mask_frame: view_masks.frame_index,
+            });
+        }
+    }
+    trainer.set_prune_guard(Box::new(ObjectFloor {
+        floors: options.object_floors,
+    }));
+    let ids = masks.views.iter().map(|view| view.level_ids()).collect();
+    trainer.set_object_targets(ObjectTargets::upload(ctx, ids))?;
+    Ok(trainer)
+}
