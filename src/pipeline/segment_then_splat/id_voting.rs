@@ -12,7 +12,7 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::frame_masks::FrameMasks;
+use super::view_masks::ViewMaskSet;
 use crate::scene::Level;
 use crate::splat::OBJECT_NONE;
 
@@ -42,7 +42,7 @@ pub type Observations<'a> = Option<&'a [(usize, [f32; 2])]>;
 pub fn vote_object_ids(
     positions: &[Vec3],
     observations: &[Observations<'_>],
-    masks: &FrameMasks,
+    masks: &ViewMaskSet,
     rule: VotingRule,
 ) -> Vec<[u32; 3]> {
     positions
@@ -60,7 +60,7 @@ pub fn vote_object_ids(
 fn observed_positions(
     position: Vec3,
     observations: Option<&[(usize, [f32; 2])]>,
-    masks: &FrameMasks,
+    masks: &ViewMaskSet,
 ) -> Vec<(usize, [f32; 2])> {
     match observations {
         Some(seen) if !seen.is_empty() => seen
@@ -81,7 +81,7 @@ fn observed_positions(
 
 fn majority(
     positions: &[(usize, [f32; 2])],
-    masks: &FrameMasks,
+    masks: &ViewMaskSet,
     level: Level,
     rule: VotingRule,
 ) -> u32 {
@@ -112,7 +112,7 @@ fn majority(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pipeline::segment_then_splat::frame_masks::tests::synthetic_scene;
+    use crate::pipeline::segment_then_splat::view_masks::tests::synthetic_scene;
     use crate::scene::synthetic::synthetic_objects;
 
     /// Which sphere each synthetic point lies on (points are on the sphere surfaces).
@@ -134,9 +134,9 @@ mod tests {
             .collect()
     }
 
-    fn frame_masks(scene: &crate::scene::Scene) -> FrameMasks {
+    fn view_masks(scene: &crate::scene::Scene) -> ViewMaskSet {
         let frames: Vec<usize> = (0..scene.frames.len()).collect();
-        FrameMasks::from_user_masks(scene, &frames, None).expect("masks")
+        ViewMaskSet::from_user_masks(scene, &frames, None).expect("masks")
     }
 
     #[test]
@@ -144,7 +144,7 @@ mod tests {
         let dir = tempfile::tempdir().expect("tempdir");
         let scene = synthetic_scene(dir.path(), 12);
         let points = scene.points.clone().expect("points");
-        let masks = frame_masks(&scene);
+        let masks = view_masks(&scene);
         let observed: Vec<Vec<(usize, [f32; 2])>> = points
             .tracks
             .iter()
@@ -185,7 +185,7 @@ mod tests {
         let dir = tempfile::tempdir().expect("tempdir");
         let scene = synthetic_scene(dir.path(), 12);
         let positions = scene.points.clone().expect("points").positions;
-        let masks = frame_masks(&scene);
+        let masks = view_masks(&scene);
         let observations = vec![None; positions.len()];
         let ids = vote_object_ids(&positions, &observations, &masks, VotingRule::default());
         let expected = true_ids(&positions);
@@ -201,7 +201,7 @@ mod tests {
     fn a_point_in_empty_space_gets_no_object() {
         let dir = tempfile::tempdir().expect("tempdir");
         let scene = synthetic_scene(dir.path(), 12);
-        let masks = frame_masks(&scene);
+        let masks = view_masks(&scene);
         let far_off = [Vec3::new(0.0, 0.0, 3.0)];
         let ids = vote_object_ids(&far_off, &[None], &masks, VotingRule::default());
         assert_eq!(ids[0], [OBJECT_NONE; 3]);

@@ -2,8 +2,8 @@
 //! optimises with the object loss, keeps every object alive (persistence floor) and filters
 //! partial masks late in training.
 
-use super::frame_masks::{FrameMasks, FrameMasksError};
 use super::id_voting::{Observations, VotingRule, vote_object_ids};
+use super::view_masks::{ViewMaskSet, ViewMaskSetError};
 use crate::gpu::GpuContext;
 use crate::scene::Scene;
 use crate::splat::GaussianModel;
@@ -19,7 +19,7 @@ pub const DEFAULT_OBJECT_FLOORS: [usize; 3] = [1000, 1000, 10];
 #[derive(Debug, thiserror::Error)]
 pub enum SegmentedTrainingError {
     #[error(transparent)]
-    Masks(#[from] FrameMasksError),
+    Masks(#[from] ViewMaskSetError),
     #[error(transparent)]
     Train(#[from] TrainError),
     #[error(
@@ -59,7 +59,7 @@ pub fn training_frames(scene: &Scene, config: &TrainConfig) -> Vec<usize> {
 /// with their tracks where they have them (the views that really saw them).
 pub fn initial_segmented_model(
     scene: &Scene,
-    masks: &FrameMasks,
+    masks: &ViewMaskSet,
     config: &TrainConfig,
     voting: VotingRule,
 ) -> Result<GaussianModel, SegmentedTrainingError> {
@@ -106,7 +106,7 @@ pub fn segmented_trainer_from_user_masks(
         .object_loss
         .get_or_insert_with(ObjectLossConfig::default);
     let frames = training_frames(scene, &config);
-    let masks = FrameMasks::from_user_masks(scene, &frames, config.max_resolution)?;
+    let masks = ViewMaskSet::from_user_masks(scene, &frames, config.max_resolution)?;
     let model = initial_segmented_model(scene, &masks, &config, options.voting)?;
     let mut trainer = Trainer::new(ctx, scene, config, Some(model))?;
     for (train_view, (view, view_masks)) in

@@ -14,7 +14,7 @@ use crate::splat::RenderCamera;
 use crate::splat::camera::CameraError;
 
 #[derive(Debug, thiserror::Error)]
-pub enum FrameMasksError {
+pub enum ViewMaskSetError {
     #[error(transparent)]
     Scene(#[from] SceneError),
     #[error(transparent)]
@@ -46,7 +46,7 @@ pub struct ViewMasks {
 
 /// The masks of a set of views.
 #[derive(Debug, Clone, Default)]
-pub struct FrameMasks {
+pub struct ViewMaskSet {
     pub views: Vec<ViewMasks>,
 }
 
@@ -58,7 +58,7 @@ impl ViewMasks {
         frame_index: usize,
         masks: [&InstanceMask; 3],
         max_side: Option<u32>,
-    ) -> Result<Self, FrameMasksError> {
+    ) -> Result<Self, ViewMaskSetError> {
         let frame = scene
             .frames
             .get(frame_index)
@@ -69,7 +69,7 @@ impl ViewMasks {
         let (full_width, full_height) = (frame.intrinsics.width, frame.intrinsics.height);
         for (level, mask) in Level::ALL.into_iter().zip(masks) {
             if (mask.width, mask.height) != (full_width, full_height) {
-                return Err(FrameMasksError::SizeMismatch {
+                return Err(ViewMaskSetError::SizeMismatch {
                     frame: frame_index,
                     level,
                     found: [mask.width, mask.height],
@@ -183,23 +183,23 @@ impl ViewMasks {
     }
 }
 
-impl FrameMasks {
+impl ViewMaskSet {
     /// The user's masks (`masks/<level>/`) for `frame_indices`, at most `max_side` pixels on the
     /// longest side. A level the user did not give is served by the nearest given level.
     pub fn from_user_masks(
         scene: &Scene,
         frame_indices: &[usize],
         max_side: Option<u32>,
-    ) -> Result<Self, FrameMasksError> {
+    ) -> Result<Self, ViewMaskSetError> {
         if scene.masks.is_none() {
-            return Err(FrameMasksError::NoMasks);
+            return Err(ViewMaskSetError::NoMasks);
         }
         let mut views = Vec::with_capacity(frame_indices.len());
         for &frame_index in frame_indices {
             let mut levels = Vec::with_capacity(3);
             for level in Level::ALL {
                 let mask = load_instance_mask(scene, level, frame_index)?
-                    .ok_or(FrameMasksError::NoMasks)?;
+                    .ok_or(ViewMaskSetError::NoMasks)?;
                 levels.push(mask);
             }
             let masks = [&levels[0], &levels[1], &levels[2]];
@@ -261,7 +261,7 @@ pub(crate) mod tests {
         let dir = tempfile::tempdir().expect("tempdir");
         let scene = synthetic_scene(dir.path(), 6);
         let frames: Vec<usize> = (0..scene.frames.len()).collect();
-        let masks = FrameMasks::from_user_masks(&scene, &frames, Some(32)).expect("masks");
+        let masks = ViewMaskSet::from_user_masks(&scene, &frames, Some(32)).expect("masks");
         assert_eq!(masks.views.len(), 6);
         let objects = synthetic_objects();
         for view in &masks.views {
