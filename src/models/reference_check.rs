@@ -155,15 +155,19 @@ fn normalised_rows(data: &[f32], width: usize) -> Vec<f32> {
         .collect()
 }
 
+/// The reference subdirectory's name (`mobilesam`, `clip-vit-b-32`), prefixed to every line.
+fn directory_label(dir: &Path) -> String {
+    dir.file_name()
+        .map(|name| name.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
 fn check_clip(
     store: &ModelStore,
     dir: &Path,
     report: &mut ReferenceReport,
 ) -> Result<(), ModelError> {
-    let label = dir
-        .file_name()
-        .map(|name| name.to_string_lossy().into_owned())
-        .unwrap_or_default();
+    let label = directory_label(dir);
     let image_encoder = ClipImageEncoder::new(store)?;
     let text_encoder = ClipTextEncoder::new(store, 64)?;
     let image = read_image(&dir.join("image.png"))?;
@@ -251,10 +255,7 @@ fn check_sam(
     dir: &Path,
     report: &mut ReferenceReport,
 ) -> Result<(), ModelError> {
-    let label = dir
-        .file_name()
-        .map(|name| name.to_string_lossy().into_owned())
-        .unwrap_or_default();
+    let label = directory_label(dir);
     let model = SamModel::new(store)?;
     let encoder = store.session(Role::SamEncoder)?;
     let Preprocess::SamEncoder(preprocess) = &encoder.entry().preprocess else {
