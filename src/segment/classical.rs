@@ -7,7 +7,8 @@
 //! `absorb_enclosed_ratio[level]` times the container's area. Small keeps nested parts (ratio 0),
 //! middle folds small details into their surroundings, large folds in everything nested, so a
 //! disc inside a rectangle is its own object at the small level and part of the rectangle at the
-//! large level. Regions covering `max_region_fraction` of the image or more are background: never
+//! large level. Before that, thin regions (the blended bands smoothing leaves along edges) are
+//! merged into the neighbour of closest colour. Regions covering `max_region_fraction` of the image or more are background: never
 //! output, never containers. Regions under the minimum area are merged into neighbours by FH's
 //! last step. Every mask has scores 1 (regions are certain by construction); a level's masks
 //! come largest first.
@@ -197,6 +198,109 @@ impl RegionGraph {
     }
 }
 
+/// Merges thin regions (fewer than half of their pixels interior, i.e. with all four
+/// neighbours in the region; the image border counts as inside) into the adjacent region of
+/// closest mean colour, preferring regions that are not thin themselves. Smoothing turns every
+/// sharp edge into a one- or two-pixel band of blended colours that FH keeps as its own strips,
+/// often larger than the minimum size; they are no objects. Returns relabelled `labels`, `count`.
+fn merge_thin_regions(image: &RgbImage, labels: &[u32], count: usize) -> (Vec<u32>, usize) {
+    let (width, height) = (image.width() as usize, image.height() as usize);
+    let mut area = vec![0u64; count];
+    let mut interior = vec![0u64; count];
+    let mut colour_sum = vec![[0f64; 3]; count];
+    let mut neighbours = vec![std::collections::BTreeSet::<u32>::new(); count];
+    for y in 0..height {
+        for x in 0..width {
+            let label = labels[y * width + x];
+            let region = label as usize;
+            area[region] += 1;
+            for (sum, value) in colour_sum[region]
+                .iter_mut()
+                .zip(image.get_pixel(x as u32, y as u32).0)
+            {
+                *sum += f64::from(value);
+            }
+            let same = |nx: Option<usize>, ny: Option<usize>| match (nx, ny) {
+                (Some(nx), Some(ny)) if nx < width && ny < height => {
+                    labels[ny * width + nx] == label
+                }
+                _ => true,
+            };
+            if same(x.checked_sub(1), Some(y))
+                && same(Some(x + 1), Some(y))
+                && same(Some(x), y.checked_sub(1))
+                && same(Some(x), Some(y + 1))
+            {
+                interior[region] += 1;
+            }
+            for (nx, ny) in [(x + 1, y), (x, y + 1)] {
+                if nx < width && ny < height {
+                    let other = labels[ny * width + nx];
+                    if other != label {
+                        neighbours[region].insert(other);
+                        neighbours[other as usize].insert(label);
+                    }
+                }
+            }
+        }
+    }
+    let mean = |region: usize| colour_sum[region].map(|sum| sum / area[region].max(1) as f64);
+    let is_thin: Vec<bool> = (0..count)
+        .map(|region| interior[region] * 2 < area[region])
+        .collect();
+    let mut target_from_region: Vec<u32> = (0..count as u32).collect();
+    let mut order: Vec<usize> = (0..count).filter(|&region| is_thin[region]).collect();
+    order.sort_by_key(|&region| (area[region], region));
+    for region in order {
+        let colour = mean(region);
+        let distance = |other: usize| {
+            let other_colour = mean(other);
+            (0..3)
+                .map(|channel| (colour[channel] - other_colour[channel]).powi(2))
+                .sum::<f64>()
+        };
+        let best = neighbours[region]
+            .iter()
+            .map(|&other| other as usize)
+            .min_by(|&a, &b| {
+                (is_thin[a], distance(a))
+                    .partial_cmp(&(is_thin[b], distance(b)))
+                    .unwrap_or(std::cmp::Ordering::Equal)
+            });
+        if let Some(best) = best {
+            target_from_region[region] = best as u32;
+        }
+    }
+    // Follow chains of thin regions to their end (a cycle of thin regions stops where it closes).
+    let mut label_from_region = vec![u32::MAX; count];
+    let mut next_label = 0u32;
+    let final_from_region: Vec<u32> = (0..count)
+        .map(|region| {
+            let mut current = region;
+            for _ in 0..count {
+                let target = target_from_region[current] as usize;
+                if target == current || !is_thin[current] {
+                    break;
+                }
+                current = target;
+            }
+            current as u32
+        })
+        .collect();
+    let relabelled = labels
+        .iter()
+        .map(|&label| {
+            let root = final_from_region[label as usize] as usize;
+            if label_from_region[root] == u32::MAX {
+                label_from_region[root] = next_label;
+                next_label += 1;
+            }
+            label_from_region[root]
+        })
+        .collect();
+    (relabelled, next_label as usize)
+}
+
 /// One level: FH at `k`, containment, background and size rules, masks largest first.
 fn segment_level(
     image: &RgbImage,
@@ -211,6 +315,7 @@ fn segment_level(
     let background_area =
         ((f64::from(config.max_region_fraction) * pixel_count as f64).ceil() as u64).max(1);
     let (labels, count) = felzenszwalb(image, config.sigma, k, min_area);
+    let (labels, count) = merge_thin_regions(image, &labels, count);
     let mut graph = RegionGraph::new(&labels, count, width as usize, height as usize);
     let region_from_original = graph.absorb_enclosed(absorb_ratio, background_area);
     // Instance ids for the regions that become masks (id = region + 1), 0 for the rest.
