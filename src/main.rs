@@ -153,6 +153,9 @@ fn run_service(
     runtime.block_on(async move {
         let service = ServiceBuilder::new(config)
             .handler(std::sync::Arc::new(segsplat::pipeline::ReconstructHandler))
+            .handler(std::sync::Arc::new(
+                segsplat::pipeline::SegmentThenSplatHandler,
+            ))
             .mode(mode)
             .start()
             .await

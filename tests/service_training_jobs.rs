@@ -1,5 +1,6 @@
-//! The `reconstruct` job end to end through the service on the GPU worker (lavapipe in CI):
-//! upload, submit, progress over the job record, artifacts in the blob store.
+//! The training job kinds end to end through the service on the GPU worker (lavapipe in CI):
+//! upload, submit, progress over the job record, artifacts in the blob store, objects in the
+//! database.
 
 mod common;
 
@@ -8,35 +9,45 @@ use std::time::Duration;
 
 use common::{TestService, archives, test_config};
 use segsplat::api::ServiceBuilder;
+use segsplat::scene::Level;
 use segsplat::scene::colmap::ColmapEncoding;
 use segsplat::scene::synthetic::SyntheticSpec;
 use segsplat::splat::labels::read_labels;
 use segsplat::splat::ply::read_ply;
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn reconstruct_job_trains_and_stores_artifacts() {
+/// A service with both training job kinds on the GPU worker; `None` (skip) without a GPU when
+/// `SEGSPLAT_SKIP_GPU_TESTS` is set.
+async fn start_service(data: &std::path::Path) -> Option<TestService> {
     if segsplat::gpu::GpuContext::new_default().is_err() {
         if std::env::var("SEGSPLAT_SKIP_GPU_TESTS").is_ok() {
             eprintln!("skipping: no GPU adapter");
-            return;
+            return None;
         }
         panic!("no GPU adapter (lavapipe is installed by scripts/bootstrap.sh)");
     }
-    let data = tempfile::tempdir().unwrap();
-    let mut config = test_config(data.path());
+    let mut config = test_config(data);
     config.workers.cpu_slots = 0;
     config.jobs.lease_secs = 30.0;
     config.jobs.heartbeat_secs = 1.0;
     let service = ServiceBuilder::new(config)
         .handler(Arc::new(segsplat::pipeline::ReconstructHandler))
+        .handler(Arc::new(segsplat::pipeline::SegmentThenSplatHandler))
         .start()
         .await
         .unwrap();
     let base_url = format!("http://{}", service.http_addr().unwrap());
-    let client = TestService {
+    Some(TestService {
         service,
         base_url,
         client: reqwest::Client::new(),
+    })
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn reconstruct_job_trains_and_stores_artifacts() {
+    let data = tempfile::tempdir().unwrap();
+    let Some(client) = start_service(data.path()).await else {
+        return;
     };
     let spec = SyntheticSpec {
         frame_count: 9,
@@ -93,5 +104,101 @@ async fn reconstruct_job_trains_and_stores_artifacts() {
             .exists(&format!("jobs/{job_id}/checkpoints/train"))
             .unwrap()
     );
+    client.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn segment_then_splat_job_stores_objects_at_three_levels() {
+    let data = tempfile::tempdir().unwrap();
+    let Some(client) = start_service(data.path()).await else {
+        return;
+    };
+    let without_masks = SyntheticSpec {
+        frame_count: 9,
+        width: 48,
+        height: 36,
+        ..SyntheticSpec::default()
+    };
+    let archive = archives::zip_of(&archives::colmap_files(
+        without_masks.clone(),
+        ColmapEncoding::Binary,
+    ));
+    let (status, scene) = client.upload(archive, "application/zip").await;
+    assert_eq!(status, 201, "{scene}");
+    let unmasked_id = scene["id"].as_str().unwrap();
+    let job_id = client
+        .create_job(
+            unmasked_id,
+            "segment_then_splat",
+            serde_json::json!({"steps": 10}),
+        )
+        .await;
+    let job = client
+        .wait_for_state(&job_id, "failed", Duration::from_secs(120))
+        .await;
+    assert!(
+        job["error"].as_str().unwrap_or_default().contains("masks"),
+        "a scene without masks fails with a reason: {job}"
+    );
+
+    let with_masks = SyntheticSpec {
+        with_masks: Some(Level::ALL.to_vec()),
+        ..without_masks
+    };
+    let archive = archives::zip_of(&archives::colmap_files(with_masks, ColmapEncoding::Text));
+    let (status, scene) = client.upload(archive, "application/zip").await;
+    assert_eq!(status, 201, "{scene}");
+    let scene_id = scene["id"].as_str().unwrap();
+    let job_id = client
+        .create_job(
+            scene_id,
+            "segment_then_splat",
+            serde_json::json!({"steps": 60, "checkpoint_every": 30, "densify_from": 20,
+                               "densify_interval": 20, "densify_until": 50,
+                               "object_loss": {"objects_per_level": 1}}),
+        )
+        .await;
+    let job = client
+        .wait_for_state(&job_id, "succeeded", Duration::from_secs(300))
+        .await;
+    assert_eq!(job["progress"]["stage"], "persist", "{job}");
+
+    let (status, objects) = client
+        .get_json(&format!("/v1/scenes/{scene_id}/objects"))
+        .await;
+    assert_eq!(status, 200, "{objects}");
+    let levels: Vec<&str> = objects["objects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|o| o["level"].as_str().unwrap())
+        .collect();
+    let count = |level: &str| levels.iter().filter(|l| **l == level).count();
+    assert_eq!(
+        (count("small"), count("middle"), count("large")),
+        (3, 2, 1),
+        "{objects}"
+    );
+    let (status, small) = client
+        .get_json(&format!("/v1/scenes/{scene_id}/objects?level=small"))
+        .await;
+    assert_eq!(status, 200);
+    assert_eq!(small["objects"].as_array().unwrap().len(), 3);
+    let (status, _) = client
+        .get_json(&format!("/v1/scenes/{scene_id}/objects?level=huge"))
+        .await;
+    assert_eq!(status, 400);
+
+    let blobs = client.service.blobs();
+    let prefix = format!("jobs/{job_id}/output");
+    for file in [
+        "scene.ply",
+        "labels.npy",
+        "objects.json",
+        "skipped_pairs.json",
+        "metrics.json",
+    ] {
+        assert!(blobs.exists(&format!("{prefix}/{file}")).unwrap(), "{file}");
+    }
     client.shutdown().await;
 }

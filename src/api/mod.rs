@@ -7,6 +7,7 @@ mod grpc;
 mod ingest;
 mod jobs;
 mod metrics;
+mod objects;
 mod openapi;
 mod ops;
 mod router;

@@ -3,7 +3,7 @@
 use axum::Json;
 use utoipa::OpenApi;
 
-use super::{error, jobs, ops, scenes};
+use super::{error, jobs, objects, ops, scenes};
 
 #[derive(OpenApi)]
 #[openapi(
@@ -18,6 +18,7 @@ use super::{error, jobs, ops, scenes};
         jobs::list_jobs,
         jobs::cancel_job,
         jobs::job_events,
+        objects::list_objects,
         ops::healthz,
         ops::readyz,
         ops::metrics,
@@ -30,6 +31,8 @@ use super::{error, jobs, ops, scenes};
         jobs::CreateJobRequest,
         jobs::JobResponse,
         jobs::JobList,
+        objects::ObjectResponse,
+        objects::ObjectList,
         ops::HealthResponse,
         ops::ReadinessResponse,
     )),

@@ -7,7 +7,7 @@ use tokio_util::sync::CancellationToken;
 
 use super::{JobFailure, ProgressReporter};
 use crate::gpu::GpuContext;
-use crate::store::{BlobError, BlobStore};
+use crate::store::{BlobError, BlobStore, Database};
 
 pub struct JobContext {
     pub job_id: String,
@@ -24,6 +24,8 @@ pub struct JobContext {
     /// The worker's GPU; `None` on CPU-only slots (only for kinds with `needs_gpu() == false`).
     pub gpu: Option<Arc<GpuContext>>,
     pub blobs: Arc<dyn BlobStore>,
+    /// For job kinds that record results in tables (objects and their embeddings).
+    pub database: Database,
     pub progress: ProgressReporter,
     /// Cancelled when the user cancels the job or this worker lost its lease.
     pub cancel: CancellationToken,

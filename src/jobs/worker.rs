@@ -155,6 +155,7 @@ impl Worker {
             config: job.config.clone(),
             gpu: self.gpu.clone(),
             blobs: self.shared.blobs.clone(),
+            database: self.shared.database.clone(),
             progress: ProgressReporter::new(
                 self.shared.database.clone(),
                 self.shared.bus.clone(),

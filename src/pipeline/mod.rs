@@ -2,5 +2,7 @@
 
 pub mod reconstruct;
 pub mod segment_then_splat;
+pub mod training_job;
 
 pub use reconstruct::ReconstructHandler;
+pub use segment_then_splat::job::SegmentThenSplatHandler;

@@ -8,16 +8,15 @@ use std::sync::Arc;
 use futures::future::BoxFuture;
 use serde::{Deserialize, Serialize};
 
+use super::training_job::{fatal, report, retryable, train_failure, train_with_checkpoints};
 use crate::gpu::GpuContext;
-use crate::jobs::{JobContext, JobFailure, JobHandler, Progress};
+use crate::jobs::{JobContext, JobFailure, JobHandler};
 use crate::scene::{LoadOptions, load_scene};
 use crate::splat::checkpoint::Checkpoint;
 use crate::splat::labels::write_labels;
 use crate::splat::model::GaussianModel;
 use crate::splat::ply::write_ply;
-use crate::splat::train::{
-    EvalReport, TrainConfig, TrainError, TrainProgress, Trainer, TrainerMeta,
-};
+use crate::splat::train::{EvalReport, TrainConfig, Trainer, TrainerMeta};
 
 pub const KIND: &str = "reconstruct";
 const CHECKPOINT_NAME: &str = "train";
@@ -90,21 +89,6 @@ impl JobHandler for ReconstructHandler {
     }
 }
 
-fn fatal(error: impl std::fmt::Display) -> JobFailure {
-    JobFailure::Fatal(error.to_string())
-}
-
-fn retryable(error: impl std::fmt::Display) -> JobFailure {
-    JobFailure::Retryable(error.to_string())
-}
-
-fn train_failure(error: TrainError) -> JobFailure {
-    match error {
-        TrainError::Config(_) | TrainError::Views(_) | TrainError::EmptyModel => fatal(error),
-        other => retryable(other),
-    }
-}
-
 fn run_blocking(ctx: &JobContext) -> Result<(), JobFailure> {
     let config: ReconstructConfig = serde_json::from_value(ctx.config.clone()).map_err(fatal)?;
     let gpu: Arc<GpuContext> = ctx
@@ -120,51 +104,9 @@ fn run_blocking(ctx: &JobContext) -> Result<(), JobFailure> {
         }
         None => Trainer::new(&gpu, &scene, config.train.clone(), None).map_err(train_failure)?,
     };
-    let total = config.train.steps;
-    let started = std::time::Instant::now();
-    while trainer.step() < total {
-        let next_checkpoint = match config.checkpoint_every {
-            0 => total,
-            every => (trainer.step() / every + 1) * every,
-        };
-        trainer
-            .run_until(next_checkpoint, |progress| {
-                report_training(ctx, progress);
-                ctx.stop_requested().is_ok()
-            })
-            .map_err(train_failure)?;
-        ctx.stop_requested()?;
-        save_checkpoint(ctx, &trainer)?;
-    }
-    finish(ctx, &mut trainer, started.elapsed().as_secs_f64())
-}
-
-fn report_training(ctx: &JobContext, progress: &TrainProgress) {
-    let report = Progress {
-        stage: "train".to_string(),
-        step: progress.step as u64,
-        total_steps: progress.total_steps as u64,
-        metrics: [
-            ("loss".to_string(), progress.loss as f64),
-            ("gaussians".to_string(), progress.gaussians as f64),
-            ("steps_per_sec".to_string(), progress.steps_per_sec),
-        ]
-        .into_iter()
-        .collect(),
-        eta_secs: None,
-    };
-    if let Err(error) = ctx.progress.report_blocking(report) {
-        tracing::warn!(%error, "progress report failed");
-    }
-}
-
-fn save_checkpoint(ctx: &JobContext, trainer: &Trainer) -> Result<(), JobFailure> {
-    let bytes = trainer
-        .checkpoint()
-        .and_then(|c| Ok(c.to_bytes()?))
-        .map_err(train_failure)?;
-    ctx.save_checkpoint(CHECKPOINT_NAME, &bytes)
-        .map_err(retryable)
+    let train_seconds =
+        train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?;
+    finish(ctx, &mut trainer, train_seconds)
 }
 
 fn finish(ctx: &JobContext, trainer: &mut Trainer, train_seconds: f64) -> Result<(), JobFailure> {
@@ -194,19 +136,16 @@ fn finish(ctx: &JobContext, trainer: &mut Trainer, train_seconds: f64) -> Result
     ctx.blobs
         .put_bytes(&format!("{prefix}/metrics.json"), &metrics_json)
         .map_err(retryable)?;
-    let report = Progress {
-        stage: "evaluate".to_string(),
-        step: 1,
-        total_steps: 1,
-        metrics: [
-            ("psnr".to_string(), metrics.held_out.psnr),
-            ("ssim".to_string(), metrics.held_out.ssim),
-            ("gaussians".to_string(), metrics.gaussians as f64),
-        ]
-        .into_iter()
-        .collect(),
-        eta_secs: None,
-    };
-    let _ = ctx.progress.report_blocking(report);
+    report(
+        ctx,
+        "evaluate",
+        1,
+        1,
+        &[
+            ("psnr", metrics.held_out.psnr),
+            ("ssim", metrics.held_out.ssim),
+            ("gaussians", metrics.gaussians as f64),
+        ],
+    );
     Ok(())
 }

@@ -5,3 +5,4 @@ pub mod id_voting;
 pub mod objects;
 pub mod training;
 pub mod view_masks;
+pub mod job;

@@ -1,0 +1,282 @@
+//! The `segment_then_splat` job: masks per view at three levels -> object ids on the initial
+//! Gaussians -> training with the object loss -> object table. Progress per stage over SSE,
+//! checkpoints inside training (a restarted job rebuilds the masks, which is deterministic, and
+//! resumes training from its last checkpoint), cancel honoured at step boundaries.
+//!
+//! Results under the job's output prefix: `scene.ply` (Inria layout), `labels.npy` (object ids
+//! per Gaussian, PLY order), `objects.json` (per object: level, id, Gaussian count, centroid,
+//! bounds, mean colour), `skipped_pairs.json` (the (frame, level, object) pairs the partial-mask
+//! filter left out), `metrics.json`; and the scene's rows in the `objects` table.
+
+use std::sync::Arc;
+
+use futures::future::BoxFuture;
+use serde::{Deserialize, Serialize};
+
+use super::objects::{ObjectSummary, summarize_objects};
+use super::training::{
+    DEFAULT_OBJECT_FLOORS, SegmentedTrainingOptions, segmented_trainer_from_user_masks,
+    training_frames,
+};
+use super::view_masks::ViewMaskSet;
+use crate::gpu::GpuContext;
+use crate::jobs::{JobContext, JobFailure, JobHandler, Progress};
+use crate::pipeline::reconstruct::write_scene_files;
+use crate::pipeline::training_job::{
+    fatal, report, retryable, train_failure, train_with_checkpoints,
+};
+use crate::scene::{Level, LoadOptions, Scene, load_scene};
+use crate::splat::checkpoint::Checkpoint;
+use crate::splat::densify::ObjectFloor;
+use crate::splat::train::{
+    EvalReport, ObjectLossConfig, ObjectTargets, TrainConfig, Trainer, TrainerMeta,
+};
+use crate::store::objects::ObjectRecord;
+
+pub const KIND: &str = "segment_then_splat";
+const CHECKPOINT_NAME: &str = "train";
+
+/// Where the per-view masks come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MaskSource {
+    /// The scene's own masks when it has them (the only source this job runs today; generated
+    /// masks need the stage 1 association, which is in progress).
+    #[default]
+    Auto,
+    /// The scene's `masks/{small,middle,large}/` instance-id PNGs.
+    User,
+}
+
+/// The job's config: training settings (the object loss on by default), mask source, the
+/// persistence floors and how often to checkpoint.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SegmentThenSplatConfig {
+    #[serde(flatten)]
+    pub train: TrainConfig,
+    pub masks: MaskSource,
+    /// Gaussians each object keeps at least (small, middle, large), or all it has when fewer.
+    pub object_floors: [usize; 3],
+    /// Steps between checkpoints (0 = only at the end).
+    pub checkpoint_every: u32,
+}
+
+impl Default for SegmentThenSplatConfig {
+    fn default() -> Self {
+        Self {
+            train: TrainConfig {
+                object_loss: Some(ObjectLossConfig::default()),
+                ..TrainConfig::default()
+            },
+            masks: MaskSource::Auto,
+            object_floors: DEFAULT_OBJECT_FLOORS,
+            checkpoint_every: 1000,
+        }
+    }
+}
+
+/// What a finished job reports in `metrics.json`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SegmentThenSplatMetrics {
+    pub steps: u32,
+    pub gaussians: usize,
+    pub train_seconds: f64,
+    pub held_out: EvalReport,
+    /// Objects per level (small, middle, large).
+    pub objects: [usize; 3],
+    pub skipped_pairs: usize,
+}
+
+/// A skipped (object, view) pair in frame terms.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct SkippedFramePair {
+    frame_index: usize,
+    frame_name: String,
+    level: Level,
+    object_id: u32,
+}
+
+#[derive(Debug, Default)]
+pub struct SegmentThenSplatHandler;
+
+impl JobHandler for SegmentThenSplatHandler {
+    fn kind(&self) -> &'static str {
+        KIND
+    }
+
+    fn validate_config(&self, config: &serde_json::Value) -> Result<serde_json::Value, String> {
+        let mut parsed: SegmentThenSplatConfig = if config.is_null() {
+            SegmentThenSplatConfig::default()
+        } else {
+            serde_json::from_value(config.clone()).map_err(|error| error.to_string())?
+        };
+        // The object loss is the point of this job: on unless configured.
+        parsed
+            .train
+            .object_loss
+            .get_or_insert_with(ObjectLossConfig::default);
+        parsed.train.validate().map_err(|error| error.to_string())?;
+        serde_json::to_value(&parsed).map_err(|error| error.to_string())
+    }
+
+    fn run(&self, ctx: JobContext) -> BoxFuture<'static, Result<(), JobFailure>> {
+        Box::pin(async move {
+            let ctx = Arc::new(ctx);
+            let worker = Arc::clone(&ctx);
+            let objects = tokio::task::spawn_blocking(move || run_blocking(&worker))
+                .await
+                .map_err(|error| retryable(format!("worker thread failed: {error}")))??;
+            ctx.database
+                .replace_objects(&ctx.scene_id, &objects, &[])
+                .await
+                .map_err(retryable)?;
+            let persisted = Progress {
+                stage: "persist".to_string(),
+                step: 1,
+                total_steps: 1,
+                metrics: [("objects".to_string(), objects.len() as f64)]
+                    .into_iter()
+                    .collect(),
+                eta_secs: None,
+            };
+            if let Err(error) = ctx.progress.report(persisted).await {
+                tracing::warn!(%error, "progress report failed");
+            }
+            Ok(())
+        })
+    }
+}
+
+fn run_blocking(ctx: &JobContext) -> Result<Vec<ObjectRecord>, JobFailure> {
+    let config: SegmentThenSplatConfig =
+        serde_json::from_value(ctx.config.clone()).map_err(fatal)?;
+    let gpu: Arc<GpuContext> = ctx
+        .gpu
+        .clone()
+        .ok_or_else(|| fatal("the segment_then_splat job needs a GPU worker"))?;
+    let scene = load_scene(&ctx.scene_dir, &LoadOptions::default()).map_err(fatal)?;
+    if scene.masks.is_none() {
+        return Err(fatal(
+            "the scene has no masks/{small,middle,large}/ instance masks; segmenting scenes \
+             without user masks is not available in this job yet",
+        ));
+    }
+    report(ctx, "segment", 0, 1, &[]);
+    let options = SegmentedTrainingOptions {
+        object_floors: config.object_floors,
+        ..SegmentedTrainingOptions::default()
+    };
+    let mut trainer = match ctx.load_checkpoint(CHECKPOINT_NAME).map_err(retryable)? {
+        Some(bytes) => {
+            let checkpoint = Checkpoint::<TrainerMeta>::from_bytes(&bytes).map_err(retryable)?;
+            tracing::info!(step = checkpoint.meta.step, "resuming from checkpoint");
+            resume_segmented(&gpu, &scene, &checkpoint, &options)?
+        }
+        None => segmented_trainer_from_user_masks(&gpu, &scene, config.train.clone(), &options)
+            .map_err(fatal)?,
+    };
+    report(ctx, "segment", 1, 1, &[]);
+    let train_seconds =
+        train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?;
+    finish(ctx, &scene, &mut trainer, train_seconds)
+}
+
+/// A trainer continuing from a checkpoint: the masks are rebuilt (deterministic) and the
+/// persistence floor set again; everything else comes from the checkpoint.
+fn resume_segmented(
+    gpu: &GpuContext,
+    scene: &Scene,
+    checkpoint: &Checkpoint<TrainerMeta>,
+    options: &SegmentedTrainingOptions,
+) -> Result<Trainer, JobFailure> {
+    let mut trainer = Trainer::resume(gpu, scene, checkpoint).map_err(train_failure)?;
+    let frames = training_frames(scene, trainer.config());
+    let masks = ViewMaskSet::from_user_masks(scene, &frames, trainer.config().max_resolution)
+        .map_err(fatal)?;
+    trainer.set_prune_guard(Box::new(ObjectFloor {
+        floors: options.object_floors,
+    }));
+    let ids = masks.views.iter().map(|view| view.level_ids()).collect();
+    trainer
+        .set_object_targets(ObjectTargets::upload(gpu, ids))
+        .map_err(train_failure)?;
+    Ok(trainer)
+}
+
+fn finish(
+    ctx: &JobContext,
+    scene: &Scene,
+    trainer: &mut Trainer,
+    train_seconds: f64,
+) -> Result<Vec<ObjectRecord>, JobFailure> {
+    let held_out = trainer.evaluate().map_err(train_failure)?;
+    let model = trainer.model().map_err(train_failure)?;
+    let summaries = summarize_objects(&model);
+    let skipped: Vec<SkippedFramePair> = trainer
+        .skipped_pairs()
+        .into_iter()
+        .filter_map(|pair| {
+            let frame_index = trainer.views().train.get(pair.train_view)?.frame_index;
+            Some(SkippedFramePair {
+                frame_index,
+                frame_name: scene.frames.get(frame_index)?.name.clone(),
+                level: pair.level,
+                object_id: pair.object_id,
+            })
+        })
+        .collect();
+    let metrics = SegmentThenSplatMetrics {
+        steps: trainer.step(),
+        gaussians: model.len(),
+        train_seconds,
+        held_out,
+        objects: Level::ALL.map(|level| summaries.iter().filter(|s| s.level == level).count()),
+        skipped_pairs: skipped.len(),
+    };
+    write_scene_files(&model, &ctx.work_dir).map_err(retryable)?;
+    let prefix = ctx.output_prefix();
+    for file in ["scene.ply", "labels.npy"] {
+        ctx.blobs
+            .put_file(&format!("{prefix}/{file}"), &ctx.work_dir.join(file))
+            .map_err(retryable)?;
+    }
+    for (file, json) in [
+        ("objects.json", serde_json::to_vec_pretty(&summaries)),
+        ("skipped_pairs.json", serde_json::to_vec_pretty(&skipped)),
+        ("metrics.json", serde_json::to_vec_pretty(&metrics)),
+    ] {
+        let bytes = json.map_err(fatal)?;
+        ctx.blobs
+            .put_bytes(&format!("{prefix}/{file}"), &bytes)
+            .map_err(retryable)?;
+    }
+    report(
+        ctx,
+        "evaluate",
+        1,
+        1,
+        &[
+            ("psnr", metrics.held_out.psnr),
+            ("ssim", metrics.held_out.ssim),
+            ("gaussians", metrics.gaussians as f64),
+        ],
+    );
+    Ok(summaries
+        .iter()
+        .map(|summary| object_record(&ctx.scene_id, summary))
+        .collect())
+}
+
+fn object_record(scene_id: &str, summary: &ObjectSummary) -> ObjectRecord {
+    ObjectRecord {
+        scene_id: scene_id.to_string(),
+        level: summary.level,
+        object_id: summary.object_id,
+        gaussian_count: summary.gaussian_count as u64,
+        centroid: summary.centroid,
+        bounds_min: summary.bounds_min,
+        bounds_max: summary.bounds_max,
+        mean_color: summary.mean_color,
+    }
+}
