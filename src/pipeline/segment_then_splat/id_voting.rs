@@ -56,8 +56,9 @@ pub fn vote_object_ids(
         .collect()
 }
 
-/// (view, position in mask pixels) for every view that sees the point.
-fn observed_positions(
+/// (view, position in mask pixels) for every view that sees the point: the observing views at
+/// the observed pixels when `observations` has any, else every view it projects into.
+pub(super) fn observed_positions(
     position: Vec3,
     observations: Option<&[(usize, [f32; 2])]>,
     masks: &ViewMaskSet,

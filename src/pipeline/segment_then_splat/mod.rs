@@ -1,8 +1,13 @@
 //! The Segment-then-Splat pipeline (METHOD.md): masks per view at three levels, object ids on the
 //! initial points, training with the object loss, per-object language embeddings.
 
+pub mod association;
+mod global_objects;
 pub mod id_voting;
+pub mod job;
+mod mask_links;
 pub mod objects;
+mod projected_visibility;
+pub mod track_metrics;
 pub mod training;
 pub mod view_masks;
-pub mod job;

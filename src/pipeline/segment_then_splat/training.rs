@@ -2,10 +2,14 @@
 //! optimises with the object loss, keeps every object alive (persistence floor) and filters
 //! partial masks late in training.
 
+use super::association::{
+    AssociationError, AssociationOptions, AssociationReport, generated_view_masks,
+};
 use super::id_voting::{Observations, VotingRule, vote_object_ids};
 use super::view_masks::{ViewMaskSet, ViewMaskSetError};
 use crate::gpu::GpuContext;
-use crate::scene::Scene;
+use crate::scene::{Scene, SparsePoints};
+use crate::segment::MaskGenerator;
 use crate::splat::GaussianModel;
 use crate::splat::densify::ObjectFloor;
 use crate::splat::train::trainer::initial_model;
@@ -22,6 +26,8 @@ pub enum SegmentedTrainingError {
     Masks(#[from] ViewMaskSetError),
     #[error(transparent)]
     Train(#[from] TrainError),
+    #[error(transparent)]
+    Association(#[from] AssociationError),
     #[error(
         "training view {train_view} is frame {trainer_frame}, but its masks are frame {mask_frame}"
     )]
@@ -64,24 +70,11 @@ pub fn initial_segmented_model(
     voting: VotingRule,
 ) -> Result<GaussianModel, SegmentedTrainingError> {
     let mut model = initial_model(scene, config)?;
-    let view_from_frame = |frame: u32| {
-        masks
-            .views
-            .iter()
-            .position(|view| view.frame_index == frame as usize)
-    };
     // Tracks in mask-view indices; only meaningful when the model is the sparse points in order.
-    let tracks: Vec<Vec<(usize, [f32; 2])>> = match &scene.points {
-        Some(points) if points.positions.len() == model.len() => points
-            .tracks
-            .iter()
-            .map(|track| {
-                track
-                    .iter()
-                    .filter_map(|seen| Some((view_from_frame(seen.frame_index)?, seen.pixel)))
-                    .collect()
-            })
-            .collect(),
+    let tracks = match &scene.points {
+        Some(points) if points.positions.len() == model.len() => {
+            point_tracks_in_views(points, masks)
+        }
         _ => vec![Vec::new(); model.len()],
     };
     let observations: Vec<Observations> = tracks
@@ -93,21 +86,80 @@ pub fn initial_segmented_model(
     Ok(model)
 }
 
-/// A trainer for Segment then Splat on `scene` with the user's masks: ids voted onto the initial
-/// Gaussians, the object loss on (its default config unless `config.object_loss` is set), the
-/// persistence floor guarding pruning.
+/// Each sparse point's COLMAP track as (index into `masks.views`, full-resolution pixel), keeping
+/// only the observations in those views; empty for points without a track.
+pub(super) fn point_tracks_in_views(
+    points: &SparsePoints,
+    masks: &ViewMaskSet,
+) -> Vec<Vec<(usize, [f32; 2])>> {
+    let view_from_frame = |frame: u32| {
+        masks
+            .views
+            .iter()
+            .position(|view| view.frame_index == frame as usize)
+    };
+    points
+        .tracks
+        .iter()
+        .map(|track| {
+            track
+                .iter()
+                .filter_map(|seen| Some((view_from_frame(seen.frame_index)?, seen.pixel)))
+                .collect()
+        })
+        .collect()
+}
+
+/// A trainer for Segment then Splat on `scene` with the user's masks (stage 1 skipped); see
+/// [`segmented_trainer_from_view_masks`].
 pub fn segmented_trainer_from_user_masks(
     ctx: &GpuContext,
     scene: &Scene,
+    config: TrainConfig,
+    options: &SegmentedTrainingOptions,
+) -> Result<Trainer, SegmentedTrainingError> {
+    let frames = training_frames(scene, &config);
+    let masks = ViewMaskSet::from_user_masks(scene, &frames, config.max_resolution)?;
+    segmented_trainer_from_view_masks(ctx, scene, config, &masks, options)
+}
+
+/// A trainer like [`segmented_trainer_from_user_masks`], with masks made by `generator` on the
+/// training views (at the training resolution) and given one id per object across views by
+/// their shared sparse points ([`generated_view_masks`]). Also answers what association did.
+pub fn segmented_trainer_from_generated_masks(
+    ctx: &GpuContext,
+    scene: &Scene,
+    config: TrainConfig,
+    generator: &mut MaskGenerator,
+    options: &SegmentedTrainingOptions,
+    association: &AssociationOptions,
+) -> Result<(Trainer, AssociationReport), SegmentedTrainingError> {
+    let frames = training_frames(scene, &config);
+    let (masks, report) = generated_view_masks(
+        scene,
+        &frames,
+        generator,
+        config.max_resolution,
+        association,
+    )?;
+    let trainer = segmented_trainer_from_view_masks(ctx, scene, config, &masks, options)?;
+    Ok((trainer, report))
+}
+
+/// The trainer for masks of exactly the training views, in training order: ids voted onto the
+/// initial Gaussians, the object loss on (its default config unless `config.object_loss` is
+/// set), the persistence floor guarding pruning.
+pub fn segmented_trainer_from_view_masks(
+    ctx: &GpuContext,
+    scene: &Scene,
     mut config: TrainConfig,
+    masks: &ViewMaskSet,
     options: &SegmentedTrainingOptions,
 ) -> Result<Trainer, SegmentedTrainingError> {
     config
         .object_loss
         .get_or_insert_with(ObjectLossConfig::default);
-    let frames = training_frames(scene, &config);
-    let masks = ViewMaskSet::from_user_masks(scene, &frames, config.max_resolution)?;
-    let model = initial_segmented_model(scene, &masks, &config, options.voting)?;
+    let model = initial_segmented_model(scene, masks, &config, options.voting)?;
     let mut trainer = Trainer::new(ctx, scene, config, Some(model))?;
     for (train_view, (view, view_masks)) in
         trainer.views().train.iter().zip(&masks.views).enumerate()

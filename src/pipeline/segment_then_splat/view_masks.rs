@@ -8,7 +8,8 @@
 use glam::Vec3;
 
 use crate::scene::{
-    InstanceMask, Level, Scene, SceneError, load_instance_mask, scale_for_max_side, scaled_size,
+    Frame, InstanceMask, Level, Scene, SceneError, load_instance_mask, scale_for_max_side,
+    scaled_size,
 };
 use crate::splat::RenderCamera;
 use crate::splat::camera::CameraError;
@@ -27,6 +28,13 @@ pub enum ViewMaskSetError {
         level: Level,
         found: [u32; 2],
         expected: [u32; 2],
+    },
+    #[error("frame {frame}: {level:?} id map has {found} pixels, expected {expected}")]
+    IdCount {
+        frame: usize,
+        level: Level,
+        found: usize,
+        expected: usize,
     },
 }
 
@@ -59,13 +67,7 @@ impl ViewMasks {
         masks: [&InstanceMask; 3],
         max_side: Option<u32>,
     ) -> Result<Self, ViewMaskSetError> {
-        let frame = scene
-            .frames
-            .get(frame_index)
-            .ok_or_else(|| SceneError::Inconsistent {
-                file: scene.root.display().to_string(),
-                message: format!("frame {frame_index} requested but the scene has fewer"),
-            })?;
+        let frame = frame_of(scene, frame_index)?;
         let (full_width, full_height) = (frame.intrinsics.width, frame.intrinsics.height);
         for (level, mask) in Level::ALL.into_iter().zip(masks) {
             if (mask.width, mask.height) != (full_width, full_height) {
@@ -77,21 +79,53 @@ impl ViewMasks {
                 });
             }
         }
+        let mut view = Self::without_objects(scene, frame_index, max_side)?;
+        view.ids = masks.map(|mask| downsample_nearest(mask, view.width, view.height));
+        Ok(view)
+    }
+
+    /// A view whose maps hold no object yet, at the training resolution for `max_side`: the
+    /// camera and size that masks made for this view must have.
+    pub fn without_objects(
+        scene: &Scene,
+        frame_index: usize,
+        max_side: Option<u32>,
+    ) -> Result<Self, ViewMaskSetError> {
+        let frame = frame_of(scene, frame_index)?;
+        let (full_width, full_height) = (frame.intrinsics.width, frame.intrinsics.height);
         let factor = max_side.map_or(1.0, |side| {
             scale_for_max_side(full_width, full_height, side)
         });
         let (width, height) = scaled_size(full_width, full_height, factor);
         let scale = width as f32 / full_width as f32;
         let camera = RenderCamera::from_frame(frame, scale)?;
-        let ids = masks.map(|mask| downsample_nearest(mask, width, height));
+        let pixels = width as usize * height as usize;
         Ok(Self {
             frame_index,
             camera,
             width,
             height,
             scale,
-            ids,
+            ids: [vec![0; pixels], vec![0; pixels], vec![0; pixels]],
         })
+    }
+
+    /// The same view with row-major id maps already at its resolution (e.g. from associated
+    /// generated masks) in place of its own.
+    pub fn with_level_ids(mut self, ids: [Vec<u32>; 3]) -> Result<Self, ViewMaskSetError> {
+        let expected = self.width as usize * self.height as usize;
+        for (level, level_ids) in Level::ALL.into_iter().zip(&ids) {
+            if level_ids.len() != expected {
+                return Err(ViewMaskSetError::IdCount {
+                    frame: self.frame_index,
+                    level,
+                    found: level_ids.len(),
+                    expected,
+                });
+            }
+        }
+        self.ids = ids;
+        Ok(self)
     }
 
     /// Row-major ids at `level`; 0 = no object.
@@ -214,6 +248,16 @@ impl ViewMaskSet {
             .iter()
             .find(|view| view.frame_index == frame_index)
     }
+}
+
+fn frame_of(scene: &Scene, frame_index: usize) -> Result<&Frame, ViewMaskSetError> {
+    Ok(scene
+        .frames
+        .get(frame_index)
+        .ok_or_else(|| SceneError::Inconsistent {
+            file: scene.root.display().to_string(),
+            message: format!("frame {frame_index} requested but the scene has fewer"),
+        })?)
 }
 
 /// Nearest-neighbour resampling (ids must not blend), sampling at pixel centres.

@@ -1,0 +1,325 @@
+//! Stage 1 for posed static scenes without user masks, on the synthetic three-sphere scene
+//! (32 ring views at 96x72, exact masks at three levels, COLMAP points with tracks): per-view
+//! masks get one id per object across views from the sparse points they share.
+//!
+//! - The scene's own masks with ids scrambled in every view must come back as exactly one
+//!   object per sphere group per level (ORR 1, Dup 0), with tracks and with projected points.
+//! - The classical generator must reach the ORR/Dup stated below at the small level.
+//! - Trained end to end from classical masks, each true object's best predicted object (any
+//!   level, the issue's `--oracle` selection) must match its held-out full silhouette.
+
+use glam::Vec3;
+use segsplat::gpu::GpuContext;
+use segsplat::pipeline::segment_then_splat::association::{
+    AssociationError, AssociationOptions, AssociationReport, associate_frame_masks,
+    generated_view_masks,
+};
+use segsplat::pipeline::segment_then_splat::objects::{full_mask, render_layer};
+use segsplat::pipeline::segment_then_splat::track_metrics::object_recall_and_duplicates;
+use segsplat::pipeline::segment_then_splat::training::{
+    SegmentedTrainingOptions, segmented_trainer_from_generated_masks, training_frames,
+};
+use segsplat::pipeline::segment_then_splat::view_masks::ViewMaskSet;
+use segsplat::scene::colmap::ColmapEncoding;
+use segsplat::scene::synthetic::{
+    SYNTHETIC_BACKGROUND, SyntheticSpec, synthetic_objects, write_colmap,
+};
+use segsplat::scene::{Level, LoadOptions, Scene, load_scene};
+use segsplat::segment::{ClassicalConfig, MaskGenerator, SegmentError, user_frame_masks};
+use segsplat::splat::ObjectFilter;
+use segsplat::splat::render::Renderer;
+use segsplat::splat::train::{ObjectLossConfig, TrainConfig};
+
+/// Objects per level (small, middle, large) in the synthetic scene.
+const TRUE_OBJECTS: [usize; 3] = [3, 2, 1];
+/// The (tuned) classical generator at the small level. Measured: ORR 2/3, Dup 2 (the shaded
+/// spheres still split into regions the one-object-per-view rule keeps apart); middle and large
+/// ORR 1, Dup 0.
+const MIN_CLASSICAL_SMALL_ORR: f64 = 0.6;
+const MAX_CLASSICAL_SMALL_DUP: usize = 2;
+const MIN_CLASSICAL_COARSE_ORR: f64 = 0.99;
+/// Held-out full mIoU of the oracle-selected objects trained from classical masks (measured 0.91).
+const MIN_CLASSICAL_ORACLE_MIOU: f64 = 0.8;
+
+/// The classical generator tuned for these small flat-shaded renders: FH scales ten times the
+/// defaults (which, scaled down to 96x72, split each shaded sphere into several regions).
+fn classical_generator() -> MaskGenerator {
+    MaskGenerator::Classical(ClassicalConfig {
+        scale_per_level: [1000.0, 4000.0, 16000.0],
+        ..ClassicalConfig::default()
+    })
+}
+
+fn synthetic_scene(dir: &std::path::Path) -> Scene {
+    let spec = SyntheticSpec {
+        frame_count: 32,
+        width: 96,
+        height: 72,
+        with_masks: Some(Level::ALL.to_vec()),
+        ..Default::default()
+    };
+    write_colmap(dir, &spec, ColmapEncoding::Binary).unwrap();
+    load_scene(dir, &LoadOptions::default()).unwrap()
+}
+
+fn config() -> TrainConfig {
+    TrainConfig {
+        steps: 600,
+        max_resolution: None,
+        background: SYNTHETIC_BACKGROUND.map(|c| c as f32 / 255.0),
+        sh_degree_interval: 100,
+        densify_from: 100,
+        densify_until: 450,
+        densify_interval: 100,
+        opacity_reset_interval: 0,
+        object_loss: Some(ObjectLossConfig {
+            objects_per_level: 2,
+            ..Default::default()
+        }),
+        ..Default::default()
+    }
+}
+
+/// Associates the scene's own masks after scrambling them in every view: each level's masks
+/// rotated and (in odd views) reversed, so local order says nothing, and their source ids
+/// replaced by view-specific ones.
+fn associate_scrambled_user_masks(
+    scene: &Scene,
+    frames: &[usize],
+) -> (ViewMaskSet, AssociationReport) {
+    let (masks, report) = associate_frame_masks(
+        scene,
+        frames,
+        None,
+        &AssociationOptions::default(),
+        |frame_index| {
+            let mut frame = user_frame_masks(scene, frame_index)
+                .map_err(|error| AssociationError::Segment(SegmentError::User(error)))?;
+            for level in &mut frame.levels {
+                if !level.is_empty() {
+                    let shift = frame_index % level.len();
+                    level.rotate_left(shift);
+                }
+                if frame_index % 2 == 1 {
+                    level.reverse();
+                }
+                for (index, scored) in level.iter_mut().enumerate() {
+                    scored.instance_id = Some(1000 + 7 * frame_index as u32 + index as u32);
+                }
+            }
+            Ok(frame)
+        },
+    )
+    .unwrap();
+    eprintln!("{report:?}");
+    (masks, report)
+}
+
+fn assert_exact_recovery(predicted: &ViewMaskSet, truth: &ViewMaskSet) {
+    for level in Level::ALL {
+        let quality = object_recall_and_duplicates(predicted, truth, level, 0.5).unwrap();
+        eprintln!("{level:?}: {quality:?}");
+        assert_eq!(quality.truth_objects, TRUE_OBJECTS[level.index()]);
+        assert_eq!(quality.object_recall_rate, 1.0, "{level:?}");
+        assert_eq!(quality.duplicated_objects, 0, "{level:?}");
+        // Ids are 1..N.
+        let mut ids: Vec<u32> = predicted
+            .views
+            .iter()
+            .flat_map(|view| view.objects_at(level))
+            .collect();
+        ids.sort_unstable();
+        ids.dedup();
+        let expected: Vec<u32> = (1..=TRUE_OBJECTS[level.index()] as u32).collect();
+        assert_eq!(ids, expected, "{level:?}");
+    }
+}
+
+#[test]
+fn scrambled_user_masks_regain_one_id_per_object_by_tracks_and_by_projection() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut scene = synthetic_scene(dir.path());
+    let frames = training_frames(&scene, &config());
+    let truth = ViewMaskSet::from_user_masks(&scene, &frames, None).unwrap();
+
+    let (by_tracks, report) = associate_scrambled_user_masks(&scene, &frames);
+    for (level, expected) in Level::ALL.into_iter().zip(TRUE_OBJECTS) {
+        assert_eq!(report.levels[level.index()].objects, expected, "{level:?}");
+        assert_eq!(report.levels[level.index()].refused_merges, 0, "{level:?}");
+    }
+    assert_exact_recovery(&by_tracks, &truth);
+
+    // Without tracks every point is projected into every view instead (hidden ones filtered
+    // by depth against each mask's front).
+    let points = scene.points.as_mut().unwrap();
+    points.tracks.iter_mut().for_each(Vec::clear);
+    let (by_projection, _) = associate_scrambled_user_masks(&scene, &frames);
+    assert_exact_recovery(&by_projection, &truth);
+}
+
+#[test]
+fn classical_masks_associate_with_stated_recall_and_no_duplicates() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = synthetic_scene(dir.path());
+    let frames = training_frames(&scene, &config());
+    let truth = ViewMaskSet::from_user_masks(&scene, &frames, None).unwrap();
+    let mut generator = classical_generator();
+    let (masks, report) = generated_view_masks(
+        &scene,
+        &frames,
+        &mut generator,
+        None,
+        &AssociationOptions::default(),
+    )
+    .unwrap();
+    eprintln!("{report:#?}");
+    for level in Level::ALL {
+        let quality = object_recall_and_duplicates(&masks, &truth, level, 0.5).unwrap();
+        eprintln!("classical {level:?}: {quality:?}");
+        if level != Level::Small {
+            assert!(
+                quality.object_recall_rate >= MIN_CLASSICAL_COARSE_ORR,
+                "{level:?}: {quality:?}"
+            );
+        }
+    }
+    let small = object_recall_and_duplicates(&masks, &truth, Level::Small, 0.5).unwrap();
+    assert!(
+        small.object_recall_rate >= MIN_CLASSICAL_SMALL_ORR,
+        "{small:?}"
+    );
+    assert!(
+        small.duplicated_objects <= MAX_CLASSICAL_SMALL_DUP,
+        "{small:?}"
+    );
+}
+
+/// The true full silhouette of an object: every pixel whose ray meets one of its spheres.
+fn full_truth(scene: &Scene, frame_index: usize, level: Level, object: u32) -> Vec<bool> {
+    let frame = &scene.frames[frame_index];
+    let k = &frame.intrinsics;
+    let origin = frame.world_from_camera.transform_point3(Vec3::ZERO);
+    let spheres: Vec<_> = synthetic_objects()
+        .into_iter()
+        .filter(|s| s.ids[level.index()] == object)
+        .collect();
+    (0..k.height * k.width)
+        .map(|pixel| {
+            let (x, y) = (pixel % k.width, pixel / k.width);
+            let camera_direction = Vec3::new(
+                ((f64::from(x) + 0.5 - k.cx) / k.fx) as f32,
+                ((f64::from(y) + 0.5 - k.cy) / k.fy) as f32,
+                1.0,
+            );
+            let direction = frame
+                .world_from_camera
+                .transform_vector3(camera_direction)
+                .normalize();
+            spheres.iter().any(|s| {
+                let to_origin = origin - s.center;
+                let b = to_origin.dot(direction);
+                b * b - (to_origin.length_squared() - s.radius * s.radius) >= 0.0
+            })
+        })
+        .collect()
+}
+
+fn iou(predicted: &[bool], truth: &[bool]) -> f64 {
+    let both = predicted.iter().zip(truth).filter(|(p, t)| **p && **t);
+    let either = predicted.iter().zip(truth).filter(|(p, t)| **p || **t);
+    let (intersection, union) = (both.count(), either.count());
+    if union == 0 {
+        1.0
+    } else {
+        intersection as f64 / union as f64
+    }
+}
+
+#[test]
+fn trained_from_classical_masks_oracle_objects_match_held_out_truth() {
+    let ctx = match GpuContext::new_default() {
+        Ok(ctx) => ctx,
+        Err(error) if std::env::var("SEGSPLAT_SKIP_GPU_TESTS").is_ok() => {
+            eprintln!("skipping: no GPU adapter ({error})");
+            return;
+        }
+        Err(error) => panic!("no GPU adapter: {error}"),
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let scene = synthetic_scene(dir.path());
+    let mut generator = classical_generator();
+    let (mut trainer, report) = segmented_trainer_from_generated_masks(
+        &ctx,
+        &scene,
+        config(),
+        &mut generator,
+        &SegmentedTrainingOptions::default(),
+        &AssociationOptions::default(),
+    )
+    .unwrap();
+    eprintln!("{report:?}");
+    let progress = trainer.run(|_| true).unwrap();
+    eprintln!("trained: {progress:?}");
+
+    // Every predicted object's full mask in every held-out view.
+    let mut renderer = Renderer::new(&ctx).unwrap();
+    let test_views = &trainer.views().test;
+    let predicted: Vec<(Level, u32)> = Level::ALL
+        .into_iter()
+        .flat_map(|level| {
+            let count = report.levels[level.index()].objects as u32;
+            (1..=count).map(move |id| (level, id))
+        })
+        .collect();
+    let rendered: Vec<Vec<Vec<bool>>> = predicted
+        .iter()
+        .map(|&(level, id)| {
+            test_views
+                .iter()
+                .map(|view| {
+                    let filter = ObjectFilter::Object { level, id };
+                    let layer = render_layer(
+                        &ctx,
+                        &mut renderer,
+                        trainer.gaussians(),
+                        &view.camera,
+                        filter,
+                    )
+                    .unwrap();
+                    full_mask(&layer)
+                })
+                .collect()
+        })
+        .collect();
+
+    // Oracle: each true object gets the one predicted object (any level) with the best mean
+    // held-out IoU; mIoU is then the paper's (per view over the objects, then over views).
+    let mut per_view_scores = vec![Vec::new(); test_views.len()];
+    for level in Level::ALL {
+        for object in 1..=TRUE_OBJECTS[level.index()] as u32 {
+            let truths: Vec<Vec<bool>> = test_views
+                .iter()
+                .map(|view| full_truth(&scene, view.frame_index, level, object))
+                .collect();
+            let scores_of = |masks: &Vec<Vec<bool>>| -> Vec<f64> {
+                masks.iter().zip(&truths).map(|(m, t)| iou(m, t)).collect()
+            };
+            let best = rendered
+                .iter()
+                .map(scores_of)
+                .max_by(|a, b| mean(a).total_cmp(&mean(b)))
+                .unwrap_or_else(|| vec![0.0; test_views.len()]);
+            eprintln!("{level:?} object {object}: best IoUs {best:.3?}");
+            for (scores, score) in per_view_scores.iter_mut().zip(best) {
+                scores.push(score);
+            }
+        }
+    }
+    let miou = mean(&per_view_scores.iter().map(|s| mean(s)).collect::<Vec<_>>());
+    eprintln!("held-out oracle full mIoU from classical masks: {miou:.4}");
+    assert!(miou >= MIN_CLASSICAL_ORACLE_MIOU, "oracle mIoU {miou:.4}");
+}
+
+fn mean(values: &[f64]) -> f64 {
+    values.iter().sum::<f64>() / values.len().max(1) as f64
+}
