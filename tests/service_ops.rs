@@ -298,7 +298,7 @@ async fn grpc_health_and_scene_job_object_reads_without_auth() {
     assert_eq!(large.objects[0].gaussian_count, 500);
     assert_eq!(large.objects[0].bounds.unwrap().max.unwrap().x, 2.0);
 
-    let pending = client
+    let no_encoder = client
         .query(proto::QueryRequest {
             scene_id,
             text: "mug".to_string(),
@@ -306,7 +306,7 @@ async fn grpc_health_and_scene_job_object_reads_without_auth() {
         })
         .await
         .unwrap_err();
-    assert_eq!(pending.code(), tonic::Code::Unimplemented);
-    assert!(pending.message().contains("Segment-then-Splat"));
+    assert_eq!(no_encoder.code(), tonic::Code::Unavailable);
+    assert!(no_encoder.message().contains("no text encoder configured"));
     service.shutdown().await;
 }

@@ -1,11 +1,16 @@
-//! gRPC `segsplat.v1.SceneQuery`: scene, job and object reads now; the query and mask methods
-//! answer `UNIMPLEMENTED` until the Segment-then-Splat pipeline provides them.
+//! gRPC `segsplat.v1.SceneQuery`: scene, job and object reads, and the unary text `Query` (objects
+//! and scores; masks for a view come with the mask renderer). The streaming query and
+//! `RenderMask` answer `UNIMPLEMENTED` until the Segment-then-Splat pipeline provides them.
 
 use std::pin::Pin;
+use std::sync::Arc;
+use std::time::Instant;
 
 use futures::Stream;
 use tonic::{Request, Response, Status};
 
+use super::query::{QueryFailure, run_query};
+use crate::language::{DEFAULT_RELEVANCY_THRESHOLD, Granularity, QueryOptions, SharedTextEncoder};
 use crate::proto;
 use crate::proto::scene_query_server::SceneQuery;
 use crate::scene::Level;
@@ -16,14 +21,46 @@ use crate::store::{Database, StoreError};
 
 const PIPELINE_PENDING: &str = "arrives with the Segment-then-Splat pipeline";
 
-#[derive(Debug, Clone)]
+#[derive(Clone)]
 pub struct SceneQueryService {
     database: Database,
+    text_encoder: Arc<SharedTextEncoder>,
 }
 
 impl SceneQueryService {
-    pub fn new(database: Database) -> Self {
-        Self { database }
+    pub fn new(database: Database, text_encoder: Arc<SharedTextEncoder>) -> Self {
+        Self {
+            database,
+            text_encoder,
+        }
+    }
+}
+
+fn query_failure_status(failure: QueryFailure) -> Status {
+    let message = failure.to_string();
+    match failure {
+        QueryFailure::BadOptions(_) | QueryFailure::EmptyText => Status::invalid_argument(message),
+        QueryFailure::SceneNotFound(_) => Status::not_found(message),
+        QueryFailure::NoObjects(_) | QueryFailure::NoEmbeddings { .. } => {
+            Status::failed_precondition(message)
+        }
+        QueryFailure::NoTextEncoder(_) => Status::unavailable(message),
+        QueryFailure::Store(_) | QueryFailure::Encoding(_) => {
+            tracing::error!(%message, "gRPC query failed");
+            Status::internal(message)
+        }
+    }
+}
+
+fn granularity_from_proto(value: i32) -> Result<Granularity, Status> {
+    match proto::Granularity::try_from(value) {
+        Ok(proto::Granularity::Auto) => Ok(Granularity::Auto),
+        Ok(proto::Granularity::Small) => Ok(Granularity::Small),
+        Ok(proto::Granularity::Middle) => Ok(Granularity::Middle),
+        Ok(proto::Granularity::Large) => Ok(Granularity::Large),
+        Err(_) => Err(Status::invalid_argument(format!(
+            "granularity: unknown value {value}"
+        ))),
     }
 }
 
@@ -131,9 +168,43 @@ type StreamQueryStream =
 impl SceneQuery for SceneQueryService {
     async fn query(
         &self,
-        _request: Request<proto::QueryRequest>,
+        request: Request<proto::QueryRequest>,
     ) -> Result<Response<proto::QueryResponse>, Status> {
-        Err(Status::unimplemented(format!("Query {PIPELINE_PENDING}")))
+        let started = Instant::now();
+        let request = request.into_inner();
+        let options = QueryOptions {
+            granularity: granularity_from_proto(request.granularity)?,
+            top_k: (request.top_k.max(1)) as usize,
+            threshold: request.min_score.unwrap_or(DEFAULT_RELEVANCY_THRESHOLD),
+        };
+        let outcome = run_query(
+            &self.database,
+            &self.text_encoder,
+            &request.scene_id,
+            &request.text,
+            options,
+        )
+        .await
+        .map_err(query_failure_status)?;
+        // `request.view` asks for masks; they need the GPU mask renderer and its scene cache,
+        // which are not in the service yet, so matches carry objects and scores with no masks.
+        let matches = outcome
+            .matches
+            .into_iter()
+            .map(|found| proto::QueryMatch {
+                object: Some(object_to_proto(found.object)),
+                score: found.score,
+                relevancy: found.relevancy,
+                mask: None,
+                visible_mask: None,
+            })
+            .collect();
+        Ok(Response::new(proto::QueryResponse {
+            matches,
+            no_match: !outcome.matched,
+            model_id: outcome.model_id,
+            latency_ms: started.elapsed().as_secs_f64() * 1000.0,
+        }))
     }
 
     type StreamQueryStream = StreamQueryStream;

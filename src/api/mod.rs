@@ -10,6 +10,7 @@ mod metrics;
 mod objects;
 mod openapi;
 mod ops;
+mod query;
 mod router;
 mod scenes;
 mod server;

@@ -3,7 +3,7 @@
 use axum::Json;
 use utoipa::OpenApi;
 
-use super::{error, jobs, objects, ops, scenes};
+use super::{error, jobs, objects, ops, query, scenes};
 
 #[derive(OpenApi)]
 #[openapi(
@@ -19,6 +19,7 @@ use super::{error, jobs, objects, ops, scenes};
         jobs::cancel_job,
         jobs::job_events,
         objects::list_objects,
+        query::query_scene,
         ops::healthz,
         ops::readyz,
         ops::metrics,
@@ -33,6 +34,9 @@ use super::{error, jobs, objects, ops, scenes};
         jobs::JobList,
         objects::ObjectResponse,
         objects::ObjectList,
+        query::QueryRequest,
+        query::QueryMatchResponse,
+        query::QueryResponse,
         ops::HealthResponse,
         ops::ReadinessResponse,
     )),

@@ -22,6 +22,7 @@ use crate::jobs::{
     HandlerRegistry, JobEventBus, JobHandler, LeaseReaper, WorkerPool, WorkerPoolOptions,
     WorkerSlot, open_adapters,
 };
+use crate::language::SharedTextEncoder;
 use crate::proto::scene_query_server::SceneQueryServer;
 use crate::store::{BlobStore, Database, LocalBlobStore, StoreError};
 
@@ -158,10 +159,21 @@ impl ServiceBuilder {
             job_queued.clone(),
             (lease / 4).clamp(Duration::from_millis(50), Duration::from_secs(5)),
         );
+        // Loaded before the workers start: jobs embed objects with CLIP.
+        let models_config = config.models.clone();
+        let models = Arc::new(
+            tokio::task::spawn_blocking(move || crate::models::ModelsStatus::load(&models_config))
+                .await
+                .unwrap_or_else(|error| {
+                    crate::models::ModelsStatus::Failed(format!("model loading panicked: {error}"))
+                }),
+        );
+        let text_encoder = Arc::new(SharedTextEncoder::new(models.clone()));
         let pool = (!slots.is_empty()).then(|| {
             WorkerPool::start(WorkerPoolOptions {
                 database: database.clone(),
                 blobs: blobs.clone(),
+                models: models.clone(),
                 handlers: self.handlers.clone(),
                 bus: bus.clone(),
                 jobs: config.jobs.clone(),
@@ -173,13 +185,6 @@ impl ServiceBuilder {
             })
         });
 
-        let models_config = config.models.clone();
-        let models =
-            tokio::task::spawn_blocking(move || crate::models::ModelsStatus::load(&models_config))
-                .await
-                .unwrap_or_else(|error| {
-                    crate::models::ModelsStatus::Failed(format!("model loading panicked: {error}"))
-                });
         let state = AppState {
             config: config.clone(),
             database: database.clone(),
@@ -188,14 +193,21 @@ impl ServiceBuilder {
             bus,
             job_queued,
             workers: Arc::new(readiness),
-            models: Arc::new(models),
+            models,
+            text_encoder: text_encoder.clone(),
             metrics,
             shutdown: shutdown.clone(),
         };
         let (http, grpc) = match self.mode {
             ServiceMode::All => {
                 let http = start_http(&config, state.clone()).await?;
-                let grpc = start_grpc(&config, database.clone(), shutdown.clone()).await?;
+                let grpc = start_grpc(
+                    &config,
+                    database.clone(),
+                    text_encoder.clone(),
+                    shutdown.clone(),
+                )
+                .await?;
                 (Some(http), Some(grpc))
             }
             ServiceMode::WorkersOnly => (None, None),
@@ -246,6 +258,7 @@ async fn start_http(
 async fn start_grpc(
     config: &Config,
     database: Database,
+    text_encoder: Arc<SharedTextEncoder>,
     shutdown: CancellationToken,
 ) -> Result<(SocketAddr, JoinHandle<()>), ServiceError> {
     let listener = TcpListener::bind(config.grpc_addr)
@@ -271,7 +284,7 @@ async fn start_grpc(
         .build_v1()
         .map_err(|error| ServiceError::Reflection(error.to_string()))?;
     let scene_query = SceneQueryServer::with_interceptor(
-        SceneQueryService::new(database),
+        SceneQueryService::new(database, text_encoder),
         grpc_interceptor(tokens),
     );
     let task = tokio::spawn(async move {

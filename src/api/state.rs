@@ -24,6 +24,8 @@ pub struct AppState {
     pub workers: Arc<WorkerReadiness>,
     /// The ONNX models loaded at start (or why not); `/readyz` reports it.
     pub models: Arc<crate::models::ModelsStatus>,
+    /// The CLIP text encoder queries share (built on the first query).
+    pub text_encoder: Arc<crate::language::SharedTextEncoder>,
     pub metrics: PrometheusHandle,
     /// Cancelled when the service stops; long-lived responses (SSE) end then.
     pub shutdown: CancellationToken,

@@ -7,6 +7,7 @@ use tokio_util::sync::CancellationToken;
 
 use super::{JobFailure, ProgressReporter};
 use crate::gpu::GpuContext;
+use crate::models::ModelsStatus;
 use crate::store::{BlobError, BlobStore, Database};
 
 pub struct JobContext {
@@ -24,6 +25,8 @@ pub struct JobContext {
     /// The worker's GPU; `None` on CPU-only slots (only for kinds with `needs_gpu() == false`).
     pub gpu: Option<Arc<GpuContext>>,
     pub blobs: Arc<dyn BlobStore>,
+    /// The ONNX models the service loaded (CLIP for object embeddings), or why there are none.
+    pub models: Arc<ModelsStatus>,
     /// For job kinds that record results in tables (objects and their embeddings).
     pub database: Database,
     pub progress: ProgressReporter,

@@ -15,6 +15,7 @@ use super::{HandlerRegistry, JobEventBus};
 use crate::config::JobsConfig;
 use crate::gpu::context::select_adapters;
 use crate::gpu::{AdapterFilter, AdapterReport, GpuContext};
+use crate::models::ModelsStatus;
 use crate::store::{BlobStore, Database};
 
 /// One concurrent job runner; `gpu: None` is a CPU-only slot.
@@ -26,6 +27,8 @@ pub struct WorkerSlot {
 pub struct WorkerPoolOptions {
     pub database: Database,
     pub blobs: Arc<dyn BlobStore>,
+    /// Handed to every job (CLIP embeddings in `segment_then_splat`).
+    pub models: Arc<ModelsStatus>,
     pub handlers: HandlerRegistry,
     pub bus: JobEventBus,
     pub jobs: JobsConfig,
@@ -49,6 +52,7 @@ impl WorkerPool {
         let shared = WorkerShared {
             database: options.database,
             blobs: options.blobs,
+            models: options.models,
             handlers: options.handlers,
             bus: options.bus,
             jobs: options.jobs,

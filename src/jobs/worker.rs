@@ -11,6 +11,7 @@ use tracing::{Instrument, info, info_span, warn};
 use super::{HandlerRegistry, JobContext, JobEventBus, JobFailure, ProgressReporter};
 use crate::config::JobsConfig;
 use crate::gpu::GpuContext;
+use crate::models::ModelsStatus;
 use crate::store::jobs::{AttemptOutcome, HeartbeatOutcome, JobRecord};
 use crate::store::{BlobStore, Database};
 
@@ -19,6 +20,7 @@ use crate::store::{BlobStore, Database};
 pub(crate) struct WorkerShared {
     pub database: Database,
     pub blobs: Arc<dyn BlobStore>,
+    pub models: Arc<ModelsStatus>,
     pub handlers: HandlerRegistry,
     pub bus: JobEventBus,
     pub jobs: JobsConfig,
@@ -155,6 +157,7 @@ impl Worker {
             config: job.config.clone(),
             gpu: self.gpu.clone(),
             blobs: self.shared.blobs.clone(),
+            models: self.shared.models.clone(),
             database: self.shared.database.clone(),
             progress: ProgressReporter::new(
                 self.shared.database.clone(),

@@ -1,13 +1,16 @@
 //! The `segment_then_splat` job: masks per view at three levels -> object ids on the initial
-//! Gaussians -> training with the object loss -> object table. Progress per stage over SSE,
+//! Gaussians -> training with the object loss -> CLIP embeddings per object (when a CLIP image
+//! model is configured) -> object table. Progress per stage over SSE,
 //! checkpoints inside training (a restarted job rebuilds the masks, which is deterministic, and
 //! resumes training from its last checkpoint), cancel honoured at step boundaries.
 //!
 //! Results under the job's output prefix: `scene.ply` (Inria layout), `labels.npy` (object ids
 //! per Gaussian, PLY order), `objects.json` (per object: level, id, Gaussian count, centroid,
 //! bounds, mean colour), `skipped_pairs.json` (the (frame, level, object) pairs the partial-mask
-//! filter left out), `metrics.json`; and the scene's rows in the `objects` table.
+//! filter left out), `metrics.json`; and the scene's rows in the `objects` and
+//! `object_embeddings` tables.
 
+use std::collections::HashSet;
 use std::sync::Arc;
 
 use futures::future::BoxFuture;
@@ -21,17 +24,19 @@ use super::training::{
 use super::view_masks::ViewMaskSet;
 use crate::gpu::GpuContext;
 use crate::jobs::{JobContext, JobFailure, JobHandler, Progress};
+use crate::language::{EmbeddingAccumulator, ObjectView, image_model_id};
+use crate::models::clip::ClipImageEncoder;
 use crate::pipeline::reconstruct::write_scene_files;
 use crate::pipeline::training_job::{
     fatal, report, retryable, train_failure, train_with_checkpoints,
 };
-use crate::scene::{Level, LoadOptions, Scene, load_scene};
+use crate::scene::{Level, LoadOptions, Scene, load_frame_rgb, load_scene};
 use crate::splat::checkpoint::Checkpoint;
 use crate::splat::densify::ObjectFloor;
 use crate::splat::train::{
     EvalReport, ObjectLossConfig, ObjectTargets, TrainConfig, Trainer, TrainerMeta,
 };
-use crate::store::objects::ObjectRecord;
+use crate::store::objects::{ObjectEmbedding, ObjectRecord};
 
 pub const KIND: &str = "segment_then_splat";
 const CHECKPOINT_NAME: &str = "train";
@@ -124,20 +129,23 @@ impl JobHandler for SegmentThenSplatHandler {
         Box::pin(async move {
             let ctx = Arc::new(ctx);
             let worker = Arc::clone(&ctx);
-            let objects = tokio::task::spawn_blocking(move || run_blocking(&worker))
+            let (objects, embeddings) = tokio::task::spawn_blocking(move || run_blocking(&worker))
                 .await
                 .map_err(|error| retryable(format!("worker thread failed: {error}")))??;
             ctx.database
-                .replace_objects(&ctx.scene_id, &objects, &[])
+                .replace_objects(&ctx.scene_id, &objects, &embeddings)
                 .await
                 .map_err(retryable)?;
             let persisted = Progress {
                 stage: "persist".to_string(),
                 step: 1,
                 total_steps: 1,
-                metrics: [("objects".to_string(), objects.len() as f64)]
-                    .into_iter()
-                    .collect(),
+                metrics: [
+                    ("objects".to_string(), objects.len() as f64),
+                    ("embeddings".to_string(), embeddings.len() as f64),
+                ]
+                .into_iter()
+                .collect(),
                 eta_secs: None,
             };
             if let Err(error) = ctx.progress.report(persisted).await {
@@ -148,7 +156,7 @@ impl JobHandler for SegmentThenSplatHandler {
     }
 }
 
-fn run_blocking(ctx: &JobContext) -> Result<Vec<ObjectRecord>, JobFailure> {
+fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedding>), JobFailure> {
     let config: SegmentThenSplatConfig =
         serde_json::from_value(ctx.config.clone()).map_err(fatal)?;
     let gpu: Arc<GpuContext> = ctx
@@ -179,7 +187,85 @@ fn run_blocking(ctx: &JobContext) -> Result<Vec<ObjectRecord>, JobFailure> {
     report(ctx, "segment", 1, 1, &[]);
     let train_seconds =
         train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?;
-    finish(ctx, &scene, &mut trainer, train_seconds)
+    let objects = finish(ctx, &scene, &mut trainer, train_seconds)?;
+    let embeddings = embed_objects(ctx, &scene, &trainer)?;
+    Ok((objects, embeddings))
+}
+
+/// The "embed" stage: one CLIP embedding per object (METHOD.md stage 4, see
+/// [`crate::language::embedding`]) from the training views at the training resolution and their
+/// masks, leaving out the pairs the partial-mask filter skipped. Without a CLIP image model it
+/// is skipped (logged and reported): the objects are still stored, and queries answer "no text
+/// encoder configured".
+fn embed_objects(
+    ctx: &JobContext,
+    scene: &Scene,
+    trainer: &Trainer,
+) -> Result<Vec<ObjectEmbedding>, JobFailure> {
+    let Some(model_id) = image_model_id(&ctx.models) else {
+        tracing::info!("no CLIP image model configured: objects are stored without embeddings");
+        report(ctx, "embed", 0, 0, &[("skipped_no_clip_model", 1.0)]);
+        return Ok(Vec::new());
+    };
+    let store = ctx.models.store().map_err(fatal)?;
+    let encoder = ClipImageEncoder::new(store).map_err(fatal)?;
+    let max_side = trainer.config().max_resolution;
+    let frames: Vec<usize> = trainer
+        .views()
+        .train
+        .iter()
+        .map(|view| view.frame_index)
+        .collect();
+    let masks = ViewMaskSet::from_user_masks(scene, &frames, max_side).map_err(fatal)?;
+    let skipped: HashSet<(usize, Level, u32)> = trainer
+        .skipped_pairs()
+        .into_iter()
+        .map(|pair| (pair.train_view, pair.level, pair.object_id))
+        .collect();
+    let total = masks.views.len() as u64;
+    report(ctx, "embed", 0, total, &[]);
+    let mut accumulator = EmbeddingAccumulator::default();
+    for (view_index, view) in masks.views.iter().enumerate() {
+        ctx.stop_requested()?;
+        let image = load_frame_rgb(scene, view.frame_index, max_side).map_err(retryable)?;
+        let image = image::DynamicImage::ImageRgb32F(image).into_rgb8();
+        let object_view = ObjectView {
+            image: &image,
+            ids: Level::ALL.map(|level| view.ids(level)),
+        };
+        accumulator
+            .add_view(
+                view_index,
+                &object_view,
+                |view, level, id| skipped.contains(&(view, level, id)),
+                &encoder,
+            )
+            .map_err(fatal)?;
+        report(ctx, "embed", view_index as u64 + 1, total, &[]);
+    }
+    let vectors = accumulator.finish();
+    let from_skipped = vectors.iter().filter(|v| v.from_skipped_views).count();
+    tracing::info!(objects = vectors.len(), from_skipped, model = %model_id, "objects embedded");
+    report(
+        ctx,
+        "embed",
+        total,
+        total,
+        &[
+            ("objects", vectors.len() as f64),
+            ("from_skipped_views", from_skipped as f64),
+        ],
+    );
+    Ok(vectors
+        .into_iter()
+        .map(|object| ObjectEmbedding {
+            scene_id: ctx.scene_id.clone(),
+            level: object.level,
+            object_id: object.object_id,
+            model_id: model_id.clone(),
+            vector: object.vector,
+        })
+        .collect())
 }
 
 /// A trainer continuing from a checkpoint: the masks are rebuilt (deterministic) and the
