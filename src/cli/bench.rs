@@ -4,6 +4,13 @@
 use std::path::PathBuf;
 
 use clap::Args;
+use glam::Vec3;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use segsplat::scene::Scene;
+use segsplat::splat::GaussianModel;
+use segsplat::splat::init::random_gaussians;
+use segsplat::splat::train::trainer::initial_model;
 use segsplat::splat::train::{TrainConfig, Trainer};
 use serde::Serialize;
 
@@ -21,8 +28,9 @@ pub struct BenchArgs {
     /// Render passes timed for the forward / backward figures.
     #[arg(long, default_value_t = 10)]
     pub timing_repeats: u32,
-    /// Start from this many random Gaussians in the cameras' bounds instead of the dataset's
-    /// sparse points (to measure how step time scales with the Gaussian count).
+    /// Start from this many random Gaussians inside the sparse points' bounding box (the
+    /// cameras' bounds when the dataset has no points) instead of the points themselves, to
+    /// measure how step time scales with the Gaussian count at a realistic splat density.
     #[arg(long)]
     pub init_random: Option<usize>,
     /// Keep the Gaussian count fixed (no densification, pruning or opacity reset).
@@ -31,6 +39,33 @@ pub struct BenchArgs {
     /// Print one JSON object (otherwise a readable summary).
     #[arg(long)]
     pub json: bool,
+}
+
+/// `count` random Gaussians spread uniformly over the box holding the central 98% of the sparse
+/// points per axis (outliers would stretch it over empty space); without points, 3DGS's random
+/// initialisation in the cameras' bounds.
+fn random_model_in_points_bounds(scene: &mut Scene, count: usize, seed: u64) -> GaussianModel {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xbe_c4);
+    match scene.points.take() {
+        Some(points) if !points.positions.is_empty() => {
+            let bound = |axis: usize, quantile: f32| {
+                let mut values: Vec<f32> = points.positions.iter().map(|p| p[axis]).collect();
+                values.sort_unstable_by(f32::total_cmp);
+                values[((values.len() - 1) as f32 * quantile) as usize]
+            };
+            let min = Vec3::new(bound(0, 0.01), bound(1, 0.01), bound(2, 0.01));
+            let max = Vec3::new(bound(0, 0.99), bound(1, 0.99), bound(2, 0.99));
+            random_gaussians(count, min, max, &mut rng)
+        }
+        _ => {
+            let config = TrainConfig {
+                random_init_count: count,
+                seed,
+                ..TrainConfig::default()
+            };
+            initial_model(scene, &config).unwrap_or_default()
+        }
+    }
 }
 
 #[derive(Serialize)]
@@ -68,14 +103,13 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         seed: args.seed,
         ..Default::default()
     };
-    if let Some(count) = args.init_random {
-        scene.points = None;
-        config.random_init_count = count;
-    }
+    let initial = args
+        .init_random
+        .map(|count| random_model_in_points_bounds(&mut scene, count, args.seed));
     if args.no_densify {
         config.densify_until = 0;
     }
-    let mut trainer = Trainer::new(&ctx, &scene, config, None)?;
+    let mut trainer = Trainer::new(&ctx, &scene, config, initial)?;
     let gaussians_start = trainer.gaussian_count();
     let (forward_ms_start, backward_ms_start) = trainer.time_passes(args.timing_repeats)?;
     let progress = trainer.run(|_| true)?;

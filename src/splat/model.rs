@@ -42,12 +42,10 @@ pub enum ModelError {
     },
     #[error("{count} Gaussians do not fit a GPU scene allocated for {capacity}")]
     OverCapacity { count: usize, capacity: usize },
-    #[error("scene of {count} Gaussians cannot fit this adapter: {source}")]
-    TooLargeForAdapter {
-        count: usize,
-        #[source]
-        source: GpuError,
-    },
+    // The GPU error is part of the message, not a `source`, so job errors (which keep only the
+    // top message) still say which buffer did not fit.
+    #[error("scene of {count} Gaussians cannot fit this adapter: {reason}")]
+    TooLargeForAdapter { count: usize, reason: GpuError },
     #[error(transparent)]
     Gpu(#[from] GpuError),
 }
@@ -122,6 +120,14 @@ impl GaussianModel {
 /// SH band-0 constant.
 pub const SH_C0: f64 = 0.282_094_791_773_878_14;
 
+/// The most Gaussians whose largest per-Gaussian buffer (an `sh_rest` group, 15 f32) fits one
+/// storage binding of this adapter: 2.2 million on lavapipe's 128 MiB. Capacity headroom is
+/// clamped to it, so a scene that fits is never refused for its growth room.
+pub fn max_gaussians_for_adapter(ctx: &GpuContext) -> usize {
+    let largest_bytes_per_gaussian = (SH_REST_COEFFICIENTS_PER_GROUP * 3 * 4) as u64;
+    (ctx.limits.max_storage_buffer_binding_size / largest_bytes_per_gaussian) as usize
+}
+
 /// Usage of every per-Gaussian buffer: read/written by kernels, uploaded, read back, grown by copy.
 fn storage_usage() -> wgpu::BufferUsages {
     wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC
@@ -137,9 +143,9 @@ fn create_per_gaussian(
     // Keep at least one word so empty scenes still bind.
     let bytes = (capacity.max(1) * words_per_gaussian * 4) as u64;
     ctx.check_binding_size(label, bytes)
-        .map_err(|source| ModelError::TooLargeForAdapter {
+        .map_err(|reason| ModelError::TooLargeForAdapter {
             count: capacity,
-            source,
+            reason,
         })?;
     Ok(ctx.device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),

@@ -27,6 +27,7 @@ use crate::splat::init::{gaussians_from_points, random_gaussians};
 use crate::splat::loss::{LossError, LossImages, LossOutputs, RenderLoss};
 use crate::splat::model::{
     GaussianModel, GaussianParameterBuffers, GpuGaussianGrads, GpuGaussians, ModelError,
+    max_gaussians_for_adapter,
 };
 use crate::splat::render::{RenderError, Renderer};
 use crate::splat::schedule::{scene_extent, sh_degree_at};
@@ -189,8 +190,7 @@ impl Trainer {
             None => initial_model(scene, &config)?,
         };
         let views = Views::load(ctx, scene, config.max_resolution, config.eval_split_every)?;
-        let capacity = ((model.len() as f64 * CAPACITY_GROWTH) as usize)
-            .clamp(model.len(), config.max_gaussians.max(model.len()));
+        let capacity = grown_capacity(ctx, model.len(), config.max_gaussians);
         let [max_width, max_height] = views.max_size();
         let pixels = max_width as u64 * max_height as u64;
         let mut loss = RenderLoss::new(ctx)?;
@@ -496,7 +496,13 @@ impl Trainer {
                 config.max_world_scale_fraction.get_or_insert(0.1);
                 config.max_screen_radius_fraction.get_or_insert(0.15);
             }
-            if count >= self.config.max_gaussians {
+            // Stop growing at the configured maximum or what the adapter can hold.
+            if count
+                >= self
+                    .config
+                    .max_gaussians
+                    .min(max_gaussians_for_adapter(&ctx))
+            {
                 config.gradient_threshold = f32::INFINITY;
             }
             let plan = densify::plan_densification(
@@ -539,9 +545,7 @@ impl Trainer {
         let ctx = self.ctx.clone();
         let count = model.len();
         if count > self.gaussians.capacity() {
-            let capacity = ((count as f64 * CAPACITY_GROWTH) as usize)
-                .max(count)
-                .min(self.config.max_gaussians.max(count));
+            let capacity = grown_capacity(&ctx, count, self.config.max_gaussians);
             self.gaussians = GpuGaussians::upload(&ctx, model, capacity)?;
             self.grads = GpuGaussianGrads::new(&ctx, capacity)?;
             self.first_moments = GaussianParameterBuffers::new(&ctx, "adam.m", capacity)?;
@@ -756,6 +760,16 @@ impl Trainer {
     pub fn rng(&mut self) -> &mut impl Rng {
         &mut self.rng
     }
+}
+
+/// Buffer capacity for `count` Gaussians: headroom for densification, within the configured
+/// maximum and what one storage binding of the adapter holds, never below `count` (a scene that
+/// does not fit then fails with the buffer's name and size).
+fn grown_capacity(ctx: &GpuContext, count: usize, max_gaussians: usize) -> usize {
+    let ceiling = max_gaussians.min(max_gaussians_for_adapter(ctx));
+    ((count as f64 * CAPACITY_GROWTH) as usize)
+        .min(ceiling)
+        .max(count)
 }
 
 fn gather_fresh_zero(plan: &DensifyPlan, rows: &GaussianModel) -> GaussianModel {
