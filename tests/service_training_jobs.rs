@@ -160,7 +160,7 @@ async fn segment_then_splat_job_stores_objects_at_three_levels() {
         .create_job(
             unmasked_id,
             "segment_then_splat",
-            serde_json::json!({"steps": 10}),
+            serde_json::json!({"steps": 10, "masks": "user"}),
         )
         .await;
     let job = client
@@ -168,8 +168,20 @@ async fn segment_then_splat_job_stores_objects_at_three_levels() {
         .await;
     assert!(
         job["error"].as_str().unwrap_or_default().contains("masks"),
-        "a scene without masks fails with a reason: {job}"
+        "user masks asked of a scene without them fail with a reason: {job}"
     );
+    // Without user masks or a SAM model, `auto` segments with the classical fallback.
+    let job_id = client
+        .create_job(
+            unmasked_id,
+            "segment_then_splat",
+            serde_json::json!({"steps": 10, "checkpoint_every": 0}),
+        )
+        .await;
+    let job = client
+        .wait_for_state(&job_id, "succeeded", Duration::from_secs(240))
+        .await;
+    assert_eq!(job["progress"]["stage"], "persist", "{job}");
 
     let with_masks = SyntheticSpec {
         with_masks: Some(Level::ALL.to_vec()),

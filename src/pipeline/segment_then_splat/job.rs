@@ -16,9 +16,10 @@ use std::sync::Arc;
 use futures::future::BoxFuture;
 use serde::{Deserialize, Serialize};
 
+use super::association::{AssociationOptions, generated_view_masks};
 use super::objects::{ObjectSummary, summarize_objects};
 use super::training::{
-    DEFAULT_OBJECT_FLOORS, SegmentedTrainingOptions, segmented_trainer_from_user_masks,
+    DEFAULT_OBJECT_FLOORS, SegmentedTrainingOptions, segmented_trainer_from_view_masks,
     training_frames,
 };
 use super::view_masks::ViewMaskSet;
@@ -26,11 +27,13 @@ use crate::gpu::GpuContext;
 use crate::jobs::{JobContext, JobFailure, JobHandler, Progress};
 use crate::language::{EmbeddingAccumulator, ObjectView, image_model_id};
 use crate::models::clip::ClipImageEncoder;
+use crate::models::sam::{SamModel, SamPredictor};
 use crate::pipeline::reconstruct::write_scene_files;
 use crate::pipeline::training_job::{
     fatal, report, retryable, train_failure, train_with_checkpoints,
 };
 use crate::scene::{Level, LoadOptions, Scene, load_frame_rgb, load_scene};
+use crate::segment::{AutomaticConfig, ClassicalConfig, MaskGenerator};
 use crate::splat::checkpoint::Checkpoint;
 use crate::splat::densify::ObjectFloor;
 use crate::splat::train::{
@@ -45,12 +48,16 @@ const CHECKPOINT_NAME: &str = "train";
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum MaskSource {
-    /// The scene's own masks when it has them (the only source this job runs today; generated
-    /// masks need the stage 1 association, which is in progress).
+    /// The scene's own masks when it has them, else SAM-family automatic masks when a SAM model
+    /// is configured, else the classical segmenter.
     #[default]
     Auto,
-    /// The scene's `masks/{small,middle,large}/` instance-id PNGs.
+    /// The scene's `masks/{small,middle,large}/` instance-id PNGs (stage 1 is skipped).
     User,
+    /// Automatic masks from the configured SAM-family model, associated across views.
+    Automatic,
+    /// The model-free classical segmenter, associated across views.
+    Classical,
 }
 
 /// The job's config: training settings (the object loss on by default), mask source, the
@@ -164,13 +171,10 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
         .clone()
         .ok_or_else(|| fatal("the segment_then_splat job needs a GPU worker"))?;
     let scene = load_scene(&ctx.scene_dir, &LoadOptions::default()).map_err(fatal)?;
-    if scene.masks.is_none() {
-        return Err(fatal(
-            "the scene has no masks/{small,middle,large}/ instance masks; segmenting scenes \
-             without user masks is not available in this job yet",
-        ));
-    }
-    report(ctx, "segment", 0, 1, &[]);
+    let frames = training_frames(&scene, &config.train);
+    // Stage 1 runs again on a resumed attempt: every mask source is deterministic, and the
+    // masks are cheaper to rebuild than to store.
+    let masks = view_masks_for(ctx, &scene, &config, &frames)?;
     let options = SegmentedTrainingOptions {
         object_floors: config.object_floors,
         ..SegmentedTrainingOptions::default()
@@ -179,17 +183,87 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
         Some(bytes) => {
             let checkpoint = Checkpoint::<TrainerMeta>::from_bytes(&bytes).map_err(retryable)?;
             tracing::info!(step = checkpoint.meta.step, "resuming from checkpoint");
-            resume_segmented(&gpu, &scene, &checkpoint, &options)?
+            resume_segmented(&gpu, &scene, &checkpoint, &masks, &options)?
         }
-        None => segmented_trainer_from_user_masks(&gpu, &scene, config.train.clone(), &options)
-            .map_err(fatal)?,
+        None => {
+            segmented_trainer_from_view_masks(&gpu, &scene, config.train.clone(), &masks, &options)
+                .map_err(fatal)?
+        }
     };
-    report(ctx, "segment", 1, 1, &[]);
     let train_seconds =
         train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?;
     let objects = finish(ctx, &scene, &mut trainer, train_seconds)?;
-    let embeddings = embed_objects(ctx, &scene, &trainer)?;
+    let embeddings = embed_objects(ctx, &scene, &trainer, &masks)?;
     Ok((objects, embeddings))
+}
+
+/// Stage 1: the training views' masks at three levels from the configured source, with ids
+/// consistent across views. Reports the "segment" stage.
+fn view_masks_for(
+    ctx: &JobContext,
+    scene: &Scene,
+    config: &SegmentThenSplatConfig,
+    frames: &[usize],
+) -> Result<ViewMaskSet, JobFailure> {
+    let max_side = config.train.max_resolution;
+    let source = match config.masks {
+        MaskSource::Auto if scene.masks.is_some() => MaskSource::User,
+        MaskSource::Auto if sam_model(ctx).is_some() => MaskSource::Automatic,
+        MaskSource::Auto => MaskSource::Classical,
+        chosen => chosen,
+    };
+    report(ctx, "segment", 0, 1, &[]);
+    let mut generator = match source {
+        MaskSource::User | MaskSource::Auto => {
+            if scene.masks.is_none() {
+                return Err(fatal(
+                    "masks: \"user\" needs masks/{small,middle,large}/ instance-id PNGs in the scene",
+                ));
+            }
+            let masks = ViewMaskSet::from_user_masks(scene, frames, max_side).map_err(fatal)?;
+            report(ctx, "segment", 1, 1, &[("views", masks.views.len() as f64)]);
+            return Ok(masks);
+        }
+        MaskSource::Automatic => {
+            let model = sam_model(ctx).ok_or_else(|| {
+                fatal("masks: \"automatic\" needs a SAM-family model in models.dir")
+            })?;
+            MaskGenerator::Automatic {
+                segmenter: Box::new(SamPredictor::new(model)),
+                config: AutomaticConfig::default(),
+            }
+        }
+        MaskSource::Classical => MaskGenerator::Classical(ClassicalConfig::default()),
+    };
+    tracing::info!(?source, views = frames.len(), "generating masks");
+    let (masks, association) = generated_view_masks(
+        scene,
+        frames,
+        &mut generator,
+        max_side,
+        &AssociationOptions::default(),
+    )
+    .map_err(fatal)?;
+    let objects = association.levels.map(|level| level.objects as f64);
+    report(
+        ctx,
+        "segment",
+        1,
+        1,
+        &[
+            ("views", masks.views.len() as f64),
+            ("small_objects", objects[0]),
+            ("middle_objects", objects[1]),
+            ("large_objects", objects[2]),
+        ],
+    );
+    Ok(masks)
+}
+
+/// The configured SAM-family model, when the model directory has one.
+fn sam_model(ctx: &JobContext) -> Option<SamModel> {
+    let store = ctx.models.store().ok()?;
+    SamModel::new(store).ok()
 }
 
 /// The "embed" stage: one CLIP embedding per object (METHOD.md stage 4, see
@@ -201,6 +275,7 @@ fn embed_objects(
     ctx: &JobContext,
     scene: &Scene,
     trainer: &Trainer,
+    masks: &ViewMaskSet,
 ) -> Result<Vec<ObjectEmbedding>, JobFailure> {
     let Some(model_id) = image_model_id(&ctx.models) else {
         tracing::info!("no CLIP image model configured: objects are stored without embeddings");
@@ -210,13 +285,6 @@ fn embed_objects(
     let store = ctx.models.store().map_err(fatal)?;
     let encoder = ClipImageEncoder::new(store).map_err(fatal)?;
     let max_side = trainer.config().max_resolution;
-    let frames: Vec<usize> = trainer
-        .views()
-        .train
-        .iter()
-        .map(|view| view.frame_index)
-        .collect();
-    let masks = ViewMaskSet::from_user_masks(scene, &frames, max_side).map_err(fatal)?;
     let skipped: HashSet<(usize, Level, u32)> = trainer
         .skipped_pairs()
         .into_iter()
@@ -274,12 +342,10 @@ fn resume_segmented(
     gpu: &GpuContext,
     scene: &Scene,
     checkpoint: &Checkpoint<TrainerMeta>,
+    masks: &ViewMaskSet,
     options: &SegmentedTrainingOptions,
 ) -> Result<Trainer, JobFailure> {
     let mut trainer = Trainer::resume(gpu, scene, checkpoint).map_err(train_failure)?;
-    let frames = training_frames(scene, trainer.config());
-    let masks = ViewMaskSet::from_user_masks(scene, &frames, trainer.config().max_resolution)
-        .map_err(fatal)?;
     trainer.set_prune_guard(Box::new(ObjectFloor {
         floors: options.object_floors,
     }));
