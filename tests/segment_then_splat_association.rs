@@ -8,8 +8,9 @@
 //! - Trained end to end from classical masks, each true object's best predicted object (any
 //!   level, the issue's `--oracle` selection) must match its held-out full silhouette.
 
-use glam::Vec3;
-use segsplat::gpu::GpuContext;
+mod segment_then_splat_support;
+
+use segment_then_splat_support::{config, full_truth, gpu, iou, mean, synthetic_scene};
 use segsplat::pipeline::segment_then_splat::association::{
     AssociationError, AssociationOptions, AssociationReport, associate_frame_masks,
     generated_view_masks,
@@ -20,15 +21,10 @@ use segsplat::pipeline::segment_then_splat::training::{
     SegmentedTrainingOptions, segmented_trainer_from_generated_masks, training_frames,
 };
 use segsplat::pipeline::segment_then_splat::view_masks::ViewMaskSet;
-use segsplat::scene::colmap::ColmapEncoding;
-use segsplat::scene::synthetic::{
-    SYNTHETIC_BACKGROUND, SyntheticSpec, synthetic_objects, write_colmap,
-};
-use segsplat::scene::{Level, LoadOptions, Scene, load_scene};
+use segsplat::scene::{Level, Scene};
 use segsplat::segment::{ClassicalConfig, MaskGenerator, SegmentError, user_frame_masks};
 use segsplat::splat::ObjectFilter;
 use segsplat::splat::render::Renderer;
-use segsplat::splat::train::{ObjectLossConfig, TrainConfig};
 
 /// Objects per level (small, middle, large) in the synthetic scene.
 const TRUE_OBJECTS: [usize; 3] = [3, 2, 1];
@@ -48,36 +44,6 @@ fn classical_generator() -> MaskGenerator {
         scale_per_level: [1000.0, 4000.0, 16000.0],
         ..ClassicalConfig::default()
     })
-}
-
-fn synthetic_scene(dir: &std::path::Path) -> Scene {
-    let spec = SyntheticSpec {
-        frame_count: 32,
-        width: 96,
-        height: 72,
-        with_masks: Some(Level::ALL.to_vec()),
-        ..Default::default()
-    };
-    write_colmap(dir, &spec, ColmapEncoding::Binary).unwrap();
-    load_scene(dir, &LoadOptions::default()).unwrap()
-}
-
-fn config() -> TrainConfig {
-    TrainConfig {
-        steps: 600,
-        max_resolution: None,
-        background: SYNTHETIC_BACKGROUND.map(|c| c as f32 / 255.0),
-        sh_degree_interval: 100,
-        densify_from: 100,
-        densify_until: 450,
-        densify_interval: 100,
-        opacity_reset_interval: 0,
-        object_loss: Some(ObjectLossConfig {
-            objects_per_level: 2,
-            ..Default::default()
-        }),
-        ..Default::default()
-    }
 }
 
 /// Associates the scene's own masks after scrambling them in every view: each level's masks
@@ -138,7 +104,7 @@ fn assert_exact_recovery(predicted: &ViewMaskSet, truth: &ViewMaskSet) {
 #[test]
 fn scrambled_user_masks_regain_one_id_per_object_by_tracks_and_by_projection() {
     let dir = tempfile::tempdir().unwrap();
-    let mut scene = synthetic_scene(dir.path());
+    let mut scene = synthetic_scene(dir.path(), |_| ());
     let frames = training_frames(&scene, &config());
     let truth = ViewMaskSet::from_user_masks(&scene, &frames, None).unwrap();
 
@@ -160,7 +126,7 @@ fn scrambled_user_masks_regain_one_id_per_object_by_tracks_and_by_projection() {
 #[test]
 fn classical_masks_associate_with_stated_recall_and_no_duplicates() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = synthetic_scene(dir.path());
+    let scene = synthetic_scene(dir.path(), |_| ());
     let frames = training_frames(&scene, &config());
     let truth = ViewMaskSet::from_user_masks(&scene, &frames, None).unwrap();
     let mut generator = classical_generator();
@@ -194,59 +160,11 @@ fn classical_masks_associate_with_stated_recall_and_no_duplicates() {
     );
 }
 
-/// The true full silhouette of an object: every pixel whose ray meets one of its spheres.
-fn full_truth(scene: &Scene, frame_index: usize, level: Level, object: u32) -> Vec<bool> {
-    let frame = &scene.frames[frame_index];
-    let k = &frame.intrinsics;
-    let origin = frame.world_from_camera.transform_point3(Vec3::ZERO);
-    let spheres: Vec<_> = synthetic_objects()
-        .into_iter()
-        .filter(|s| s.ids[level.index()] == object)
-        .collect();
-    (0..k.height * k.width)
-        .map(|pixel| {
-            let (x, y) = (pixel % k.width, pixel / k.width);
-            let camera_direction = Vec3::new(
-                ((f64::from(x) + 0.5 - k.cx) / k.fx) as f32,
-                ((f64::from(y) + 0.5 - k.cy) / k.fy) as f32,
-                1.0,
-            );
-            let direction = frame
-                .world_from_camera
-                .transform_vector3(camera_direction)
-                .normalize();
-            spheres.iter().any(|s| {
-                let to_origin = origin - s.center;
-                let b = to_origin.dot(direction);
-                b * b - (to_origin.length_squared() - s.radius * s.radius) >= 0.0
-            })
-        })
-        .collect()
-}
-
-fn iou(predicted: &[bool], truth: &[bool]) -> f64 {
-    let both = predicted.iter().zip(truth).filter(|(p, t)| **p && **t);
-    let either = predicted.iter().zip(truth).filter(|(p, t)| **p || **t);
-    let (intersection, union) = (both.count(), either.count());
-    if union == 0 {
-        1.0
-    } else {
-        intersection as f64 / union as f64
-    }
-}
-
 #[test]
 fn trained_from_classical_masks_oracle_objects_match_held_out_truth() {
-    let ctx = match GpuContext::new_default() {
-        Ok(ctx) => ctx,
-        Err(error) if std::env::var("SEGSPLAT_SKIP_GPU_TESTS").is_ok() => {
-            eprintln!("skipping: no GPU adapter ({error})");
-            return;
-        }
-        Err(error) => panic!("no GPU adapter: {error}"),
-    };
+    let Some(ctx) = gpu() else { return };
     let dir = tempfile::tempdir().unwrap();
-    let scene = synthetic_scene(dir.path());
+    let scene = synthetic_scene(dir.path(), |_| ());
     let mut generator = classical_generator();
     let (mut trainer, report) = segmented_trainer_from_generated_masks(
         &ctx,
@@ -318,8 +236,4 @@ fn trained_from_classical_masks_oracle_objects_match_held_out_truth() {
     let miou = mean(&per_view_scores.iter().map(|s| mean(s)).collect::<Vec<_>>());
     eprintln!("held-out oracle full mIoU from classical masks: {miou:.4}");
     assert!(miou >= MIN_CLASSICAL_ORACLE_MIOU, "oracle mIoU {miou:.4}");
-}
-
-fn mean(values: &[f64]) -> f64 {
-    values.iter().sum::<f64>() / values.len().max(1) as f64
 }

@@ -5,23 +5,20 @@
 //! mask (mIoU, the paper's way: mean over objects in a frame, then over frames), every object
 //! must keep Gaussians, and a mask planted as a partial view must be filtered out.
 
-use glam::Vec3;
+mod segment_then_splat_support;
+
 use image::{GrayImage, Luma};
-use segsplat::gpu::GpuContext;
+use segment_then_splat_support::{config, full_truth, gpu, iou, mean, synthetic_scene};
 use segsplat::pipeline::segment_then_splat::objects::{
     full_mask, render_layer, summarize_objects, visible_mask,
 };
 use segsplat::pipeline::segment_then_splat::training::{
     SegmentedTrainingOptions, segmented_trainer_from_user_masks,
 };
-use segsplat::scene::colmap::ColmapEncoding;
-use segsplat::scene::synthetic::{
-    SYNTHETIC_BACKGROUND, SyntheticSpec, synthetic_objects, write_colmap,
-};
-use segsplat::scene::{Level, LoadOptions, Scene, load_instance_mask, load_scene};
+use segsplat::scene::{Level, load_instance_mask};
 use segsplat::splat::ObjectFilter;
 use segsplat::splat::render::Renderer;
-use segsplat::splat::train::{ObjectLossConfig, SkippedPair, TrainConfig};
+use segsplat::splat::train::SkippedPair;
 
 /// Held-out mIoU the trained full (amodal) object masks must reach against the true silhouettes.
 const MIN_FULL_MIOU: f64 = 0.9;
@@ -30,30 +27,6 @@ const MIN_VISIBLE_MIOU: f64 = 0.85;
 /// The frame whose small-level mask of sphere 3 is cut down to a sliver (a planted partial).
 const PLANTED_FRAME: usize = 5;
 const PLANTED_OBJECT: u32 = 3;
-
-fn gpu() -> Option<GpuContext> {
-    match GpuContext::new_default() {
-        Ok(ctx) => Some(ctx),
-        Err(error) if std::env::var("SEGSPLAT_SKIP_GPU_TESTS").is_ok() => {
-            eprintln!("skipping: no GPU adapter ({error})");
-            None
-        }
-        Err(error) => panic!("no GPU adapter: {error}"),
-    }
-}
-
-fn synthetic_scene(dir: &std::path::Path) -> Scene {
-    let spec = SyntheticSpec {
-        frame_count: 32,
-        width: 96,
-        height: 72,
-        with_masks: Some(Level::ALL.to_vec()),
-        ..Default::default()
-    };
-    write_colmap(dir, &spec, ColmapEncoding::Binary).unwrap();
-    plant_partial_mask(dir, PLANTED_FRAME, PLANTED_OBJECT);
-    load_scene(dir, &LoadOptions::default()).unwrap()
-}
 
 /// Keeps only the top fifth of `object`'s pixels in one small-level mask, as if the rest were
 /// hidden: a partial 2D view of a whole 3D object.
@@ -75,82 +48,13 @@ fn plant_partial_mask(dir: &std::path::Path, frame: usize, object: u32) {
     mask.save(&path).unwrap();
 }
 
-fn config() -> TrainConfig {
-    TrainConfig {
-        steps: 600,
-        max_resolution: None,
-        background: SYNTHETIC_BACKGROUND.map(|c| c as f32 / 255.0),
-        sh_degree_interval: 100,
-        densify_from: 100,
-        densify_until: 450,
-        densify_interval: 100,
-        opacity_reset_interval: 0,
-        object_loss: Some(ObjectLossConfig {
-            objects_per_level: 2,
-            ..Default::default()
-        }),
-        ..Default::default()
-    }
-}
-
-/// The true full silhouette of an object: every pixel whose ray meets one of its spheres.
-fn full_truth(scene: &Scene, frame_index: usize, level: Level, object: u32) -> Vec<bool> {
-    let frame = &scene.frames[frame_index];
-    let k = &frame.intrinsics;
-    let origin = frame.world_from_camera.transform_point3(Vec3::ZERO);
-    let spheres: Vec<_> = synthetic_objects()
-        .into_iter()
-        .filter(|s| s.ids[level.index()] == object)
-        .collect();
-    let mut mask = Vec::with_capacity((k.width * k.height) as usize);
-    for y in 0..k.height {
-        for x in 0..k.width {
-            let camera_direction = Vec3::new(
-                ((f64::from(x) + 0.5 - k.cx) / k.fx) as f32,
-                ((f64::from(y) + 0.5 - k.cy) / k.fy) as f32,
-                1.0,
-            );
-            let direction = frame
-                .world_from_camera
-                .transform_vector3(camera_direction)
-                .normalize();
-            mask.push(spheres.iter().any(|s| {
-                let to_origin = origin - s.center;
-                let b = to_origin.dot(direction);
-                b * b - (to_origin.length_squared() - s.radius * s.radius) >= 0.0
-            }));
-        }
-    }
-    mask
-}
-
-fn mean(values: &[f64]) -> f64 {
-    values.iter().sum::<f64>() / values.len().max(1) as f64
-}
-
-fn iou(predicted: &[bool], truth: &[bool]) -> f64 {
-    let intersection = predicted
-        .iter()
-        .zip(truth)
-        .filter(|(p, t)| **p && **t)
-        .count();
-    let union = predicted
-        .iter()
-        .zip(truth)
-        .filter(|(p, t)| **p || **t)
-        .count();
-    if union == 0 {
-        1.0
-    } else {
-        intersection as f64 / union as f64
-    }
-}
-
 #[test]
 fn trained_object_masks_match_held_out_truth() {
     let Some(ctx) = gpu() else { return };
     let dir = tempfile::tempdir().unwrap();
-    let scene = synthetic_scene(dir.path());
+    let scene = synthetic_scene(dir.path(), |dir| {
+        plant_partial_mask(dir, PLANTED_FRAME, PLANTED_OBJECT)
+    });
     let mut trainer = segmented_trainer_from_user_masks(
         &ctx,
         &scene,

@@ -1,0 +1,104 @@
+//! Shared by the Segment-then-Splat end-to-end tests: the synthetic three-sphere scene at the
+//! tests' size, the short training config, true full silhouettes and the mIoU arithmetic.
+#![allow(dead_code)]
+
+use glam::Vec3;
+use segsplat::gpu::GpuContext;
+use segsplat::scene::colmap::ColmapEncoding;
+use segsplat::scene::synthetic::{
+    SYNTHETIC_BACKGROUND, SyntheticSpec, synthetic_objects, write_colmap,
+};
+use segsplat::scene::{Level, LoadOptions, Scene, load_scene};
+use segsplat::splat::train::{ObjectLossConfig, TrainConfig};
+
+/// The adapter, or `None` (skip, with the reason printed) when there is none and
+/// `SEGSPLAT_SKIP_GPU_TESTS` is set; without that variable a missing adapter fails.
+pub fn gpu() -> Option<GpuContext> {
+    match GpuContext::new_default() {
+        Ok(ctx) => Some(ctx),
+        Err(error) if std::env::var("SEGSPLAT_SKIP_GPU_TESTS").is_ok() => {
+            eprintln!("skipping: no GPU adapter ({error})");
+            None
+        }
+        Err(error) => panic!("no GPU adapter: {error}"),
+    }
+}
+
+/// Writes the synthetic COLMAP scene (32 ring views at 96x72, masks at every level, points with
+/// tracks) into `dir`, lets `edit` change its files, and loads it.
+pub fn synthetic_scene(dir: &std::path::Path, edit: impl FnOnce(&std::path::Path)) -> Scene {
+    let spec = SyntheticSpec {
+        frame_count: 32,
+        width: 96,
+        height: 72,
+        with_masks: Some(Level::ALL.to_vec()),
+        ..Default::default()
+    };
+    write_colmap(dir, &spec, ColmapEncoding::Binary).unwrap();
+    edit(dir);
+    load_scene(dir, &LoadOptions::default()).unwrap()
+}
+
+/// 600 steps with densification and the object loss (m = 2): about a minute on lavapipe.
+pub fn config() -> TrainConfig {
+    TrainConfig {
+        steps: 600,
+        max_resolution: None,
+        background: SYNTHETIC_BACKGROUND.map(|c| c as f32 / 255.0),
+        sh_degree_interval: 100,
+        densify_from: 100,
+        densify_until: 450,
+        densify_interval: 100,
+        opacity_reset_interval: 0,
+        object_loss: Some(ObjectLossConfig {
+            objects_per_level: 2,
+            ..Default::default()
+        }),
+        ..Default::default()
+    }
+}
+
+/// The true full silhouette of an object: every pixel whose ray meets one of its spheres.
+pub fn full_truth(scene: &Scene, frame_index: usize, level: Level, object: u32) -> Vec<bool> {
+    let frame = &scene.frames[frame_index];
+    let k = &frame.intrinsics;
+    let origin = frame.world_from_camera.transform_point3(Vec3::ZERO);
+    let spheres: Vec<_> = synthetic_objects()
+        .into_iter()
+        .filter(|s| s.ids[level.index()] == object)
+        .collect();
+    (0..k.height * k.width)
+        .map(|pixel| {
+            let (x, y) = (pixel % k.width, pixel / k.width);
+            let camera_direction = Vec3::new(
+                ((f64::from(x) + 0.5 - k.cx) / k.fx) as f32,
+                ((f64::from(y) + 0.5 - k.cy) / k.fy) as f32,
+                1.0,
+            );
+            let direction = frame
+                .world_from_camera
+                .transform_vector3(camera_direction)
+                .normalize();
+            spheres.iter().any(|s| {
+                let to_origin = origin - s.center;
+                let b = to_origin.dot(direction);
+                b * b - (to_origin.length_squared() - s.radius * s.radius) >= 0.0
+            })
+        })
+        .collect()
+}
+
+pub fn iou(predicted: &[bool], truth: &[bool]) -> f64 {
+    let both = predicted.iter().zip(truth).filter(|(p, t)| **p && **t);
+    let either = predicted.iter().zip(truth).filter(|(p, t)| **p || **t);
+    let (intersection, union) = (both.count(), either.count());
+    if union == 0 {
+        1.0
+    } else {
+        intersection as f64 / union as f64
+    }
+}
+
+pub fn mean(values: &[f64]) -> f64 {
+    values.iter().sum::<f64>() / values.len().max(1) as f64
+}
