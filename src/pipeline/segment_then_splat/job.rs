@@ -18,6 +18,7 @@ use serde::{Deserialize, Serialize};
 
 use super::association::{AssociationOptions, generated_view_masks};
 use super::objects::{ObjectSummary, summarize_objects};
+use super::track_merge::{TrackMergeRule, merge_lost_tracks};
 use super::training::{
     DEFAULT_OBJECT_FLOORS, SegmentedTrainingOptions, segmented_trainer_from_view_masks,
     training_frames,
@@ -236,7 +237,7 @@ fn view_masks_for(
         MaskSource::Classical => MaskGenerator::Classical(ClassicalConfig::default()),
     };
     tracing::info!(?source, views = frames.len(), "generating masks");
-    let (masks, association) = generated_view_masks(
+    let (mut masks, association) = generated_view_masks(
         scene,
         frames,
         &mut generator,
@@ -244,6 +245,8 @@ fn view_masks_for(
         &AssociationOptions::default(),
     )
     .map_err(fatal)?;
+    let merges = merge_lost_tracks(scene, &mut masks, &config.train, TrackMergeRule::default())
+        .map_err(fatal)?;
     let objects = association.levels.map(|level| level.objects as f64);
     report(
         ctx,
@@ -255,6 +258,7 @@ fn view_masks_for(
             ("small_objects", objects[0]),
             ("middle_objects", objects[1]),
             ("large_objects", objects[2]),
+            ("lost_track_merges", merges.iter().sum::<usize>() as f64),
         ],
     );
     Ok(masks)

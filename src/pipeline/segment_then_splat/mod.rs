@@ -8,6 +8,7 @@ pub mod job;
 mod mask_links;
 pub mod objects;
 mod projected_visibility;
+pub mod track_merge;
 pub mod track_metrics;
 pub mod training;
 pub mod view_masks;

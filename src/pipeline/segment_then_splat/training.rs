@@ -6,6 +6,7 @@ use super::association::{
     AssociationError, AssociationOptions, AssociationReport, generated_view_masks,
 };
 use super::id_voting::{Observations, VotingRule, vote_object_ids};
+use super::track_merge::{TrackMergeRule, merge_lost_tracks};
 use super::view_masks::{ViewMaskSet, ViewMaskSetError};
 use crate::gpu::GpuContext;
 use crate::scene::{Scene, SparsePoints};
@@ -135,13 +136,14 @@ pub fn segmented_trainer_from_generated_masks(
     association: &AssociationOptions,
 ) -> Result<(Trainer, AssociationReport), SegmentedTrainingError> {
     let frames = training_frames(scene, &config);
-    let (masks, report) = generated_view_masks(
+    let (mut masks, report) = generated_view_masks(
         scene,
         &frames,
         generator,
         config.max_resolution,
         association,
     )?;
+    merge_lost_tracks(scene, &mut masks, &config, TrackMergeRule::default())?;
     let trainer = segmented_trainer_from_view_masks(ctx, scene, config, &masks, options)?;
     Ok((trainer, report))
 }
