@@ -3,6 +3,7 @@
 
 pub mod association;
 mod global_objects;
+pub mod hull_points;
 pub mod id_voting;
 pub mod job;
 mod mask_links;

@@ -5,6 +5,7 @@
 use super::association::{
     AssociationError, AssociationOptions, AssociationReport, generated_view_masks,
 };
+use super::hull_points::{HullFill, append_points, hull_points_for_missed_objects};
 use super::id_voting::{Observations, VotingRule, vote_object_ids};
 use super::track_merge::{TrackMergeRule, merge_lost_tracks};
 use super::view_masks::{ViewMaskSet, ViewMaskSetError};
@@ -84,6 +85,18 @@ pub fn initial_segmented_model(
         .collect();
     let positions: Vec<glam::Vec3> = model.means.iter().map(|m| glam::Vec3::from(*m)).collect();
     model.object_ids = vote_object_ids(&positions, &observations, masks, voting);
+    // Objects the points missed get points carved from their visual hull, voted like the rest.
+    let hull = hull_points_for_missed_objects(masks, &model, HullFill::default());
+    if !hull.is_empty() {
+        let first_new = model.len();
+        append_points(&mut model, &hull);
+        let ids = vote_object_ids(&hull, &vec![None; hull.len()], masks, voting);
+        model.object_ids[first_new..].copy_from_slice(&ids);
+        tracing::info!(
+            points = hull.len(),
+            "visual-hull points for objects the sparse points missed"
+        );
+    }
     Ok(model)
 }
 
