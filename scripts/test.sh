@@ -4,4 +4,10 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 # Mesa warns on every device creation without it; harmless but noisy.
 export XDG_RUNTIME_DIR=${XDG_RUNTIME_DIR:-/tmp}
-cargo test --locked --all-targets -- --test-threads=2
+# Two test threads through the environment, not `-- --test-threads=2`: the criterion benches
+# (run once each in test mode) have their own argument parser and reject that flag.
+export RUST_TEST_THREADS=${RUST_TEST_THREADS:-2}
+# Benches first (one quick pass each, to prove they still run), then every test target, so the
+# run ends on the test summary.
+cargo test --locked --benches
+cargo test --locked --lib --bins --tests
