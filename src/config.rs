@@ -160,7 +160,7 @@ impl Default for WorkersConfig {
 }
 
 /// ONNX models (docs/models.md). Without `dir` the service runs without learned models.
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ModelsConfig {
     /// Model directory with `manifest.json`; unset = no models (classical segmenter, no text
@@ -172,8 +172,21 @@ pub struct ModelsConfig {
     pub intra_threads: usize,
     /// Threads across operators; 0 = ONNX Runtime's default.
     pub inter_threads: usize,
-    /// Use the CUDA execution provider when the library and a GPU offer it.
+    /// Use the CUDA execution provider when the library and a GPU offer it (on by default; the
+    /// CPU otherwise). `false` keeps models on the CPU even where CUDA is available.
     pub cuda: bool,
+}
+
+impl Default for ModelsConfig {
+    fn default() -> Self {
+        Self {
+            dir: None,
+            ort_library: None,
+            intra_threads: 0,
+            inter_threads: 0,
+            cuda: true,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -483,14 +496,18 @@ mod tests {
             env(&[
                 ("SEGSPLAT_MODELS__DIR", "/srv/models"),
                 ("SEGSPLAT_MODELS__INTRA_THREADS", "4"),
-                ("SEGSPLAT_MODELS__CUDA", "true"),
+                ("SEGSPLAT_MODELS__CUDA", "false"),
             ]),
             &ConfigOverrides::default(),
         )
         .unwrap();
         assert_eq!(config.models.dir, Some(PathBuf::from("/srv/models")));
         assert_eq!(config.models.intra_threads, 4);
-        assert!(config.models.cuda);
+        assert!(!config.models.cuda);
+        assert!(
+            Config::default().models.cuda,
+            "CUDA is used where offered by default"
+        );
         assert_eq!(config.models.ort_library, None);
         assert!(Config::default().models.dir.is_none());
 

@@ -144,8 +144,8 @@ fn build_session(
                     "the CUDA execution provider did not register; running on the CPU"
                 ),
             },
-            Ok(false) => tracing::warn!(
-                "models.cuda is set but this ONNX Runtime has no CUDA execution provider; running on the CPU"
+            Ok(false) => tracing::info!(
+                "this ONNX Runtime has no CUDA execution provider; models run on the CPU"
             ),
             Err(error) => {
                 tracing::warn!(%error, "cannot list execution providers; running on the CPU")
