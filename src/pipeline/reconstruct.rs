@@ -8,7 +8,9 @@ use std::sync::Arc;
 use futures::future::BoxFuture;
 use serde::{Deserialize, Serialize};
 
-use super::training_job::{fatal, report, retryable, train_failure, train_with_checkpoints};
+use super::training_job::{
+    fatal, report_evaluation, retryable, store_outputs, train_failure, train_with_checkpoints,
+};
 use crate::gpu::GpuContext;
 use crate::jobs::{JobContext, JobFailure, JobHandler};
 use crate::scene::{LoadOptions, load_scene};
@@ -112,7 +114,6 @@ fn run_blocking(ctx: &JobContext) -> Result<(), JobFailure> {
 fn finish(ctx: &JobContext, trainer: &mut Trainer, train_seconds: f64) -> Result<(), JobFailure> {
     let held_out = trainer.evaluate().map_err(train_failure)?;
     let model = trainer.model().map_err(train_failure)?;
-    write_scene_files(&model, &ctx.work_dir).map_err(retryable)?;
     let metrics = ReconstructMetrics {
         steps: trainer.step(),
         gaussians: model.len(),
@@ -120,32 +121,7 @@ fn finish(ctx: &JobContext, trainer: &mut Trainer, train_seconds: f64) -> Result
         held_out,
     };
     let metrics_json = serde_json::to_vec_pretty(&metrics).map_err(fatal)?;
-    let prefix = ctx.output_prefix();
-    ctx.blobs
-        .put_file(
-            &format!("{prefix}/scene.ply"),
-            &ctx.work_dir.join("scene.ply"),
-        )
-        .map_err(retryable)?;
-    ctx.blobs
-        .put_file(
-            &format!("{prefix}/labels.npy"),
-            &ctx.work_dir.join("labels.npy"),
-        )
-        .map_err(retryable)?;
-    ctx.blobs
-        .put_bytes(&format!("{prefix}/metrics.json"), &metrics_json)
-        .map_err(retryable)?;
-    report(
-        ctx,
-        "evaluate",
-        1,
-        1,
-        &[
-            ("psnr", metrics.held_out.psnr),
-            ("ssim", metrics.held_out.ssim),
-            ("gaussians", metrics.gaussians as f64),
-        ],
-    );
+    store_outputs(ctx, &model, &[("metrics.json", metrics_json)])?;
+    report_evaluation(ctx, &metrics.held_out, metrics.gaussians);
     Ok(())
 }

@@ -1,8 +1,10 @@
 //! What the training job kinds share: failure classification, progress reports, checkpointed
 //! training that honours cancel and shutdown at step boundaries.
 
+use super::reconstruct::write_scene_files;
 use crate::jobs::{JobContext, JobFailure, Progress};
-use crate::splat::train::{TrainError, TrainProgress, Trainer};
+use crate::splat::GaussianModel;
+use crate::splat::train::{EvalReport, TrainError, TrainProgress, Trainer};
 
 pub fn fatal(error: impl std::fmt::Display) -> JobFailure {
     JobFailure::Fatal(error.to_string())
@@ -92,4 +94,41 @@ pub fn train_with_checkpoints(
         save_checkpoint(ctx, checkpoint_name, trainer)?;
     }
     Ok(started.elapsed().as_secs_f64())
+}
+
+/// Stores a finished job's outputs under its output prefix: the trained scene (`scene.ply`,
+/// Inria layout, and `labels.npy`, object ids in PLY order) and the given JSON documents.
+pub fn store_outputs(
+    ctx: &JobContext,
+    model: &GaussianModel,
+    documents: &[(&str, Vec<u8>)],
+) -> Result<(), JobFailure> {
+    write_scene_files(model, &ctx.work_dir).map_err(retryable)?;
+    let prefix = ctx.output_prefix();
+    for file in ["scene.ply", "labels.npy"] {
+        ctx.blobs
+            .put_file(&format!("{prefix}/{file}"), &ctx.work_dir.join(file))
+            .map_err(retryable)?;
+    }
+    for (file, bytes) in documents {
+        ctx.blobs
+            .put_bytes(&format!("{prefix}/{file}"), bytes)
+            .map_err(retryable)?;
+    }
+    Ok(())
+}
+
+/// Reports the held-out evaluation as the "evaluate" stage.
+pub fn report_evaluation(ctx: &JobContext, held_out: &EvalReport, gaussians: usize) {
+    report(
+        ctx,
+        "evaluate",
+        1,
+        1,
+        &[
+            ("psnr", held_out.psnr),
+            ("ssim", held_out.ssim),
+            ("gaussians", gaussians as f64),
+        ],
+    );
 }

@@ -29,9 +29,9 @@ use crate::jobs::{JobContext, JobFailure, JobHandler, Progress};
 use crate::language::{EmbeddingAccumulator, ObjectView, image_model_id};
 use crate::models::clip::ClipImageEncoder;
 use crate::models::sam::{SamModel, SamPredictor};
-use crate::pipeline::reconstruct::write_scene_files;
 use crate::pipeline::training_job::{
-    fatal, report, retryable, train_failure, train_with_checkpoints,
+    fatal, report, report_evaluation, retryable, store_outputs, train_failure,
+    train_with_checkpoints,
 };
 use crate::scene::{Level, LoadOptions, Scene, load_frame_rgb, load_scene};
 use crate::segment::{AutomaticConfig, ClassicalConfig, MaskGenerator};
@@ -390,34 +390,22 @@ fn finish(
         objects: Level::ALL.map(|level| summaries.iter().filter(|s| s.level == level).count()),
         skipped_pairs: skipped.len(),
     };
-    write_scene_files(&model, &ctx.work_dir).map_err(retryable)?;
-    let prefix = ctx.output_prefix();
-    for file in ["scene.ply", "labels.npy"] {
-        ctx.blobs
-            .put_file(&format!("{prefix}/{file}"), &ctx.work_dir.join(file))
-            .map_err(retryable)?;
-    }
-    for (file, json) in [
-        ("objects.json", serde_json::to_vec_pretty(&summaries)),
-        ("skipped_pairs.json", serde_json::to_vec_pretty(&skipped)),
-        ("metrics.json", serde_json::to_vec_pretty(&metrics)),
-    ] {
-        let bytes = json.map_err(fatal)?;
-        ctx.blobs
-            .put_bytes(&format!("{prefix}/{file}"), &bytes)
-            .map_err(retryable)?;
-    }
-    report(
-        ctx,
-        "evaluate",
-        1,
-        1,
-        &[
-            ("psnr", metrics.held_out.psnr),
-            ("ssim", metrics.held_out.ssim),
-            ("gaussians", metrics.gaussians as f64),
-        ],
-    );
+    let documents = [
+        (
+            "objects.json",
+            serde_json::to_vec_pretty(&summaries).map_err(fatal)?,
+        ),
+        (
+            "skipped_pairs.json",
+            serde_json::to_vec_pretty(&skipped).map_err(fatal)?,
+        ),
+        (
+            "metrics.json",
+            serde_json::to_vec_pretty(&metrics).map_err(fatal)?,
+        ),
+    ];
+    store_outputs(ctx, &model, &documents)?;
+    report_evaluation(ctx, &metrics.held_out, metrics.gaussians);
     Ok(summaries
         .iter()
         .map(|summary| object_record(&ctx.scene_id, summary))
