@@ -20,8 +20,8 @@ use super::association::{AssociationOptions, generated_view_masks};
 use super::objects::{ObjectSummary, summarize_objects};
 use super::track_merge::{TrackMergeRule, merge_lost_tracks};
 use super::training::{
-    DEFAULT_OBJECT_FLOORS, SegmentedTrainingOptions, segmented_trainer_from_view_masks,
-    training_frames,
+    DEFAULT_OBJECT_FLOORS, SegmentedTrainingOptions, attach_object_training,
+    segmented_trainer_from_view_masks, training_frames,
 };
 use super::view_masks::ViewMaskSet;
 use crate::gpu::GpuContext;
@@ -36,10 +36,7 @@ use crate::pipeline::training_job::{
 use crate::scene::{Level, LoadOptions, Scene, load_frame_rgb, load_scene};
 use crate::segment::{AutomaticConfig, ClassicalConfig, MaskGenerator};
 use crate::splat::checkpoint::Checkpoint;
-use crate::splat::densify::ObjectFloor;
-use crate::splat::train::{
-    EvalReport, ObjectLossConfig, ObjectTargets, TrainConfig, Trainer, TrainerMeta,
-};
+use crate::splat::train::{EvalReport, ObjectLossConfig, TrainConfig, Trainer, TrainerMeta};
 use crate::store::objects::{ObjectEmbedding, ObjectRecord};
 
 pub const KIND: &str = "segment_then_splat";
@@ -350,13 +347,7 @@ fn resume_segmented(
     options: &SegmentedTrainingOptions,
 ) -> Result<Trainer, JobFailure> {
     let mut trainer = Trainer::resume(gpu, scene, checkpoint).map_err(train_failure)?;
-    trainer.set_prune_guard(Box::new(ObjectFloor {
-        floors: options.object_floors,
-    }));
-    let ids = masks.views.iter().map(|view| view.level_ids()).collect();
-    trainer
-        .set_object_targets(ObjectTargets::upload(gpu, ids))
-        .map_err(train_failure)?;
+    attach_object_training(gpu, &mut trainer, masks, options).map_err(fatal)?;
     Ok(trainer)
 }
 

@@ -176,6 +176,19 @@ pub fn segmented_trainer_from_view_masks(
         .get_or_insert_with(ObjectLossConfig::default);
     let model = initial_segmented_model(scene, masks, &config, options.voting)?;
     let mut trainer = Trainer::new(ctx, scene, config, Some(model))?;
+    attach_object_training(ctx, &mut trainer, masks, options)?;
+    Ok(trainer)
+}
+
+/// Gives a trainer (new or resumed) what the object loss needs beyond its checkpointed state:
+/// the training views' masks on the GPU and the persistence floor. `masks` must be of exactly
+/// the trainer's training views, in its order.
+pub fn attach_object_training(
+    ctx: &GpuContext,
+    trainer: &mut Trainer,
+    masks: &ViewMaskSet,
+    options: &SegmentedTrainingOptions,
+) -> Result<(), SegmentedTrainingError> {
     for (train_view, (view, view_masks)) in
         trainer.views().train.iter().zip(&masks.views).enumerate()
     {
@@ -192,5 +205,5 @@ pub fn segmented_trainer_from_view_masks(
     }));
     let ids = masks.views.iter().map(|view| view.level_ids()).collect();
     trainer.set_object_targets(ObjectTargets::upload(ctx, ids))?;
-    Ok(trainer)
+    Ok(())
 }
