@@ -48,6 +48,7 @@ pub struct Config {
     pub jobs: JobsConfig,
     pub workers: WorkersConfig,
     pub models: ModelsConfig,
+    pub query: QueryConfig,
     pub log: LogConfig,
 }
 
@@ -63,6 +64,7 @@ impl Default for Config {
             jobs: JobsConfig::default(),
             workers: WorkersConfig::default(),
             models: ModelsConfig::default(),
+            query: QueryConfig::default(),
             log: LogConfig::default(),
         }
     }
@@ -189,6 +191,26 @@ impl Default for ModelsConfig {
     }
 }
 
+/// Serving queries and masks from trained scenes.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct QueryConfig {
+    /// GPU memory the mask cache may fill with trained scenes' Gaussians before it drops the
+    /// least recently used (a scene larger than this is still served, alone).
+    pub cache_budget_mib: u64,
+    /// Longest side of a rendered mask; larger requests are refused.
+    pub max_mask_side: u32,
+}
+
+impl Default for QueryConfig {
+    fn default() -> Self {
+        Self {
+            cache_budget_mib: 2048,
+            max_mask_side: crate::pipeline::serving::DEFAULT_MAX_MASK_SIDE,
+        }
+    }
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum LogFormat {
@@ -311,6 +333,9 @@ impl Config {
             .any(|channel| !(0.0..=1.0).contains(channel))
         {
             return invalid("scene.background", "each channel must be within 0..1");
+        }
+        if self.query.max_mask_side == 0 {
+            return invalid("query.max_mask_side", "must be > 0");
         }
         if !(self.jobs.lease_secs.is_finite() && self.jobs.lease_secs > 0.0) {
             return invalid("jobs.lease_secs", "must be > 0");

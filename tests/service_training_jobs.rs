@@ -4,52 +4,25 @@
 
 mod common;
 
-use std::sync::Arc;
 use std::time::Duration;
 
-use common::{TestService, archives, test_config};
-use segsplat::api::ServiceBuilder;
+use common::{TestService, archives};
 use segsplat::scene::Level;
 use segsplat::scene::colmap::ColmapEncoding;
 use segsplat::scene::synthetic::SyntheticSpec;
 use segsplat::splat::labels::read_labels;
 use segsplat::splat::ply::read_ply;
 
-/// A service with both training job kinds on the GPU worker; `None` (skip) without a GPU when
-/// `SEGSPLAT_SKIP_GPU_TESTS` is set.
 async fn start_service(data: &std::path::Path) -> Option<TestService> {
-    start_service_with_models(data, None).await
+    TestService::start_on_gpu(data, |_| {}).await
 }
 
 /// [`start_service`] with `models.dir` set (CLIP embeddings and text queries).
 async fn start_service_with_models(
     data: &std::path::Path,
-    models_dir: Option<std::path::PathBuf>,
+    models_dir: std::path::PathBuf,
 ) -> Option<TestService> {
-    if segsplat::gpu::GpuContext::new_default().is_err() {
-        if std::env::var("SEGSPLAT_SKIP_GPU_TESTS").is_ok() {
-            eprintln!("skipping: no GPU adapter");
-            return None;
-        }
-        panic!("no GPU adapter (lavapipe is installed by scripts/bootstrap.sh)");
-    }
-    let mut config = test_config(data);
-    config.workers.cpu_slots = 0;
-    config.jobs.lease_secs = 30.0;
-    config.jobs.heartbeat_secs = 1.0;
-    config.models.dir = models_dir;
-    let service = ServiceBuilder::new(config)
-        .handler(Arc::new(segsplat::pipeline::ReconstructHandler))
-        .handler(Arc::new(segsplat::pipeline::SegmentThenSplatHandler))
-        .start()
-        .await
-        .unwrap();
-    let base_url = format!("http://{}", service.http_addr().unwrap());
-    Some(TestService {
-        service,
-        base_url,
-        client: reqwest::Client::new(),
-    })
+    TestService::start_on_gpu(data, |config| config.models.dir = Some(models_dir)).await
 }
 
 /// A 60-step `segment_then_splat` job on `scene_id`, awaited: (job id, finished job record).
@@ -232,6 +205,7 @@ async fn segment_then_splat_job_stores_objects_at_three_levels() {
     for file in [
         "scene.ply",
         "labels.npy",
+        "cameras.json",
         "objects.json",
         "skipped_pairs.json",
         "metrics.json",
@@ -261,7 +235,7 @@ async fn segment_then_splat_embeds_objects_and_answers_text_queries() {
     let data = tempfile::tempdir().unwrap();
     let models =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/models/tiny");
-    let Some(client) = start_service_with_models(data.path(), Some(models)).await else {
+    let Some(client) = start_service_with_models(data.path(), models).await else {
         return;
     };
     // 96 x 72 rather than 48 x 36: the stand-in CLIP quantises a crop's mean colour to the
@@ -332,5 +306,116 @@ async fn segment_then_splat_embeds_objects_and_answers_text_queries() {
         lenient["matched"], true,
         "the threshold is the caller's: {lenient}"
     );
+
+    // With a view, each match carries its masks.
+    let (status, with_masks) = client
+        .post_json(
+            &query_path,
+            serde_json::json!({"text": "green", "granularity": "small",
+                               "view": {"frame_index": 0, "max_side": 48},
+                               "mask_format": "png", "visible_masks": true}),
+        )
+        .await;
+    assert_eq!(status, 200, "{with_masks}");
+    let best = &with_masks["objects"][0];
+    assert_eq!(best["object_id"], 2, "{with_masks}");
+    assert_eq!(
+        (
+            &best["mask"]["format"],
+            &best["mask"]["width"],
+            &best["mask"]["height"]
+        ),
+        (
+            &serde_json::json!("png"),
+            &serde_json::json!(48),
+            &serde_json::json!(36)
+        ),
+        "{with_masks}"
+    );
+    assert!(best["visible_mask"]["data"].is_string(), "{with_masks}");
+    let (status, body) = client
+        .post_json(
+            &query_path,
+            serde_json::json!({"text": "green", "granularity": "small",
+                               "view": {"frame_index": 99}}),
+        )
+        .await;
+    assert_eq!(status, 400, "{body}");
+
+    stream_query_answers_each_pose(&client, scene_id).await;
     client.shutdown().await;
+}
+
+/// gRPC `StreamQuery`: the text is sent once, then poses; each reply echoes its sequence and
+/// carries the mask for that pose; a bad pose ends the stream with INVALID_ARGUMENT.
+async fn stream_query_answers_each_pose(client: &TestService, scene_id: &str) {
+    use segsplat::proto;
+    let (status, cameras) = client
+        .get_json(&format!("/v1/scenes/{scene_id}/trained/cameras.json"))
+        .await;
+    assert_eq!(status, 200, "{cameras}");
+    let pose_view = |index: usize| {
+        let camera = &cameras[index];
+        let rows: Vec<f64> = camera["camera_to_world"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|row| row.as_array().unwrap().iter().map(|v| v.as_f64().unwrap()))
+            .collect();
+        proto::PoseView {
+            pose: Some(proto::Pose {
+                camera_to_world: rows,
+            }),
+            intrinsics: Some(proto::Intrinsics {
+                fx: camera["fx"].as_f64().unwrap(),
+                fy: camera["fy"].as_f64().unwrap(),
+                cx: camera["cx"].as_f64().unwrap(),
+                cy: camera["cy"].as_f64().unwrap(),
+                width: camera["width"].as_u64().unwrap() as u32,
+                height: camera["height"].as_u64().unwrap() as u32,
+            }),
+        }
+    };
+    let first = proto::StreamQueryRequest {
+        scene_id: scene_id.to_string(),
+        text: "blue".to_string(),
+        granularity: proto::Granularity::Small as i32,
+        top_k: 1,
+        view: Some(pose_view(0)),
+        time: None,
+        mask_encoding: proto::MaskEncoding::CocoRle as i32,
+        sequence: 10,
+    };
+    let second = proto::StreamQueryRequest {
+        scene_id: String::new(),
+        text: String::new(),
+        view: Some(pose_view(3)),
+        sequence: 11,
+        ..first.clone()
+    };
+    let mut broken = second.clone();
+    broken.sequence = 12;
+    if let Some(pose) = broken.view.as_mut().and_then(|view| view.pose.as_mut()) {
+        pose.camera_to_world.truncate(12);
+    }
+    let mut grpc = client.grpc().await;
+    let mut replies = grpc
+        .stream_query(futures::stream::iter(vec![first, second, broken]))
+        .await
+        .unwrap()
+        .into_inner();
+    for expected_sequence in [10, 11] {
+        let reply = replies.message().await.unwrap().unwrap();
+        assert_eq!(reply.sequence, expected_sequence);
+        let response = reply.response.unwrap();
+        assert!(!response.no_match, "{response:?}");
+        let best = &response.matches[0];
+        assert_eq!(best.object.as_ref().unwrap().object_id, 3, "{response:?}");
+        let mask = best.mask.as_ref().unwrap();
+        assert_eq!((mask.width, mask.height), (96, 72));
+        assert!(mask.amodal && !mask.data.is_empty());
+    }
+    let error = replies.message().await.unwrap_err();
+    assert_eq!(error.code(), tonic::Code::InvalidArgument, "{error}");
+    assert!(error.message().contains("16 values"), "{error}");
 }

@@ -1,6 +1,6 @@
-//! gRPC `segsplat.v1.SceneQuery`: scene, job and object reads, and the unary text `Query` (objects
-//! and scores; masks for a view come with the mask renderer). The streaming query and
-//! `RenderMask` answer `UNIMPLEMENTED` until the Segment-then-Splat pipeline provides them.
+//! gRPC `segsplat.v1.SceneQuery`: scene, job and object reads; the text `Query`, unary and
+//! streamed (robots send poses, get masks per pose), with masks rendered from the GPU scene
+//! cache when a view is given; and `RenderMask` for one object.
 
 use std::pin::Pin;
 use std::sync::Arc;
@@ -10,7 +10,11 @@ use futures::Stream;
 use tonic::{Request, Response, Status};
 
 use super::query::{QueryFailure, run_query};
+use super::serving::{ServeFailure, Serving};
 use crate::language::{DEFAULT_RELEVANCY_THRESHOLD, Granularity, QueryOptions, SharedTextEncoder};
+use crate::pipeline::serving::{
+    EncodedMask, EncodedMaskData, MaskFormat, MaskView, PinholeIntrinsics, ServingError,
+};
 use crate::proto;
 use crate::proto::scene_query_server::SceneQuery;
 use crate::scene::Level;
@@ -19,19 +23,226 @@ use crate::store::objects::ObjectRecord;
 use crate::store::scenes::SceneRecord;
 use crate::store::{Database, StoreError};
 
-const PIPELINE_PENDING: &str = "arrives with the Segment-then-Splat pipeline";
+/// Replies a stream query may have waiting before the client reads them.
+const STREAM_BUFFER: usize = 4;
 
 #[derive(Clone)]
 pub struct SceneQueryService {
     database: Database,
     text_encoder: Arc<SharedTextEncoder>,
+    serving: Serving,
 }
 
 impl SceneQueryService {
-    pub fn new(database: Database, text_encoder: Arc<SharedTextEncoder>) -> Self {
+    pub fn new(database: Database, text_encoder: Arc<SharedTextEncoder>, serving: Serving) -> Self {
         Self {
             database,
             text_encoder,
+            serving,
+        }
+    }
+
+    /// One query with optional masks: the core of `Query` and of each `StreamQuery` message.
+    async fn answer(&self, query: QueryParts) -> Result<proto::QueryResponse, Status> {
+        let started = Instant::now();
+        let options = QueryOptions {
+            granularity: granularity_from_proto(query.granularity)?,
+            top_k: (query.top_k.max(1)) as usize,
+            threshold: query.min_score.unwrap_or(DEFAULT_RELEVANCY_THRESHOLD),
+        };
+        let format = mask_format_from_proto(query.mask_encoding)?;
+        let view = match (&query.view, format) {
+            (Some(view), Some(_)) => Some(view_from_proto(view)?),
+            (None, Some(_)) => {
+                return Err(Status::invalid_argument(
+                    "view: masks were asked for (mask_encoding) but no view was given",
+                ));
+            }
+            (_, None) => None,
+        };
+        let outcome = run_query(
+            &self.database,
+            &self.text_encoder,
+            &query.scene_id,
+            &query.text,
+            options,
+        )
+        .await
+        .map_err(query_failure_status)?;
+        let masks = match (view, format) {
+            (Some(view), Some(format)) if !outcome.matches.is_empty() => {
+                let objects = outcome
+                    .matches
+                    .iter()
+                    .map(|found| (found.object.level, found.object.object_id))
+                    .collect();
+                self.serving
+                    .render_masks(&query.scene_id, view, objects, query.visible_only, format)
+                    .await
+                    .map_err(serve_failure_status)?
+            }
+            _ => Vec::new(),
+        };
+        let matches = outcome
+            .matches
+            .into_iter()
+            .enumerate()
+            .map(|(rank, found)| proto::QueryMatch {
+                object: Some(object_to_proto(found.object)),
+                score: found.score,
+                relevancy: found.relevancy,
+                mask: masks
+                    .get(rank)
+                    .map(|masks| mask_to_proto(&masks.mask, true)),
+                visible_mask: masks
+                    .get(rank)
+                    .and_then(|masks| masks.visible_mask.as_ref())
+                    .map(|mask| mask_to_proto(mask, false)),
+            })
+            .collect();
+        Ok(proto::QueryResponse {
+            matches,
+            no_match: !outcome.matched,
+            model_id: outcome.model_id,
+            latency_ms: started.elapsed().as_secs_f64() * 1000.0,
+        })
+    }
+}
+
+/// What one query needs, from a `QueryRequest` or the running state of a stream.
+#[derive(Debug, Clone, Default)]
+struct QueryParts {
+    scene_id: String,
+    text: String,
+    granularity: i32,
+    top_k: u32,
+    min_score: Option<f32>,
+    view: Option<proto::View>,
+    mask_encoding: i32,
+    visible_only: bool,
+}
+
+impl QueryParts {
+    /// Folds one stream message in: scene, text, granularity and top_k carry over when a
+    /// message leaves them empty; the view and mask encoding are per message.
+    fn update(&mut self, message: proto::StreamQueryRequest) {
+        if !message.scene_id.is_empty() {
+            self.scene_id = message.scene_id;
+        }
+        if !message.text.is_empty() {
+            self.text = message.text;
+        }
+        if message.granularity != 0 {
+            self.granularity = message.granularity;
+        }
+        if message.top_k != 0 {
+            self.top_k = message.top_k;
+        }
+        self.view = message.view.map(|pose| proto::View {
+            source: Some(proto::view::Source::Pose(pose)),
+            time: message.time,
+            max_side: None,
+        });
+        self.mask_encoding = message.mask_encoding;
+    }
+}
+
+fn mask_format_from_proto(value: i32) -> Result<Option<MaskFormat>, Status> {
+    match proto::MaskEncoding::try_from(value) {
+        Ok(proto::MaskEncoding::None) => Ok(None),
+        Ok(proto::MaskEncoding::Png) => Ok(Some(MaskFormat::Png)),
+        Ok(proto::MaskEncoding::CocoRle) => Ok(Some(MaskFormat::CocoRle)),
+        Err(_) => Err(Status::invalid_argument(format!(
+            "mask_encoding: unknown value {value}"
+        ))),
+    }
+}
+
+fn view_from_proto(view: &proto::View) -> Result<MaskView, Status> {
+    match &view.source {
+        Some(proto::view::Source::FrameIndex(index)) => Ok(MaskView::Frame {
+            index: *index as usize,
+            max_side: view.max_side,
+        }),
+        Some(proto::view::Source::Pose(pose)) => pose_view_from_proto(pose),
+        None => Err(Status::invalid_argument("view: set frame_index or pose")),
+    }
+}
+
+fn pose_view_from_proto(view: &proto::PoseView) -> Result<MaskView, Status> {
+    let values = view
+        .pose
+        .as_ref()
+        .map(|pose| pose.camera_to_world.as_slice())
+        .unwrap_or_default();
+    if values.len() != 16 {
+        return Err(Status::invalid_argument(format!(
+            "view.pose.camera_to_world: expected 16 values (row-major 4x4), got {}",
+            values.len()
+        )));
+    }
+    let mut rows = [[0.0f64; 4]; 4];
+    for (index, value) in values.iter().enumerate() {
+        rows[index / 4][index % 4] = *value;
+    }
+    let intrinsics = view
+        .intrinsics
+        .as_ref()
+        .ok_or_else(|| Status::invalid_argument("view.intrinsics: required with a pose"))?;
+    Ok(MaskView::Pose {
+        camera_to_world: rows,
+        intrinsics: PinholeIntrinsics {
+            fx: intrinsics.fx,
+            fy: intrinsics.fy,
+            cx: intrinsics.cx,
+            cy: intrinsics.cy,
+            width: intrinsics.width,
+            height: intrinsics.height,
+        },
+    })
+}
+
+fn mask_to_proto(mask: &EncodedMask, amodal: bool) -> proto::Mask {
+    let (encoding, data) = match &mask.data {
+        EncodedMaskData::Png(bytes) => (proto::MaskEncoding::Png, bytes.clone()),
+        EncodedMaskData::CocoRle(counts) => {
+            (proto::MaskEncoding::CocoRle, counts.as_bytes().to_vec())
+        }
+    };
+    proto::Mask {
+        encoding: encoding as i32,
+        width: mask.width,
+        height: mask.height,
+        data,
+        amodal,
+    }
+}
+
+fn serve_failure_status(failure: ServeFailure) -> Status {
+    let message = failure.to_string();
+    match failure {
+        ServeFailure::SceneNotFound(_)
+        | ServeFailure::FileNotStored { .. }
+        | ServeFailure::UnknownFile(_) => Status::not_found(message),
+        ServeFailure::NotTrained(_) => Status::failed_precondition(message),
+        ServeFailure::Serving(error) => match error {
+            ServingError::FrameOutOfRange { .. } | ServingError::BadView(_) => {
+                Status::invalid_argument(message)
+            }
+            ServingError::NoSuchObject { .. } => Status::not_found(message),
+            ServingError::MissingFile { .. } => Status::failed_precondition(message),
+            ServingError::NoGpu(_) => Status::unavailable(message),
+            ServingError::Corrupt { .. }
+            | ServingError::Storage(_)
+            | ServingError::Gpu(_)
+            | ServingError::Encoding(_) => {
+                tracing::error!(%message, "gRPC mask request failed");
+                Status::internal(message)
+            }
+        },
+        ServeFailure::Store(_) | ServeFailure::Worker(_) => {
+            tracing::error!(%message, "gRPC mask request failed");
+            Status::internal(message)
         }
     }
 }
@@ -170,51 +381,58 @@ impl SceneQuery for SceneQueryService {
         &self,
         request: Request<proto::QueryRequest>,
     ) -> Result<Response<proto::QueryResponse>, Status> {
-        let started = Instant::now();
         let request = request.into_inner();
-        let options = QueryOptions {
-            granularity: granularity_from_proto(request.granularity)?,
-            top_k: (request.top_k.max(1)) as usize,
-            threshold: request.min_score.unwrap_or(DEFAULT_RELEVANCY_THRESHOLD),
+        let parts = QueryParts {
+            scene_id: request.scene_id,
+            text: request.text,
+            granularity: request.granularity,
+            top_k: request.top_k,
+            min_score: request.min_score,
+            view: request.view,
+            mask_encoding: request.mask_encoding,
+            visible_only: request.visible_only,
         };
-        let outcome = run_query(
-            &self.database,
-            &self.text_encoder,
-            &request.scene_id,
-            &request.text,
-            options,
-        )
-        .await
-        .map_err(query_failure_status)?;
-        // `request.view` asks for masks; they need the GPU mask renderer and its scene cache,
-        // which are not in the service yet, so matches carry objects and scores with no masks.
-        let matches = outcome
-            .matches
-            .into_iter()
-            .map(|found| proto::QueryMatch {
-                object: Some(object_to_proto(found.object)),
-                score: found.score,
-                relevancy: found.relevancy,
-                mask: None,
-                visible_mask: None,
-            })
-            .collect();
-        Ok(Response::new(proto::QueryResponse {
-            matches,
-            no_match: !outcome.matched,
-            model_id: outcome.model_id,
-            latency_ms: started.elapsed().as_secs_f64() * 1000.0,
-        }))
+        Ok(Response::new(self.answer(parts).await?))
     }
 
     type StreamQueryStream = StreamQueryStream;
 
+    /// Answers each incoming message in order, echoing its `sequence`. A message that fails
+    /// (say, a bad pose) ends the stream with that error, like a unary call would.
     async fn stream_query(
         &self,
-        _request: Request<tonic::Streaming<proto::StreamQueryRequest>>,
+        request: Request<tonic::Streaming<proto::StreamQueryRequest>>,
     ) -> Result<Response<Self::StreamQueryStream>, Status> {
-        Err(Status::unimplemented(format!(
-            "StreamQuery {PIPELINE_PENDING}"
+        let mut incoming = request.into_inner();
+        let service = self.clone();
+        let (replies, receiver) = tokio::sync::mpsc::channel(STREAM_BUFFER);
+        tokio::spawn(async move {
+            let mut parts = QueryParts::default();
+            loop {
+                let message = match incoming.message().await {
+                    Ok(Some(message)) => message,
+                    Ok(None) => break,
+                    Err(status) => {
+                        tracing::debug!(%status, "stream query client went away");
+                        break;
+                    }
+                };
+                let sequence = message.sequence;
+                parts.update(message);
+                let reply = service.answer(parts.clone()).await.map(|response| {
+                    proto::StreamQueryResponse {
+                        sequence,
+                        response: Some(response),
+                    }
+                });
+                let failed = reply.is_err();
+                if replies.send(reply).await.is_err() || failed {
+                    break;
+                }
+            }
+        });
+        Ok(Response::new(Box::pin(
+            tokio_stream::wrappers::ReceiverStream::new(receiver),
         )))
     }
 
@@ -250,11 +468,45 @@ impl SceneQuery for SceneQueryService {
 
     async fn render_mask(
         &self,
-        _request: Request<proto::RenderMaskRequest>,
+        request: Request<proto::RenderMaskRequest>,
     ) -> Result<Response<proto::RenderMaskResponse>, Status> {
-        Err(Status::unimplemented(format!(
-            "RenderMask {PIPELINE_PENDING}"
-        )))
+        let request = request.into_inner();
+        let level = proto::Level::try_from(request.level)
+            .ok()
+            .and_then(level_from_proto)
+            .ok_or_else(|| {
+                Status::invalid_argument(format!(
+                    "level: {} is not small, middle or large",
+                    request.level
+                ))
+            })?;
+        let view = request
+            .view
+            .as_ref()
+            .ok_or_else(|| Status::invalid_argument("view: required"))
+            .and_then(view_from_proto)?;
+        let format = mask_format_from_proto(request.mask_encoding)?.unwrap_or_default();
+        let masks = self
+            .serving
+            .render_masks(
+                &request.scene_id,
+                view,
+                vec![(level, request.object_id)],
+                request.visible_only,
+                format,
+            )
+            .await
+            .map_err(serve_failure_status)?;
+        let first = masks
+            .first()
+            .ok_or_else(|| Status::internal("no mask rendered"))?;
+        let mask = match (&first.visible_mask, request.visible_only) {
+            (Some(visible), true) => mask_to_proto(visible, false),
+            _ => mask_to_proto(&first.mask, true),
+        };
+        Ok(Response::new(proto::RenderMaskResponse {
+            mask: Some(mask),
+        }))
     }
 
     async fn get_job(

@@ -3,9 +3,11 @@
 
 mod auth;
 pub mod error;
+mod exports;
 mod grpc;
 mod ingest;
 mod jobs;
+mod masks;
 mod metrics;
 mod objects;
 mod openapi;
@@ -14,6 +16,7 @@ mod query;
 mod router;
 mod scenes;
 mod server;
+pub mod serving;
 mod state;
 
 pub use openapi::ApiDoc;

@@ -50,7 +50,7 @@ impl From<&ObjectRecord> for ObjectResponse {
     }
 }
 
-fn parse_level(name: &str) -> Result<Level, ApiError> {
+pub fn parse_level(name: &str) -> Result<Level, ApiError> {
     Level::ALL
         .into_iter()
         .find(|level| level.name() == name)

@@ -3,7 +3,7 @@
 use axum::Json;
 use utoipa::OpenApi;
 
-use super::{error, jobs, objects, ops, query, scenes};
+use super::{error, exports, jobs, masks, objects, ops, query, scenes};
 
 #[derive(OpenApi)]
 #[openapi(
@@ -20,6 +20,10 @@ use super::{error, jobs, objects, ops, query, scenes};
         jobs::job_events,
         objects::list_objects,
         query::query_scene,
+        masks::render_masks,
+        masks::object_mask_png,
+        exports::trained_file,
+        exports::object_ply,
         ops::healthz,
         ops::readyz,
         ops::metrics,
@@ -37,6 +41,13 @@ use super::{error, jobs, objects, ops, query, scenes};
         query::QueryRequest,
         query::QueryMatchResponse,
         query::QueryResponse,
+        masks::ViewRequest,
+        crate::pipeline::serving::PinholeIntrinsics,
+        masks::MaskBody,
+        masks::ObjectRef,
+        masks::MasksRequest,
+        masks::ObjectMasksResponse,
+        masks::MasksResponse,
         ops::HealthResponse,
         ops::ReadinessResponse,
     )),

@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::error::{ApiError, ApiResult, ErrorBody};
+use super::masks::{MaskBody, ViewRequest, parse_mask_format};
 use super::state::AppState;
 use crate::language::{
     CANONICAL_PHRASES, CandidateObject, DEFAULT_RELEVANCY_THRESHOLD, QueryOptions,
@@ -168,6 +169,12 @@ pub struct QueryRequest {
     /// Minimum LERF relevancy against "object", "things", "stuff", "texture" for a match
     /// (default 0.55; 0.5 = no better than those phrases).
     pub threshold: Option<f32>,
+    /// When given, each match carries its mask rendered for this view.
+    pub view: Option<ViewRequest>,
+    /// `coco_rle` (default) or `png`.
+    pub mask_format: Option<String>,
+    /// With `view`: also the visible-only masks (the part no other Gaussian hides).
+    pub visible_masks: Option<bool>,
 }
 
 /// One matching object.
@@ -183,6 +190,12 @@ pub struct QueryMatchResponse {
     pub centroid: [f32; 3],
     pub bounds_min: [f32; 3],
     pub bounds_max: [f32; 3],
+    /// With a `view`: alpha > 0.5 of the object rendered alone, occluded parts included.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mask: Option<MaskBody>,
+    /// With a `view` and `visible_masks`: the part of the mask no other Gaussian hides.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub visible_mask: Option<MaskBody>,
 }
 
 #[derive(Debug, Serialize, ToSchema)]
@@ -213,7 +226,8 @@ impl QueryRequest {
     params(("id" = String, Path, description = "scene id")),
     request_body = QueryRequest,
     responses((status = 200, body = QueryResponse),
-              (status = 400, description = "bad granularity, top_k, threshold or empty text",
+              (status = 400, description = "bad granularity, top_k, threshold, view, mask \
+               format or empty text",
                body = ErrorBody),
               (status = 404, description = "unknown scene", body = ErrorBody),
               (status = 409, description = "no trained objects or embeddings yet",
@@ -225,6 +239,13 @@ pub async fn query_scene(
     Json(request): Json<QueryRequest>,
 ) -> ApiResult<Json<QueryResponse>> {
     let options = request.options()?;
+    // Bad view or format fail before the (slower) text encoding.
+    let view = request
+        .view
+        .as_ref()
+        .map(ViewRequest::to_view)
+        .transpose()?;
+    let format = parse_mask_format(request.mask_format.as_deref())?;
     let outcome = run_query(
         &state.database,
         &state.text_encoder,
@@ -233,12 +254,28 @@ pub async fn query_scene(
         options,
     )
     .await?;
+    let masks = match view {
+        Some(view) if !outcome.matches.is_empty() => {
+            let objects = outcome
+                .matches
+                .iter()
+                .map(|found| (found.object.level, found.object.object_id))
+                .collect();
+            let visible = request.visible_masks.unwrap_or(false);
+            state
+                .serving
+                .render_masks(&id, view, objects, visible, format)
+                .await?
+        }
+        _ => Vec::new(),
+    };
     Ok(Json(QueryResponse {
         matched: outcome.matched,
         objects: outcome
             .matches
             .iter()
-            .map(|found| QueryMatchResponse {
+            .enumerate()
+            .map(|(rank, found)| QueryMatchResponse {
                 level: found.object.level.name().to_string(),
                 object_id: found.object.object_id,
                 score: found.score,
@@ -246,6 +283,11 @@ pub async fn query_scene(
                 centroid: found.object.centroid,
                 bounds_min: found.object.bounds_min,
                 bounds_max: found.object.bounds_max,
+                mask: masks.get(rank).map(|masks| MaskBody::from(&masks.mask)),
+                visible_mask: masks
+                    .get(rank)
+                    .and_then(|masks| masks.visible_mask.as_ref())
+                    .map(MaskBody::from),
             })
             .collect(),
         model_id: outcome.model_id,

@@ -8,7 +8,7 @@ use tower_http::trace::TraceLayer;
 use super::auth::{TokenCheck, require_token};
 use super::metrics::track_requests;
 use super::state::AppState;
-use super::{jobs, objects, openapi, ops, query, scenes};
+use super::{exports, jobs, masks, objects, openapi, ops, query, scenes};
 
 pub fn router(state: AppState) -> Router {
     let tokens = TokenCheck::new(state.config.auth.tokens.clone());
@@ -26,6 +26,16 @@ pub fn router(state: AppState) -> Router {
         .route("/v1/scenes/{id}/jobs", post(jobs::create_job))
         .route("/v1/scenes/{id}/objects", get(objects::list_objects))
         .route("/v1/scenes/{id}/query", post(query::query_scene))
+        .route("/v1/scenes/{id}/masks", post(masks::render_masks))
+        .route(
+            "/v1/scenes/{id}/objects/{level}/{object_id}/mask.png",
+            get(masks::object_mask_png),
+        )
+        .route(
+            "/v1/scenes/{id}/objects/{level}/{object_id}/ply",
+            get(exports::object_ply),
+        )
+        .route("/v1/scenes/{id}/trained/{file}", get(exports::trained_file))
         .route("/v1/jobs", get(jobs::list_jobs))
         .route("/v1/jobs/{id}", get(jobs::get_job))
         .route("/v1/jobs/{id}/cancel", post(jobs::cancel_job))

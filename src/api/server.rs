@@ -16,13 +16,16 @@ use super::auth::{TokenCheck, grpc_interceptor};
 use super::grpc::SceneQueryService;
 use super::metrics::prometheus_handle;
 use super::router::router;
+use super::serving::Serving;
 use super::state::{AppState, WorkerReadiness};
 use crate::config::Config;
+use crate::gpu::GpuContext;
 use crate::jobs::{
     HandlerRegistry, JobEventBus, JobHandler, LeaseReaper, WorkerPool, WorkerPoolOptions,
     WorkerSlot, open_adapters,
 };
 use crate::language::SharedTextEncoder;
+use crate::pipeline::serving::SceneCache;
 use crate::proto::scene_query_server::SceneQueryServer;
 use crate::store::{BlobStore, Database, LocalBlobStore, StoreError};
 
@@ -169,6 +172,17 @@ impl ServiceBuilder {
                 }),
         );
         let text_encoder = Arc::new(SharedTextEncoder::new(models.clone()));
+        let adapters = config.workers.adapters.clone();
+        let scene_cache = Arc::new(SceneCache::new(
+            config.query.cache_budget_mib.saturating_mul(1024 * 1024),
+            move || GpuContext::new(&adapters).map_err(|error| error.to_string()),
+        ));
+        let serving = Serving::new(
+            database.clone(),
+            blobs.clone(),
+            scene_cache,
+            config.query.max_mask_side,
+        );
         let pool = (!slots.is_empty()).then(|| {
             WorkerPool::start(WorkerPoolOptions {
                 database: database.clone(),
@@ -195,6 +209,7 @@ impl ServiceBuilder {
             workers: Arc::new(readiness),
             models,
             text_encoder: text_encoder.clone(),
+            serving: serving.clone(),
             metrics,
             shutdown: shutdown.clone(),
         };
@@ -205,6 +220,7 @@ impl ServiceBuilder {
                     &config,
                     database.clone(),
                     text_encoder.clone(),
+                    serving.clone(),
                     shutdown.clone(),
                 )
                 .await?;
@@ -259,6 +275,7 @@ async fn start_grpc(
     config: &Config,
     database: Database,
     text_encoder: Arc<SharedTextEncoder>,
+    serving: Serving,
     shutdown: CancellationToken,
 ) -> Result<(SocketAddr, JoinHandle<()>), ServiceError> {
     let listener = TcpListener::bind(config.grpc_addr)
@@ -284,7 +301,7 @@ async fn start_grpc(
         .build_v1()
         .map_err(|error| ServiceError::Reflection(error.to_string()))?;
     let scene_query = SceneQueryServer::with_interceptor(
-        SceneQueryService::new(database, text_encoder),
+        SceneQueryService::new(database, text_encoder, serving),
         grpc_interceptor(tokens),
     );
     let task = tokio::spawn(async move {
@@ -339,6 +356,11 @@ impl RunningService {
 
     pub fn blobs(&self) -> Arc<dyn BlobStore> {
         self.state.blobs.clone()
+    }
+
+    /// Loads and hits of the GPU scene cache masks are rendered from.
+    pub fn serving_stats(&self) -> crate::pipeline::serving::CacheStats {
+        self.state.serving.cache().stats()
     }
 
     pub fn worker_slots(&self) -> usize {

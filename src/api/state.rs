@@ -26,6 +26,8 @@ pub struct AppState {
     pub models: Arc<crate::models::ModelsStatus>,
     /// The CLIP text encoder queries share (built on the first query).
     pub text_encoder: Arc<crate::language::SharedTextEncoder>,
+    /// Trained scenes on the GPU for masks, and exports.
+    pub serving: super::serving::Serving,
     pub metrics: PrometheusHandle,
     /// Cancelled when the service stops; long-lived responses (SSE) end then.
     pub shutdown: CancellationToken,

@@ -91,7 +91,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let train_seconds = started.elapsed().as_secs_f64();
     let held_out = trainer.evaluate()?;
     let model = trainer.model()?;
-    write_scene_files(&model, &args.out)?;
+    write_scene_files(&model, &scene, &args.out)?;
     let metrics = ReconstructMetrics {
         steps: trainer.step(),
         gaussians: model.len(),

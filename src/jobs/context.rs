@@ -10,6 +10,11 @@ use crate::gpu::GpuContext;
 use crate::models::ModelsStatus;
 use crate::store::{BlobError, BlobStore, Database};
 
+/// Blob key prefix under which job `job_id` stores its results.
+pub fn job_output_prefix(job_id: &str) -> String {
+    format!("jobs/{job_id}/output")
+}
+
 pub struct JobContext {
     pub job_id: String,
     pub scene_id: String,
@@ -55,7 +60,7 @@ impl JobContext {
 
     /// Blob key prefix for this job's results.
     pub fn output_prefix(&self) -> String {
-        format!("jobs/{}/output", self.job_id)
+        job_output_prefix(&self.job_id)
     }
 
     /// Saves a checkpoint atomically (blocking I/O).

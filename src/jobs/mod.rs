@@ -9,7 +9,7 @@ mod pool;
 mod progress;
 mod worker;
 
-pub use context::JobContext;
+pub use context::{JobContext, job_output_prefix};
 pub use events::JobEventBus;
 pub use handler::{HandlerRegistry, JobFailure, JobHandler};
 pub use pool::{LeaseReaper, WorkerPool, WorkerPoolOptions, WorkerSlot, open_adapters};

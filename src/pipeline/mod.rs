@@ -2,6 +2,7 @@
 
 pub mod reconstruct;
 pub mod segment_then_splat;
+pub mod serving;
 pub mod training_job;
 
 pub use reconstruct::ReconstructHandler;

@@ -8,12 +8,13 @@ use std::sync::Arc;
 use futures::future::BoxFuture;
 use serde::{Deserialize, Serialize};
 
+use super::serving::{CAMERAS_FILE, LABELS_FILE, SCENE_FILE, scene_cameras};
 use super::training_job::{
     fatal, report_evaluation, retryable, store_outputs, train_failure, train_with_checkpoints,
 };
 use crate::gpu::GpuContext;
 use crate::jobs::{JobContext, JobFailure, JobHandler};
-use crate::scene::{LoadOptions, load_scene};
+use crate::scene::{LoadOptions, Scene, load_scene};
 use crate::splat::checkpoint::Checkpoint;
 use crate::splat::labels::write_labels;
 use crate::splat::model::GaussianModel;
@@ -52,13 +53,20 @@ pub struct ReconstructMetrics {
     pub held_out: EvalReport,
 }
 
-/// Writes `scene.ply` and `labels.npy` (object ids in PLY order) into `dir`.
-pub fn write_scene_files(model: &GaussianModel, dir: &std::path::Path) -> std::io::Result<()> {
+/// Writes `scene.ply`, `labels.npy` (object ids in PLY order) and `cameras.json` (the scene's
+/// frames, so masks can be rendered per frame without the dataset) into `dir`.
+pub fn write_scene_files(
+    model: &GaussianModel,
+    scene: &Scene,
+    dir: &std::path::Path,
+) -> std::io::Result<()> {
     let to_io = |error: &dyn std::fmt::Display| std::io::Error::other(error.to_string());
-    let ply = std::fs::File::create(dir.join("scene.ply"))?;
+    let ply = std::fs::File::create(dir.join(SCENE_FILE))?;
     write_ply(model, ply).map_err(|e| to_io(&e))?;
-    let labels = std::fs::File::create(dir.join("labels.npy"))?;
+    let labels = std::fs::File::create(dir.join(LABELS_FILE))?;
     write_labels(&model.object_ids, labels).map_err(|e| to_io(&e))?;
+    let cameras = serde_json::to_vec_pretty(&scene_cameras(scene)).map_err(|e| to_io(&e))?;
+    std::fs::write(dir.join(CAMERAS_FILE), cameras)?;
     Ok(())
 }
 
@@ -108,10 +116,15 @@ fn run_blocking(ctx: &JobContext) -> Result<(), JobFailure> {
     };
     let train_seconds =
         train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?;
-    finish(ctx, &mut trainer, train_seconds)
+    finish(ctx, &scene, &mut trainer, train_seconds)
 }
 
-fn finish(ctx: &JobContext, trainer: &mut Trainer, train_seconds: f64) -> Result<(), JobFailure> {
+fn finish(
+    ctx: &JobContext,
+    scene: &Scene,
+    trainer: &mut Trainer,
+    train_seconds: f64,
+) -> Result<(), JobFailure> {
     let held_out = trainer.evaluate().map_err(train_failure)?;
     let model = trainer.model().map_err(train_failure)?;
     let metrics = ReconstructMetrics {
@@ -121,7 +134,7 @@ fn finish(ctx: &JobContext, trainer: &mut Trainer, train_seconds: f64) -> Result
         held_out,
     };
     let metrics_json = serde_json::to_vec_pretty(&metrics).map_err(fatal)?;
-    store_outputs(ctx, &model, &[("metrics.json", metrics_json)])?;
+    store_outputs(ctx, &model, scene, &[("metrics.json", metrics_json)])?;
     report_evaluation(ctx, &metrics.held_out, metrics.gaussians);
     Ok(())
 }

@@ -2,7 +2,9 @@
 //! training that honours cancel and shutdown at step boundaries.
 
 use super::reconstruct::write_scene_files;
+use super::serving::{CAMERAS_FILE, LABELS_FILE, SCENE_FILE};
 use crate::jobs::{JobContext, JobFailure, Progress};
+use crate::scene::Scene;
 use crate::splat::GaussianModel;
 use crate::splat::train::{EvalReport, TrainError, TrainProgress, Trainer};
 
@@ -97,15 +99,17 @@ pub fn train_with_checkpoints(
 }
 
 /// Stores a finished job's outputs under its output prefix: the trained scene (`scene.ply`,
-/// Inria layout, and `labels.npy`, object ids in PLY order) and the given JSON documents.
+/// Inria layout, `labels.npy`, object ids in PLY order, and `cameras.json`) and the given JSON
+/// documents.
 pub fn store_outputs(
     ctx: &JobContext,
     model: &GaussianModel,
+    scene: &Scene,
     documents: &[(&str, Vec<u8>)],
 ) -> Result<(), JobFailure> {
-    write_scene_files(model, &ctx.work_dir).map_err(retryable)?;
+    write_scene_files(model, scene, &ctx.work_dir).map_err(retryable)?;
     let prefix = ctx.output_prefix();
-    for file in ["scene.ply", "labels.npy"] {
+    for file in [SCENE_FILE, LABELS_FILE, CAMERAS_FILE] {
         ctx.blobs
             .put_file(&format!("{prefix}/{file}"), &ctx.work_dir.join(file))
             .map_err(retryable)?;

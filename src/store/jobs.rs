@@ -267,6 +267,24 @@ impl Database {
         rows.iter().map(job_from_row).collect()
     }
 
+    /// The scene's most recently finished successful job of `kind`: the one whose results a
+    /// scene currently serves (its object table was written last).
+    pub async fn latest_succeeded_job(
+        &self,
+        scene_id: &str,
+        kind: &str,
+    ) -> Result<Option<JobRecord>, StoreError> {
+        let row = sqlx::query(sqlx::AssertSqlSafe(format!(
+            "SELECT {COLUMNS} FROM jobs WHERE scene_id = ? AND kind = ? AND state = 'succeeded' \
+             ORDER BY updated_at_ms DESC, id DESC LIMIT 1"
+        )))
+        .bind(scene_id)
+        .bind(kind)
+        .fetch_optional(self.pool())
+        .await?;
+        row.as_ref().map(job_from_row).transpose()
+    }
+
     /// Jobs per state, for the queue-depth gauges.
     pub async fn job_counts_by_state(&self) -> Result<Vec<(JobState, i64)>, StoreError> {
         let rows: Vec<(String, i64)> =

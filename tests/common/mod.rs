@@ -52,6 +52,59 @@ impl TestService {
         }
     }
 
+    /// A service with the training job kinds on a GPU worker (lavapipe in CI): `configure`
+    /// adjusts the test config first. `None` (skip) without a GPU when `SEGSPLAT_SKIP_GPU_TESTS`
+    /// is set; without that variable a missing adapter fails.
+    pub async fn start_on_gpu(
+        data_dir: &Path,
+        configure: impl FnOnce(&mut Config),
+    ) -> Option<TestService> {
+        if segsplat::gpu::GpuContext::new_default().is_err() {
+            if std::env::var("SEGSPLAT_SKIP_GPU_TESTS").is_ok() {
+                eprintln!("skipping: no GPU adapter");
+                return None;
+            }
+            panic!("no GPU adapter (lavapipe is installed by scripts/bootstrap.sh)");
+        }
+        let mut config = test_config(data_dir);
+        config.workers.cpu_slots = 0;
+        config.jobs.lease_secs = 30.0;
+        config.jobs.heartbeat_secs = 1.0;
+        configure(&mut config);
+        let service = ServiceBuilder::new(config)
+            .handler(Arc::new(segsplat::pipeline::ReconstructHandler))
+            .handler(Arc::new(segsplat::pipeline::SegmentThenSplatHandler))
+            .start()
+            .await
+            .unwrap();
+        let base_url = format!("http://{}", service.http_addr().unwrap());
+        Some(TestService {
+            service,
+            base_url,
+            client: reqwest::Client::new(),
+        })
+    }
+
+    /// A gRPC client of this service's `SceneQuery`.
+    pub async fn grpc(
+        &self,
+    ) -> segsplat::proto::scene_query_client::SceneQueryClient<tonic::transport::Channel> {
+        let addr = self.service.grpc_addr().unwrap();
+        let channel = tonic::transport::Endpoint::from_shared(format!("http://{addr}"))
+            .unwrap()
+            .connect()
+            .await
+            .unwrap();
+        segsplat::proto::scene_query_client::SceneQueryClient::new(channel)
+    }
+
+    /// GET returning the status and raw body.
+    pub async fn get_bytes(&self, path: &str) -> (u16, Vec<u8>) {
+        let response = self.client.get(self.url(path)).send().await.unwrap();
+        let status = response.status().as_u16();
+        (status, response.bytes().await.unwrap().to_vec())
+    }
+
     pub fn url(&self, path: &str) -> String {
         format!("{}{}", self.base_url, path)
     }

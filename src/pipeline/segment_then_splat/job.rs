@@ -395,7 +395,7 @@ fn finish(
             serde_json::to_vec_pretty(&metrics).map_err(fatal)?,
         ),
     ];
-    store_outputs(ctx, &model, &documents)?;
+    store_outputs(ctx, &model, scene, &documents)?;
     report_evaluation(ctx, &metrics.held_out, metrics.gaussians);
     Ok(summaries
         .iter()

@@ -1,0 +1,84 @@
+//! A finished training job's scene as the serving side loads it: the Gaussians (`scene.ply`),
+//! their object ids (`labels.npy`, PLY order) and the cameras they were trained from
+//! (`cameras.json`), from a job's blob prefix or from a local output folder.
+
+use std::path::Path;
+
+use super::ServingError;
+use super::cameras::{CAMERAS_FILE, SceneCamera};
+use crate::splat::GaussianModel;
+use crate::splat::labels::read_labels;
+use crate::splat::ply::read_ply;
+use crate::store::{BlobError, BlobStore};
+
+pub const SCENE_FILE: &str = "scene.ply";
+pub const LABELS_FILE: &str = "labels.npy";
+
+#[derive(Debug, Clone)]
+pub struct TrainedScene {
+    /// Gaussians with their object ids filled from the labels.
+    pub model: GaussianModel,
+    /// SH degree the PLY carries.
+    pub sh_degree: u32,
+    /// In the dataset's frame order: frame index = position.
+    pub cameras: Vec<SceneCamera>,
+}
+
+impl TrainedScene {
+    /// Loads the files under a job's output prefix in the blob store (blocking I/O).
+    pub fn from_blobs(blobs: &dyn BlobStore, prefix: &str) -> Result<Self, ServingError> {
+        Self::from_reader(|file| {
+            let key = format!("{prefix}/{file}");
+            blobs.get_bytes(&key).map_err(|error| match error {
+                BlobError::NotFound { .. } => ServingError::MissingFile {
+                    file: file.to_string(),
+                    location: prefix.to_string(),
+                },
+                other => ServingError::Storage(other.to_string()),
+            })
+        })
+    }
+
+    /// Loads the files from a local output folder (`segsplat train`, or a job's downloaded
+    /// output).
+    pub fn from_dir(dir: &Path) -> Result<Self, ServingError> {
+        Self::from_reader(|file| {
+            std::fs::read(dir.join(file)).map_err(|error| match error.kind() {
+                std::io::ErrorKind::NotFound => ServingError::MissingFile {
+                    file: file.to_string(),
+                    location: dir.display().to_string(),
+                },
+                _ => ServingError::Storage(format!("{}: {error}", dir.join(file).display())),
+            })
+        })
+    }
+
+    fn from_reader(
+        read: impl Fn(&str) -> Result<Vec<u8>, ServingError>,
+    ) -> Result<Self, ServingError> {
+        let ply = read(SCENE_FILE)?;
+        let imported = read_ply(ply.as_slice()).map_err(|error| ServingError::Corrupt {
+            file: SCENE_FILE.to_string(),
+            problem: error.to_string(),
+        })?;
+        let mut model = imported.model;
+        let labels = read(LABELS_FILE)?;
+        model.object_ids =
+            read_labels(labels.as_slice(), model.len()).map_err(|error| ServingError::Corrupt {
+                file: LABELS_FILE.to_string(),
+                problem: error.to_string(),
+            })?;
+        let cameras: Vec<SceneCamera> =
+            serde_json::from_slice(&read(CAMERAS_FILE)?).map_err(|error| {
+                ServingError::Corrupt {
+                    file: CAMERAS_FILE.to_string(),
+                    problem: error.to_string(),
+                }
+            })?;
+        Ok(Self {
+            model,
+            sh_degree: imported.sh_degree,
+            cameras,
+        })
+    }
+}

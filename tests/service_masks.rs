@@ -1,0 +1,367 @@
+//! Masks and exports from a trained scene through the service: REST masks for a frame and for a
+//! pose, visible-only masks, the PNG endpoint, per-object PLY, the labels sidecar, gRPC
+//! `RenderMask`, and the errors a caller can act on. The scene is the synthetic three-sphere
+//! capture with exact instance masks, so rendered masks are checked against the truth.
+
+mod common;
+
+use std::time::Duration;
+
+use base64::Engine;
+use common::{TestService, archives};
+use segsplat::proto;
+use segsplat::scene::Level;
+use segsplat::scene::colmap::ColmapEncoding;
+use segsplat::scene::synthetic::SyntheticSpec;
+use segsplat::segment::{BitMask, CompressedRle};
+use segsplat::splat::labels::read_labels;
+use segsplat::splat::ply::read_ply;
+
+fn decode_mask(mask: &serde_json::Value) -> BitMask {
+    let width = mask["width"].as_u64().unwrap() as u32;
+    let height = mask["height"].as_u64().unwrap() as u32;
+    let data = mask["data"].as_str().unwrap();
+    match mask["format"].as_str().unwrap() {
+        "coco_rle" => BitMask::from_coco_rle(&CompressedRle {
+            size: [height, width],
+            counts: data.to_string(),
+        })
+        .unwrap(),
+        "png" => {
+            let bytes = base64::engine::general_purpose::STANDARD
+                .decode(data)
+                .unwrap();
+            png_mask(&bytes)
+        }
+        other => panic!("unknown mask format {other}"),
+    }
+}
+
+fn png_mask(bytes: &[u8]) -> BitMask {
+    let image = image::load_from_memory(bytes).unwrap().into_luma8();
+    let values: Vec<bool> = image.pixels().map(|pixel| pixel.0[0] > 127).collect();
+    BitMask::from_bools(image.width(), image.height(), &values).unwrap()
+}
+
+/// The true visible silhouette of `object_id` at `level` in `frame_name`, from the dataset's
+/// instance-id masks.
+fn true_mask(
+    files: &[(String, Vec<u8>)],
+    level: Level,
+    frame_name: &str,
+    object_id: u32,
+) -> BitMask {
+    let path = segsplat::scene::masks::mask_path(level, frame_name);
+    let path = path.to_string_lossy();
+    let (_, bytes) = files
+        .iter()
+        .find(|(name, _)| name.ends_with(path.as_ref()))
+        .unwrap_or_else(|| panic!("no {path}"));
+    // Instance ids are raw values in 8-bit or 16-bit PNGs, never rescaled.
+    let (width, height, ids): (u32, u32, Vec<u32>) = match image::load_from_memory(bytes).unwrap() {
+        image::DynamicImage::ImageLuma8(ids) => (
+            ids.width(),
+            ids.height(),
+            ids.pixels().map(|p| u32::from(p.0[0])).collect(),
+        ),
+        image::DynamicImage::ImageLuma16(ids) => (
+            ids.width(),
+            ids.height(),
+            ids.pixels().map(|p| u32::from(p.0[0])).collect(),
+        ),
+        other => panic!("unexpected mask pixel type {:?}", other.color()),
+    };
+    let values: Vec<bool> = ids.iter().map(|&id| id == object_id).collect();
+    BitMask::from_bools(width, height, &values).unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn masks_and_exports_of_a_trained_scene() {
+    let data = tempfile::tempdir().unwrap();
+    let Some(client) =
+        TestService::start_on_gpu(data.path(), |config| config.query.max_mask_side = 512).await
+    else {
+        return;
+    };
+    let spec = SyntheticSpec {
+        frame_count: 12,
+        width: 80,
+        height: 60,
+        with_masks: Some(Level::ALL.to_vec()),
+        ..SyntheticSpec::default()
+    };
+    let files = archives::colmap_files(spec, ColmapEncoding::Text);
+    let (status, scene) = client
+        .upload(archives::zip_of(&files), "application/zip")
+        .await;
+    assert_eq!(status, 201, "{scene}");
+    let scene_id = scene["id"].as_str().unwrap().to_string();
+    let masks_path = format!("/v1/scenes/{scene_id}/masks");
+    let small_one = serde_json::json!([{"level": "small", "object_id": 1}]);
+    let request = |objects: &serde_json::Value, view: serde_json::Value| serde_json::json!({"objects": objects, "view": view, "visible_masks": true});
+
+    let (status, body) = client
+        .post_json(
+            &masks_path,
+            request(&small_one, serde_json::json!({"frame_index": 0})),
+        )
+        .await;
+    assert_eq!(status, 409, "nothing trained yet: {body}");
+    let (status, body) = client
+        .get_bytes(&format!("/v1/scenes/{scene_id}/trained/scene.ply"))
+        .await;
+    assert_eq!(status, 409, "{}", String::from_utf8_lossy(&body));
+
+    let job_id = client
+        .create_job(
+            &scene_id,
+            "segment_then_splat",
+            serde_json::json!({"steps": 150, "checkpoint_every": 0, "densify_from": 50,
+                               "densify_interval": 50, "densify_until": 120}),
+        )
+        .await;
+    client
+        .wait_for_state(&job_id, "succeeded", Duration::from_secs(600))
+        .await;
+
+    // Frame views: every small object's visible mask against the true silhouette.
+    let (status, cameras) = client
+        .get_json(&format!("/v1/scenes/{scene_id}/trained/cameras.json"))
+        .await;
+    assert_eq!(status, 200, "{cameras}");
+    let cameras = cameras.as_array().unwrap().clone();
+    assert_eq!(cameras.len(), 12);
+    let all_small = serde_json::json!([
+        {"level": "small", "object_id": 1},
+        {"level": "small", "object_id": 2},
+        {"level": "small", "object_id": 3}
+    ]);
+    let mut ious = Vec::new();
+    for frame_index in [1usize, 6, 10] {
+        let (status, answer) = client
+            .post_json(
+                &masks_path,
+                request(&all_small, serde_json::json!({"frame_index": frame_index})),
+            )
+            .await;
+        assert_eq!(status, 200, "{answer}");
+        let frame_name = cameras[frame_index]["name"].as_str().unwrap();
+        for rendered in answer["masks"].as_array().unwrap() {
+            let object_id = rendered["object_id"].as_u64().unwrap() as u32;
+            let full = decode_mask(&rendered["mask"]);
+            let visible = decode_mask(&rendered["visible_mask"]);
+            assert_eq!((full.width(), full.height()), (80, 60));
+            assert_eq!(
+                visible.intersection_area(&full).unwrap(),
+                visible.area(),
+                "visible lies inside the full mask"
+            );
+            let truth = true_mask(&files, Level::Small, frame_name, object_id);
+            if truth.area() > 0 {
+                ious.push(visible.iou(&truth).unwrap());
+            }
+        }
+    }
+    let mean_iou = ious.iter().sum::<f32>() / ious.len() as f32;
+    println!(
+        "visible-mask IoU against the truth over {} masks: mean {mean_iou:.3} {ious:?}",
+        ious.len()
+    );
+    assert!(mean_iou >= 0.7, "{ious:?}");
+
+    // The same camera given as a pose renders the same mask; max_side scales it.
+    let camera = &cameras[6];
+    let pose_view = serde_json::json!({
+        "camera_to_world": camera["camera_to_world"],
+        "intrinsics": {"fx": camera["fx"], "fy": camera["fy"], "cx": camera["cx"],
+                       "cy": camera["cy"], "width": camera["width"], "height": camera["height"]}
+    });
+    let (status, by_pose) = client
+        .post_json(&masks_path, request(&small_one, pose_view.clone()))
+        .await;
+    assert_eq!(status, 200, "{by_pose}");
+    let (_, by_frame) = client
+        .post_json(
+            &masks_path,
+            request(&small_one, serde_json::json!({"frame_index": 6})),
+        )
+        .await;
+    assert_eq!(
+        decode_mask(&by_pose["masks"][0]["mask"]),
+        decode_mask(&by_frame["masks"][0]["mask"])
+    );
+    let (status, half) = client
+        .post_json(
+            &masks_path,
+            serde_json::json!({"objects": small_one, "view": {"frame_index": 6, "max_side": 40},
+                               "mask_format": "png"}),
+        )
+        .await;
+    assert_eq!(status, 200, "{half}");
+    assert_eq!(half["masks"][0]["mask"]["format"], "png");
+    assert_eq!(decode_mask(&half["masks"][0]["mask"]).width(), 40);
+    assert!(half["masks"][0].get("visible_mask").is_none());
+
+    // The PNG endpoint.
+    let (status, png) = client
+        .get_bytes(&format!(
+            "/v1/scenes/{scene_id}/objects/small/1/mask.png?frame_index=6"
+        ))
+        .await;
+    assert_eq!(status, 200);
+    assert_eq!(png_mask(&png), decode_mask(&by_frame["masks"][0]["mask"]));
+
+    // Errors a caller can act on.
+    let bad = [
+        (
+            request(&small_one, serde_json::json!({"frame_index": 12})),
+            400,
+            "frame 12",
+        ),
+        (
+            request(&small_one, serde_json::json!({})),
+            400,
+            "frame_index",
+        ),
+        (
+            request(
+                &serde_json::json!([{"level": "small", "object_id": 99}]),
+                serde_json::json!({"frame_index": 0}),
+            ),
+            404,
+            "small object 99",
+        ),
+        (
+            request(
+                &serde_json::json!([{"level": "tiny", "object_id": 1}]),
+                serde_json::json!({"frame_index": 0}),
+            ),
+            400,
+            "level",
+        ),
+        (
+            request(
+                &small_one,
+                serde_json::json!({"frame_index": 0, "max_side": 0}),
+            ),
+            400,
+            "max_side",
+        ),
+        (
+            request(&small_one, {
+                let mut view = pose_view.clone();
+                view["camera_to_world"][0][0] = serde_json::json!(3.0);
+                view
+            }),
+            400,
+            "rigid",
+        ),
+        (
+            request(&small_one, {
+                let mut view = pose_view.clone();
+                view["intrinsics"]["width"] = serde_json::json!(5000);
+                view
+            }),
+            400,
+            "512",
+        ),
+    ];
+    for (body, expected_status, words) in bad {
+        let (status, answer) = client.post_json(&masks_path, body.clone()).await;
+        assert_eq!(status, expected_status, "{body} -> {answer}");
+        assert!(answer.to_string().contains(words), "{body} -> {answer}");
+    }
+    let (status, _) = client
+        .post_json(
+            "/v1/scenes/nope/masks",
+            request(&small_one, serde_json::json!({"frame_index": 0})),
+        )
+        .await;
+    assert_eq!(status, 404);
+
+    // Exports: the whole scene, the labels sidecar in PLY order, one object's PLY.
+    let (status, ply) = client
+        .get_bytes(&format!("/v1/scenes/{scene_id}/trained/scene.ply"))
+        .await;
+    assert_eq!(status, 200);
+    let scene_model = read_ply(ply.as_slice()).unwrap().model;
+    let (status, labels) = client
+        .get_bytes(&format!("/v1/scenes/{scene_id}/trained/labels.npy"))
+        .await;
+    assert_eq!(status, 200);
+    let labels = read_labels(labels.as_slice(), scene_model.len()).unwrap();
+    let in_object = labels
+        .iter()
+        .filter(|ids| ids[Level::Middle.index()] == 1)
+        .count();
+    let (status, object_ply) = client
+        .get_bytes(&format!("/v1/scenes/{scene_id}/objects/middle/1/ply"))
+        .await;
+    assert_eq!(status, 200);
+    let object = read_ply(object_ply.as_slice()).unwrap().model;
+    assert_eq!(object.len(), in_object);
+    assert!(in_object > 0);
+    let (status, objects) = client
+        .get_json(&format!("/v1/scenes/{scene_id}/objects?level=middle"))
+        .await;
+    assert_eq!(status, 200);
+    assert_eq!(
+        objects["objects"][0]["gaussian_count"], in_object as u64,
+        "{objects}"
+    );
+    for (path, expected) in [
+        (format!("/v1/scenes/{scene_id}/trained/secrets.txt"), 404),
+        (format!("/v1/scenes/{scene_id}/objects/middle/77/ply"), 404),
+        (format!("/v1/scenes/{scene_id}/objects/huge/1/ply"), 400),
+    ] {
+        let (status, body) = client.get_bytes(&path).await;
+        assert_eq!(
+            status,
+            expected,
+            "{path}: {}",
+            String::from_utf8_lossy(&body)
+        );
+    }
+
+    // gRPC RenderMask: the same mask as REST, as PNG bytes.
+    let mut grpc = client.grpc().await;
+    let frame_view = proto::View {
+        source: Some(proto::view::Source::FrameIndex(6)),
+        time: None,
+        max_side: None,
+    };
+    let rendered = grpc
+        .render_mask(proto::RenderMaskRequest {
+            scene_id: scene_id.clone(),
+            object_id: 1,
+            level: proto::Level::Small as i32,
+            view: Some(frame_view.clone()),
+            mask_encoding: proto::MaskEncoding::Png as i32,
+            visible_only: false,
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let mask = rendered.mask.unwrap();
+    assert!(mask.amodal);
+    assert_eq!(
+        png_mask(&mask.data),
+        decode_mask(&by_frame["masks"][0]["mask"])
+    );
+    let missing = grpc
+        .render_mask(proto::RenderMaskRequest {
+            scene_id: scene_id.clone(),
+            object_id: 99,
+            level: proto::Level::Small as i32,
+            view: Some(frame_view),
+            mask_encoding: proto::MaskEncoding::CocoRle as i32,
+            visible_only: true,
+        })
+        .await
+        .unwrap_err();
+    assert_eq!(missing.code(), tonic::Code::NotFound, "{missing}");
+    let cache = client.service.serving_stats();
+    assert_eq!(cache.loads, 1, "one load, then cache hits: {cache:?}");
+    assert!(cache.hits >= 10, "{cache:?}");
+    client.shutdown().await;
+}
