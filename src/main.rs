@@ -39,12 +39,12 @@ enum Command {
     Train(cli::train::TrainArgs),
     /// Render a trained scene (PLY) from a dataset's views to PNGs.
     Render(cli::render::RenderArgs),
-    /// Query a trained scene.
-    Query(FutureArgs),
-    /// Export Gaussians and object labels.
-    Export(FutureArgs),
-    /// Evaluate segmentation and rendering quality.
-    Eval(FutureArgs),
+    /// Ask a trained scene (in the service's data dir) a text query; write masks as PNGs.
+    Query(cli::query::QueryArgs),
+    /// Export a trained scene: PLY, labels sidecar, cameras, objects, single objects as PLY.
+    Export(cli::export::ExportArgs),
+    /// Score a trained scene's segmentation against LERF_OVS or 3D-OVS ground truth (mIoU).
+    Eval(cli::eval::EvalArgs),
     /// Benchmark training speed and held-out quality on a dataset (JSON).
     Bench(cli::bench::BenchArgs),
     /// Check ONNX model directories.
@@ -82,21 +82,8 @@ struct WorkerArgs {
     data_dir: Option<PathBuf>,
 }
 
-#[derive(Args)]
-struct FutureArgs {
-    #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
-    args: Vec<String>,
-}
-
-/// Exit code for commands that exist but are not built yet.
-const EXIT_NOT_AVAILABLE: u8 = 2;
-
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    let not_available = |command: &str, feature: &str| {
-        eprintln!("segsplat {command}: not available yet: arrives with {feature}");
-        ExitCode::from(EXIT_NOT_AVAILABLE)
-    };
     let result = match cli.command {
         Command::Serve(args) => {
             let overrides = ConfigOverrides {
@@ -117,9 +104,11 @@ fn main() -> ExitCode {
         Command::SyntheticScene(args) => write_synthetic_scene(&args),
         Command::Train(args) => init_cli_logging().and_then(|()| cli::train::run(args)),
         Command::Render(args) => init_cli_logging().and_then(|()| cli::render::run(args)),
-        Command::Query(_) => return not_available("query", "the Segment-then-Splat pipeline"),
-        Command::Export(_) => return not_available("export", "the Segment-then-Splat pipeline"),
-        Command::Eval(_) => return not_available("eval", "the evaluation issue"),
+        Command::Query(args) => init_cli_logging().and_then(|()| cli::query::run(args, cli.config)),
+        Command::Export(args) => {
+            init_cli_logging().and_then(|()| cli::export::run(args, cli.config))
+        }
+        Command::Eval(args) => init_cli_logging().and_then(|()| cli::eval::run(args, cli.config)),
         Command::Bench(args) => init_cli_logging().and_then(|()| cli::bench::run(args)),
         Command::Models(args) => {
             return match init_cli_logging().and_then(|()| cli::models::run(args, cli.config)) {

@@ -364,4 +364,114 @@ async fn masks_and_exports_of_a_trained_scene() {
     assert_eq!(cache.loads, 1, "one load, then cache hits: {cache:?}");
     assert!(cache.hits >= 10, "{cache:?}");
     client.shutdown().await;
+
+    local_commands_read_the_service_data(data.path(), &scene_id, &files, &cameras, in_object);
+}
+
+fn segsplat(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_segsplat"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// `segsplat export`, `eval --oracle` (against a 3D-OVS folder made from the true masks) and
+/// `query` on the data dir the service wrote.
+fn local_commands_read_the_service_data(
+    data_dir: &std::path::Path,
+    scene_id: &str,
+    files: &[(String, Vec<u8>)],
+    cameras: &[serde_json::Value],
+    middle_one_gaussians: usize,
+) {
+    let data = data_dir.to_str().unwrap();
+    let work = tempfile::tempdir().unwrap();
+    let export_dir = work.path().join("export");
+    let output = segsplat(&[
+        "export",
+        scene_id,
+        "--data-dir",
+        data,
+        "--out",
+        export_dir.to_str().unwrap(),
+        "--object",
+        "middle:1",
+    ]);
+    assert!(output.status.success(), "{output:?}");
+    for file in [
+        "scene.ply",
+        "labels.npy",
+        "cameras.json",
+        "objects.json",
+        "metrics.json",
+    ] {
+        assert!(export_dir.join(file).is_file(), "{file}");
+    }
+    let object = std::fs::read(export_dir.join("middle-1.ply")).unwrap();
+    assert_eq!(
+        read_ply(object.as_slice()).unwrap().model.len(),
+        middle_one_gaussians
+    );
+    let output = segsplat(&["export", scene_id, "--data-dir", data, "--object", "tiny:1"]);
+    assert!(!output.status.success());
+    assert!(String::from_utf8_lossy(&output.stderr).contains("small, middle or large"));
+
+    // 3D-OVS layout: segmentations/classes.txt and <view>/<class>.png.
+    let ground_truth = work.path().join("3d-ovs");
+    let segmentations = ground_truth.join("segmentations");
+    let classes = ["red ball", "green ball", "blue ball"];
+    std::fs::create_dir_all(&segmentations).unwrap();
+    std::fs::write(segmentations.join("classes.txt"), classes.join("\n")).unwrap();
+    for frame_index in [2usize, 5, 9] {
+        let name = cameras[frame_index]["name"].as_str().unwrap();
+        let view = segmentations.join(std::path::Path::new(name).file_stem().unwrap());
+        std::fs::create_dir_all(&view).unwrap();
+        for (index, class) in classes.iter().enumerate() {
+            let truth = true_mask(files, Level::Small, name, index as u32 + 1);
+            if truth.area() == 0 {
+                continue;
+            }
+            let png = image::GrayImage::from_fn(truth.width(), truth.height(), |x, y| {
+                image::Luma([if truth.get(x, y) { 255 } else { 0 }])
+            });
+            png.save(view.join(format!("{class}.png"))).unwrap();
+        }
+    }
+    let report_path = work.path().join("eval.json");
+    let ground_truth = ground_truth.to_str().unwrap();
+    let eval = |extra: &[&str]| {
+        let mut args = vec!["eval", scene_id, "--data-dir", data];
+        args.extend(["--ground-truth", ground_truth]);
+        args.extend(extra);
+        segsplat(&args)
+    };
+    let output = eval(&[
+        "--oracle",
+        "--visible",
+        "--json",
+        report_path.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(output.status.success(), "{output:?}");
+    println!("{stdout}");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&report_path).unwrap()).unwrap();
+    assert_eq!(report["format"], "3d_ovs");
+    assert_eq!(report["selection"], "oracle");
+    assert_eq!(report["segmentation"]["frame_count"], 3);
+    let miou = report["segmentation"]["miou"].as_f64().unwrap();
+    assert!(miou >= 0.65, "oracle mIoU {miou}: {report}");
+    assert!(
+        report["held_out"]["psnr"].as_f64().unwrap() > 10.0,
+        "{report}"
+    );
+
+    // Without CLIP weights the language path says what to do instead.
+    let output = eval(&[]);
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("--oracle"), "{stderr}");
+    let output = segsplat(&["query", "no-such-scene", "red", "--data-dir", data]);
+    assert!(!output.status.success());
+    assert!(String::from_utf8_lossy(&output.stderr).contains("no scene"));
 }

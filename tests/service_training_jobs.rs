@@ -235,7 +235,7 @@ async fn segment_then_splat_embeds_objects_and_answers_text_queries() {
     let data = tempfile::tempdir().unwrap();
     let models =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/models/tiny");
-    let Some(client) = start_service_with_models(data.path(), models).await else {
+    let Some(client) = start_service_with_models(data.path(), models.clone()).await else {
         return;
     };
     // 96 x 72 rather than 48 x 36: the stand-in CLIP quantises a crop's mean colour to the
@@ -344,6 +344,41 @@ async fn segment_then_splat_embeds_objects_and_answers_text_queries() {
 
     stream_query_answers_each_pose(&client, scene_id).await;
     client.shutdown().await;
+
+    // `segsplat query` on the same data dir: the answer as JSON, masks as PNGs.
+    let out = data.path().join("masks");
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_segsplat"))
+        .args([
+            "query",
+            scene_id,
+            "blue",
+            "--granularity",
+            "small",
+            "--frame",
+            "0",
+        ])
+        .args(["--frame", "4", "--visible", "--data-dir"])
+        .arg(data.path())
+        .arg("--out")
+        .arg(&out)
+        .env("SEGSPLAT_MODELS__DIR", &models)
+        .output()
+        .unwrap();
+    assert!(output.status.success(), "{output:?}");
+    let answer: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert_eq!(answer["matched"], true, "{answer}");
+    assert_eq!(answer["objects"][0]["object_id"], 3, "{answer}");
+    let written = answer["objects"][0]["masks"].as_array().unwrap();
+    assert_eq!(
+        written.len(),
+        4,
+        "full and visible for two frames: {answer}"
+    );
+    let mask = image::open(out.join("0-small-3-frame4.png"))
+        .unwrap()
+        .into_luma8();
+    assert_eq!(mask.dimensions(), (96, 72));
+    assert!(mask.pixels().any(|pixel| pixel.0[0] == 255));
 }
 
 /// gRPC `StreamQuery`: the text is sent once, then poses; each reply echoes its sequence and

@@ -12,7 +12,7 @@ mod metrics;
 mod objects;
 mod openapi;
 mod ops;
-mod query;
+pub mod query;
 mod router;
 mod scenes;
 mod server;

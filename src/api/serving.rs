@@ -7,8 +7,8 @@ use std::sync::Arc;
 use crate::jobs::job_output_prefix as output_prefix;
 use crate::pipeline::segment_then_splat::job::KIND as SEGMENT_THEN_SPLAT;
 use crate::pipeline::serving::{
-    EncodedMask, LoadedScene, MaskFormat, MaskView, SceneCache, ServingError, TrainedScene,
-    encode_mask, object_ply,
+    EncodedMask, LoadedScene, MaskFormat, MaskView, ObjectMasks, SceneCache, ServingError,
+    TrainedScene, encode_mask, object_ply,
 };
 use crate::scene::Level;
 use crate::store::jobs::JobRecord;
@@ -120,23 +120,10 @@ impl Serving {
         visible_too: bool,
         format: MaskFormat,
     ) -> Result<Vec<EncodedObjectMasks>, ServeFailure> {
-        let started = std::time::Instant::now();
-        let job = self.serving_job(scene_id).await?;
-        // Unknown ids would render as empty masks; say so instead.
-        let known = self.database.list_objects(scene_id, None).await?;
-        if let Some(&(level, object_id)) = objects.iter().find(|(level, object_id)| {
-            !known
-                .iter()
-                .any(|known| known.level == *level && known.object_id == *object_id)
-        }) {
-            return Err(ServingError::NoSuchObject { level, object_id }.into());
-        }
-        let scene = self.load_job(job).await?;
-        let cache = Arc::clone(&self.cache);
-        let max_mask_side = self.max_mask_side;
-        let masks = blocking(move || {
-            let camera = view.render_camera(&scene.cameras, max_mask_side)?;
-            let rendered = cache.render_masks(&scene, &camera, &objects, visible_too)?;
+        let rendered = self
+            .render_bit_masks(scene_id, view, objects, visible_too)
+            .await?;
+        blocking(move || {
             rendered
                 .iter()
                 .map(|masks| {
@@ -153,6 +140,35 @@ impl Serving {
                 })
                 .collect::<Result<Vec<_>, ServingError>>()
                 .map_err(ServeFailure::from)
+        })
+        .await
+    }
+
+    /// Renders the masks of `objects` for `view` (unencoded: evaluation and the CLI).
+    pub async fn render_bit_masks(
+        &self,
+        scene_id: &str,
+        view: MaskView,
+        objects: Vec<(Level, u32)>,
+        visible_too: bool,
+    ) -> Result<Vec<ObjectMasks>, ServeFailure> {
+        let started = std::time::Instant::now();
+        let job = self.serving_job(scene_id).await?;
+        // Unknown ids would render as empty masks; say so instead.
+        let known = self.database.list_objects(scene_id, None).await?;
+        if let Some(&(level, object_id)) = objects.iter().find(|(level, object_id)| {
+            !known
+                .iter()
+                .any(|known| known.level == *level && known.object_id == *object_id)
+        }) {
+            return Err(ServingError::NoSuchObject { level, object_id }.into());
+        }
+        let scene = self.load_job(job).await?;
+        let cache = Arc::clone(&self.cache);
+        let max_mask_side = self.max_mask_side;
+        let masks = blocking(move || {
+            let camera = view.render_camera(&scene.cameras, max_mask_side)?;
+            Ok(cache.render_masks(&scene, &camera, &objects, visible_too)?)
         })
         .await?;
         metrics::histogram!("segsplat_mask_render_seconds").record(started.elapsed().as_secs_f64());

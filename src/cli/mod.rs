@@ -1,7 +1,12 @@
-//! Local commands over the library: training, rendering and benchmarking a dataset directory.
+//! Local commands over the library: training, rendering and benchmarking a dataset directory;
+//! querying, exporting and evaluating the scenes a local service trained.
 
 pub mod bench;
+pub mod eval;
+pub mod export;
+pub mod local;
 pub mod models;
+pub mod query;
 pub mod render;
 pub mod train;
 

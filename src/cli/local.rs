@@ -1,0 +1,115 @@
+//! The service's stores, opened from a local command: the same config layering as `serve`
+//! (file, `SEGSPLAT_*`, `--data-dir`), the database and blob dir, the models, and the serving
+//! core, so `query`, `export` and `eval` answer exactly what the service would.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use anyhow::Context;
+use clap::Args;
+use segsplat::api::serving::Serving;
+use segsplat::config::{Config, ConfigOverrides};
+use segsplat::gpu::GpuContext;
+use segsplat::language::SharedTextEncoder;
+use segsplat::models::ModelsStatus;
+use segsplat::pipeline::serving::SceneCache;
+use segsplat::store::{Database, LocalBlobStore};
+
+/// Where the service keeps its data.
+#[derive(Args, Debug, Clone)]
+pub struct StoreArgs {
+    /// The service's data dir (database and blobs); default from the config, `./data`.
+    #[arg(long)]
+    pub data_dir: Option<PathBuf>,
+}
+
+pub struct LocalService {
+    pub database: Database,
+    pub serving: Serving,
+    pub text_encoder: Arc<SharedTextEncoder>,
+}
+
+impl LocalService {
+    /// Opens the stores without loading models (exports need none).
+    pub async fn open(config_file: Option<&Path>, store: &StoreArgs) -> anyhow::Result<Self> {
+        Self::open_with(config_file, store, false).await
+    }
+
+    /// Opens the stores and loads the configured models (text queries).
+    pub async fn open_with_models(
+        config_file: Option<&Path>,
+        store: &StoreArgs,
+    ) -> anyhow::Result<Self> {
+        Self::open_with(config_file, store, true).await
+    }
+
+    async fn open_with(
+        config_file: Option<&Path>,
+        store: &StoreArgs,
+        models: bool,
+    ) -> anyhow::Result<Self> {
+        let overrides = ConfigOverrides {
+            data_dir: store.data_dir.clone(),
+            ..Default::default()
+        };
+        let config = Config::load(config_file, std::env::vars(), &overrides)
+            .context("invalid configuration")?;
+        let database_path = config.database_path();
+        if !database_path.exists() {
+            anyhow::bail!(
+                "no segsplat database at {} (pass --data-dir, the folder `segsplat serve` uses)",
+                database_path.display()
+            );
+        }
+        let database = Database::open(&database_path)
+            .await
+            .with_context(|| format!("cannot open {}", database_path.display()))?;
+        let blobs = Arc::new(
+            LocalBlobStore::open(&config.blob_dir())
+                .with_context(|| format!("cannot open {}", config.blob_dir().display()))?,
+        );
+        let models_status = if models {
+            let models_config = config.models.clone();
+            tokio::task::spawn_blocking(move || ModelsStatus::load(&models_config))
+                .await
+                .context("model loading crashed")?
+        } else {
+            ModelsStatus::NotConfigured
+        };
+        let adapters = config.workers.adapters.clone();
+        let cache = Arc::new(SceneCache::new(
+            config.query.cache_budget_mib.saturating_mul(1024 * 1024),
+            move || GpuContext::new(&adapters).map_err(|error| error.to_string()),
+        ));
+        let serving = Serving::new(database.clone(), blobs, cache, config.query.max_mask_side);
+        Ok(Self {
+            text_encoder: Arc::new(SharedTextEncoder::new(Arc::new(models_status))),
+            database,
+            serving,
+        })
+    }
+
+    /// The scene's id from an id or a unique scene name.
+    pub async fn resolve_scene(&self, id_or_name: &str) -> anyhow::Result<String> {
+        if self.database.get_scene(id_or_name).await?.is_some() {
+            return Ok(id_or_name.to_string());
+        }
+        let named: Vec<String> = self
+            .database
+            .list_scenes()
+            .await?
+            .into_iter()
+            .filter(|scene| scene.name == id_or_name)
+            .map(|scene| scene.id)
+            .collect();
+        match named.as_slice() {
+            [id] => Ok(id.clone()),
+            [] => anyhow::bail!("no scene with id or name {id_or_name:?}"),
+            ids => anyhow::bail!(
+                "{} scenes are named {id_or_name:?}; use an id: {}",
+                ids.len(),
+                ids.join(", ")
+            ),
+        }
+    }
+}
