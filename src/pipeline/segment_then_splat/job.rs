@@ -18,6 +18,7 @@ use serde::{Deserialize, Serialize};
 
 use super::association::{AssociationOptions, generated_view_masks};
 use super::objects::{ObjectSummary, summarize_objects};
+use super::scene_size::{SceneSize, SceneSizedFields};
 use super::track_merge::{TrackMergeRule, merge_lost_tracks};
 use super::training::{
     DEFAULT_OBJECT_FLOORS, SegmentedTrainingOptions, attach_object_training,
@@ -70,6 +71,10 @@ pub struct SegmentThenSplatConfig {
     pub object_floors: [usize; 3],
     /// Steps between checkpoints (0 = only at the end).
     pub checkpoint_every: u32,
+    /// Fields that follow the scene's size at run time (METHOD.md: 20k steps and one object
+    /// per level for scenes under 100 training views, else 40k and three; middle and large
+    /// levels from step 5k and 10k). Filled on submission with the fields the config left out.
+    pub scene_sized: SceneSizedFields,
 }
 
 impl Default for SegmentThenSplatConfig {
@@ -82,6 +87,7 @@ impl Default for SegmentThenSplatConfig {
             masks: MaskSource::Auto,
             object_floors: DEFAULT_OBJECT_FLOORS,
             checkpoint_every: 1000,
+            scene_sized: SceneSizedFields::default(),
         }
     }
 }
@@ -121,6 +127,9 @@ impl JobHandler for SegmentThenSplatHandler {
         } else {
             serde_json::from_value(config.clone()).map_err(|error| error.to_string())?
         };
+        if config.get("scene_sized").is_none() {
+            parsed.scene_sized = SceneSizedFields::left_out_of(config);
+        }
         // The object loss is the point of this job: on unless configured.
         parsed
             .train
@@ -162,7 +171,7 @@ impl JobHandler for SegmentThenSplatHandler {
 }
 
 fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedding>), JobFailure> {
-    let config: SegmentThenSplatConfig =
+    let mut config: SegmentThenSplatConfig =
         serde_json::from_value(ctx.config.clone()).map_err(fatal)?;
     let gpu: Arc<GpuContext> = ctx
         .gpu
@@ -170,6 +179,18 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
         .ok_or_else(|| fatal("the segment_then_splat job needs a GPU worker"))?;
     let scene = load_scene(&ctx.scene_dir, &LoadOptions::default()).map_err(fatal)?;
     let frames = training_frames(&scene, &config.train);
+    let size = SceneSize::of(frames.len());
+    config.scene_sized.apply(size, &mut config.train);
+    tracing::info!(
+        ?size,
+        steps = config.train.steps,
+        objects_per_level = config
+            .train
+            .object_loss
+            .as_ref()
+            .map(|o| o.objects_per_level),
+        "training settings"
+    );
     // Stage 1 runs again on a resumed attempt: every mask source is deterministic, and the
     // masks are cheaper to rebuild than to store.
     let masks = view_masks_for(ctx, &scene, &config, &frames)?;
