@@ -1,5 +1,6 @@
-//! `segsplat bench DIR`: trains plain 3DGS and reports speed and held-out quality as one JSON
-//! object (see the README for figures measured with it).
+//! `segsplat bench DIR`: trains plain 3DGS (or, with `--object-loss`, with the Segment-then-Splat
+//! object loss on the dataset's own or classical masks) and reports speed and held-out quality as
+//! one JSON object (see the README for figures measured with it).
 
 use std::path::PathBuf;
 
@@ -36,9 +37,95 @@ pub struct BenchArgs {
     /// Keep the Gaussian count fixed (no densification, pruning or opacity reset).
     #[arg(long)]
     pub no_densify: bool,
+    /// Train with the object loss: `m` objects per level per step at every level from the
+    /// first step (the most it costs), on the dataset's masks or else classical masks.
+    #[arg(long)]
+    pub object_loss: bool,
+    /// `m` for `--object-loss`.
+    #[arg(long, default_value_t = 3)]
+    pub objects_per_level: u32,
     /// Print one JSON object (otherwise a readable summary).
     #[arg(long)]
     pub json: bool,
+}
+
+#[derive(Serialize)]
+struct ObjectLossReport {
+    objects_per_level: u32,
+    /// `user` or `classical`.
+    masks: &'static str,
+    /// Objects per level (small, middle, large).
+    objects: [usize; 3],
+    mask_seconds: f64,
+}
+
+/// A trainer with the object loss on every level from the start, and what it trains on.
+fn object_loss_trainer(
+    ctx: &segsplat::gpu::GpuContext,
+    scene: &Scene,
+    mut config: TrainConfig,
+    initial: Option<GaussianModel>,
+    objects_per_level: u32,
+) -> anyhow::Result<(Trainer, ObjectLossReport)> {
+    use segsplat::pipeline::segment_then_splat::association::{
+        AssociationOptions, generated_view_masks,
+    };
+    use segsplat::pipeline::segment_then_splat::training::{
+        SegmentedTrainingOptions, attach_object_training, segmented_trainer_from_view_masks,
+        training_frames,
+    };
+    use segsplat::pipeline::segment_then_splat::view_masks::ViewMaskSet;
+    use segsplat::segment::{ClassicalConfig, MaskGenerator};
+    use segsplat::splat::train::ObjectLossConfig;
+
+    anyhow::ensure!(
+        objects_per_level > 0,
+        "--objects-per-level must be at least 1"
+    );
+    config.object_loss = Some(ObjectLossConfig {
+        objects_per_level,
+        middle_from: 0.0,
+        large_from: 0.0,
+        ..ObjectLossConfig::default()
+    });
+    let started = std::time::Instant::now();
+    let frames = training_frames(scene, &config);
+    let (masks, source) = if scene.masks.is_some() {
+        let masks = ViewMaskSet::from_user_masks(scene, &frames, config.max_resolution)?;
+        (masks, "user")
+    } else {
+        let mut generator = MaskGenerator::Classical(ClassicalConfig::default());
+        let (masks, _) = generated_view_masks(
+            scene,
+            &frames,
+            &mut generator,
+            config.max_resolution,
+            &AssociationOptions::default(),
+        )?;
+        (masks, "classical")
+    };
+    let mask_seconds = started.elapsed().as_secs_f64();
+    let options = SegmentedTrainingOptions::default();
+    let trainer = match initial {
+        // Random Gaussians carry no ids: the object loss then renders empty objects, which
+        // still costs the renders it measures.
+        Some(model) => {
+            let mut trainer = Trainer::new(ctx, scene, config, Some(model))?;
+            attach_object_training(ctx, &mut trainer, &masks, &options)?;
+            trainer
+        }
+        None => segmented_trainer_from_view_masks(ctx, scene, config, &masks, &options)?,
+    };
+    let objects = segsplat::scene::Level::ALL.map(|level| masks.object_count(level));
+    Ok((
+        trainer,
+        ObjectLossReport {
+            objects_per_level,
+            masks: source,
+            objects,
+            mask_seconds,
+        },
+    ))
 }
 
 /// `count` random Gaussians spread uniformly over the box holding the central 98% of the sparse
@@ -91,6 +178,8 @@ struct BenchReport {
     psnr: f64,
     ssim: f64,
     peak_resident_mib: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    object_loss: Option<ObjectLossReport>,
 }
 
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
@@ -109,7 +198,13 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     if args.no_densify {
         config.densify_until = 0;
     }
-    let mut trainer = Trainer::new(&ctx, &scene, config, initial)?;
+    let (mut trainer, object_loss) = if args.object_loss {
+        let (trainer, report) =
+            object_loss_trainer(&ctx, &scene, config, initial, args.objects_per_level)?;
+        (trainer, Some(report))
+    } else {
+        (Trainer::new(&ctx, &scene, config, initial)?, None)
+    };
     let gaussians_start = trainer.gaussian_count();
     let (forward_ms_start, backward_ms_start) = trainer.time_passes(args.timing_repeats)?;
     let progress = trainer.run(|_| true)?;
@@ -135,6 +230,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         psnr: eval.psnr,
         ssim: eval.ssim,
         peak_resident_mib: super::peak_resident_mib(),
+        object_loss,
     };
     if args.json {
         println!("{}", serde_json::to_string(&report)?);

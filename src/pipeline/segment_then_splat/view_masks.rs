@@ -218,6 +218,17 @@ impl ViewMasks {
 }
 
 impl ViewMaskSet {
+    /// Distinct objects at `level` over all views.
+    pub fn object_count(&self, level: Level) -> usize {
+        let ids: std::collections::BTreeSet<u32> = self
+            .views
+            .iter()
+            .flat_map(|view| view.ids(level).iter().copied())
+            .filter(|&id| id != 0)
+            .collect();
+        ids.len()
+    }
+
     /// The user's masks (`masks/<level>/`) for `frame_indices`, at most `max_side` pixels on the
     /// longest side. A level the user did not give is served by the nearest given level.
     pub fn from_user_masks(
