@@ -1,7 +1,9 @@
 // Backward of rasterize_forward: one 16x16 workgroup per tile; each pixel walks its splats back to
 // front from its last contributor, recovering the transmittance before each fragment by division
 // (as 3DGS/gsplat do), and adds d loss / d (mean2d, conic, colour, opacity) and |d loss / d mean2d|
-// into grad_projected with float atomics (native or CAS: rasterize_grad_atomics_*.wgsl).
+// into grad_projected with float atomics (native or CAS: rasterize_grad_atomics_*.wgsl), summed
+// over the subgroup first where the device has subgroups (rasterize_grad_emit_*.wgsl). The loop
+// over a batch's splats stays uniform (no early `continue`) so the subgroup sums are legal.
 
 @group(0) @binding(0) var<uniform> uniforms: RenderUniforms;
 @group(0) @binding(1) var<storage, read> tile_ranges: array<u32>;
@@ -21,12 +23,6 @@ var<workgroup> batch_colour: array<vec4<f32>, 256>;
 var<workgroup> range_start: u32;
 var<workgroup> longest: atomic<u32>;
 var<workgroup> longest_snapshot: u32;
-
-fn add_grad(gaussian: u32, slot: u32, value: f32) {
-    if value != 0.0 {
-        grad_projected_add(gaussian * GRAD_STRIDE + slot, value);
-    }
-}
 
 @compute @workgroup_size(16, 16)
 fn rasterize_backward(
@@ -79,45 +75,33 @@ fn rasterize_backward(
         workgroupBarrier();
         for (var t = 0u; t < batch_size; t++) {
             let position = batch_end - 1u - t;
-            if position >= contributed {
-                continue;
-            }
             let mean_opacity = batch_mean_opacity[t];
             let conic = batch_conic[t].xyz;
             let d = mean_opacity.xy - centre;
             let sigma = 0.5 * (conic.x * d.x * d.x + conic.z * d.y * d.y) + conic.y * d.x * d.y;
-            if sigma < 0.0 {
-                continue;
-            }
-            let value = exp(-sigma);
+            let value = exp(-max(sigma, 0.0));
             let alpha = min(ALPHA_MAX, mean_opacity.z * value);
-            if alpha < ALPHA_MIN {
-                continue;
+            let contributes = position < contributed && sigma >= 0.0 && alpha >= ALPHA_MIN;
+            var grads = FragmentGrads(vec2<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0.0, vec2<f32>(0.0));
+            if contributes {
+                let one_over_rest = 1.0 / (1.0 - alpha);
+                transmittance *= one_over_rest;
+                let weight = alpha * transmittance;
+                let colour = batch_colour[t].xyz;
+                var v_alpha = dot(colour * transmittance - behind * one_over_rest, v_out.xyz);
+                v_alpha += t_final * one_over_rest * (v_out.w - background_term);
+                grads.colour = weight * v_out.xyz;
+                if mean_opacity.z * value <= ALPHA_MAX {
+                    let v_sigma = -mean_opacity.z * value * v_alpha;
+                    let v_mean = v_sigma * vec2<f32>(conic.x * d.x + conic.y * d.y, conic.y * d.x + conic.z * d.y);
+                    grads.mean = v_mean;
+                    grads.conic = vec3<f32>(0.5 * v_sigma * d.x * d.x, v_sigma * d.x * d.y, 0.5 * v_sigma * d.y * d.y);
+                    grads.opacity = value * v_alpha;
+                    grads.mean_abs = abs(v_mean);
+                }
+                behind += colour * weight;
             }
-            let one_over_rest = 1.0 / (1.0 - alpha);
-            transmittance *= one_over_rest;
-            let weight = alpha * transmittance;
-            let colour = batch_colour[t].xyz;
-            let gaussian = batch_gaussian[t];
-            let v_colour = weight * v_out.xyz;
-            var v_alpha = dot(colour * transmittance - behind * one_over_rest, v_out.xyz);
-            v_alpha += t_final * one_over_rest * (v_out.w - background_term);
-            add_grad(gaussian, 5u, v_colour.x);
-            add_grad(gaussian, 6u, v_colour.y);
-            add_grad(gaussian, 7u, v_colour.z);
-            if mean_opacity.z * value <= ALPHA_MAX {
-                let v_sigma = -mean_opacity.z * value * v_alpha;
-                let v_mean = v_sigma * vec2<f32>(conic.x * d.x + conic.y * d.y, conic.y * d.x + conic.z * d.y);
-                add_grad(gaussian, 0u, v_mean.x);
-                add_grad(gaussian, 1u, v_mean.y);
-                add_grad(gaussian, 2u, 0.5 * v_sigma * d.x * d.x);
-                add_grad(gaussian, 3u, v_sigma * d.x * d.y);
-                add_grad(gaussian, 4u, 0.5 * v_sigma * d.y * d.y);
-                add_grad(gaussian, 8u, value * v_alpha);
-                add_grad(gaussian, 9u, abs(v_mean.x));
-                add_grad(gaussian, 10u, abs(v_mean.y));
-            }
-            behind += colour * weight;
+            emit_fragment_grads(batch_gaussian[t], grads, contributes);
         }
         workgroupBarrier();
     }

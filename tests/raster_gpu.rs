@@ -380,3 +380,17 @@ fn gpu_gradients_with_compare_and_swap_atomics_match_reference() {
     let gpu = gpu_gradients(&ctx, &model, &camera, &settings, &weights, 1);
     compare_gradients(&gpu, &cpu, 2e-3);
 }
+
+#[test]
+fn gpu_gradients_without_subgroups_match_reference() {
+    let Some(mut ctx) = context() else { return };
+    // Kernels add each pixel's gradients directly when the device reports no subgroups.
+    ctx.features.remove(wgpu::Features::SUBGROUP);
+    let camera = test_camera(40, 36);
+    let model = edge_case_scene(73, 12, &camera);
+    let settings = settings_with_background();
+    let weights = random_weights(74, camera.pixel_count());
+    let cpu = reference_gradients(&model, &camera, &settings, &weights);
+    let gpu = gpu_gradients(&ctx, &model, &camera, &settings, &weights, 1);
+    compare_gradients(&gpu, &cpu, 2e-3);
+}

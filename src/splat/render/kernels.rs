@@ -16,6 +16,8 @@ const RASTERIZE_BACKWARD: &str = include_str!("../../../shaders/rasterize_backwa
 const GRAD_ATOMICS_NATIVE: &str =
     include_str!("../../../shaders/rasterize_grad_atomics_native.wgsl");
 const GRAD_ATOMICS_CAS: &str = include_str!("../../../shaders/rasterize_grad_atomics_cas.wgsl");
+const GRAD_EMIT_DIRECT: &str = include_str!("../../../shaders/rasterize_grad_emit_direct.wgsl");
+const GRAD_EMIT_SUBGROUP: &str = include_str!("../../../shaders/rasterize_grad_emit_subgroup.wgsl");
 const PROJECT_BACKWARD: &str = include_str!("../../../shaders/project_backward.wgsl");
 const SH_BACKWARD: &str = include_str!("../../../shaders/sh_backward.wgsl");
 
@@ -44,6 +46,12 @@ impl RenderKernels {
         } else {
             GRAD_ATOMICS_CAS
         };
+        // Subgroup sums before the atomics where the device has subgroups.
+        let grad_emit = if ctx.has_subgroups() {
+            GRAD_EMIT_SUBGROUP
+        } else {
+            GRAD_EMIT_DIRECT
+        };
         Ok(Self {
             project_forward: build(
                 "project_forward",
@@ -69,7 +77,7 @@ impl RenderKernels {
             )?,
             rasterize_backward: build(
                 "rasterize_backward",
-                &[atomics, COMMON, RASTERIZE_BACKWARD],
+                &[atomics, COMMON, grad_emit, RASTERIZE_BACKWARD],
                 "rasterize_backward",
             )?,
             project_backward: build(
