@@ -2,7 +2,7 @@
 // front from its last contributor, recovering the transmittance before each fragment by division
 // (as 3DGS/gsplat do), and adds d loss / d (mean2d, conic, colour, opacity) and |d loss / d mean2d|
 // into grad_projected with float atomics (native or CAS: rasterize_grad_atomics_*.wgsl), summed
-// over the subgroup first where the device has subgroups (rasterize_grad_emit_*.wgsl). The loop
+// over the subgroup first on hardware with subgroups (rasterize_grad_emit_*.wgsl). The loop
 // over a batch's splats stays uniform (no early `continue`) so the subgroup sums are legal.
 
 @group(0) @binding(0) var<uniform> uniforms: RenderUniforms;
