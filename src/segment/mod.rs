@@ -10,6 +10,8 @@ mod felzenszwalb;
 pub mod mask;
 pub mod nms;
 pub mod prompt;
+pub mod propagation;
+pub mod region_prompt;
 pub mod regions;
 pub mod rle;
 pub mod scored;
@@ -24,6 +26,11 @@ pub use classical::{ClassicalConfig, ClassicalError, classical_masks};
 pub use mask::{BitMask, BoundingBox, MaskError};
 pub use nms::MaskNmsConfig;
 pub use prompt::{PointMasks, PointPromptSegmenter, PromptError};
+pub use propagation::{
+    FirstFrameMasks, Propagation, PropagationError, PropagationOptions, PropagationReport,
+    propagate_masks,
+};
+pub use region_prompt::{RegionAnswer, RegionPrompt, RegionPromptSegmenter};
 pub use rle::{CocoRle, CompressedRle, RleError};
 pub use scored::{FrameMasks, ScoredMask, instance_ids_from_masks};
 pub use user::{UserMaskError, user_frame_masks};

@@ -1,8 +1,10 @@
 //! Segment-Anything-family models (SAM 1, MobileSAM, SAM 2.1): encoder preprocessing and the
-//! prompt driver, which also implements the mask generator's `PointPromptSegmenter`.
+//! prompt driver, which also implements the mask generator's `PointPromptSegmenter` and mask
+//! propagation's `RegionPromptSegmenter`.
 
 pub mod predictor;
 pub mod preprocess;
+mod region;
 
 pub use predictor::{
     DEFAULT_PROMPT_CHUNK, EncodedImage, LOW_RES_SIDE, PointLabel, SamAnswer, SamModel,

@@ -385,6 +385,11 @@ impl SamPredictor {
         &self.model
     }
 
+    /// Prompts per decoder run.
+    pub fn chunk(&self) -> usize {
+        self.chunk
+    }
+
     /// The encoding of the image last given to `set_image`.
     pub fn encoded_image(&self) -> Option<&Arc<EncodedImage>> {
         self.image.as_ref()
