@@ -454,3 +454,56 @@ async fn stream_query_answers_each_pose(client: &TestService, scene_id: &str) {
     assert_eq!(error.code(), tonic::Code::InvalidArgument, "{error}");
     assert!(error.message().contains("16 values"), "{error}");
 }
+
+/// `masks: "propagated"`: SAM automatic masks on the first view carried through the others by
+/// re-prompting, then trained, through the service. The tiny ONNX stand-in only follows a region
+/// by the colour under its first point (it is not SAM), so this checks the plumbing: the job
+/// runs without user masks or association, finds objects, and embeds only objects that kept
+/// Gaussians.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn segment_then_splat_with_propagated_masks() {
+    if !onnx_runtime_available() {
+        return;
+    }
+    let data = tempfile::tempdir().unwrap();
+    let models =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/models/tiny");
+    let Some(client) = start_service_with_models(data.path(), models).await else {
+        return;
+    };
+    let spec = SyntheticSpec {
+        frame_count: 9,
+        width: 96,
+        height: 72,
+        ..SyntheticSpec::default()
+    };
+    let archive = archives::zip_of(&archives::colmap_files(spec, ColmapEncoding::Text));
+    let (status, scene) = client.upload(archive, "application/zip").await;
+    assert_eq!(status, 201, "{scene}");
+    let scene_id = scene["id"].as_str().unwrap();
+    let job_id = client
+        .create_job(
+            scene_id,
+            "segment_then_splat",
+            serde_json::json!({"steps": 40, "checkpoint_every": 0, "masks": "propagated",
+                               "object_loss": {"objects_per_level": 1}}),
+        )
+        .await;
+    let job = client
+        .wait_for_state(&job_id, "succeeded", Duration::from_secs(300))
+        .await;
+    let (status, objects) = client
+        .get_json(&format!("/v1/scenes/{scene_id}/objects?level=small"))
+        .await;
+    assert_eq!(status, 200, "{objects}");
+    assert!(
+        objects["objects"].as_array().unwrap().len() >= 3,
+        "{job} {objects}"
+    );
+    let metrics = &job["progress"]["metrics"];
+    assert_eq!(
+        metrics["embeddings"], metrics["objects"],
+        "one embedding per object with Gaussians: {job}"
+    );
+    client.shutdown().await;
+}

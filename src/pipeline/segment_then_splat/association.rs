@@ -276,7 +276,7 @@ fn check_sizes(masks: &FrameMasks, view: &ViewMasks) -> Result<(), AssociationEr
 }
 
 /// The frame at the training resolution as 8-bit RGB, what generators take.
-fn frame_rgb8(
+pub(crate) fn frame_rgb8(
     scene: &Scene,
     frame_index: usize,
     max_side: Option<u32>,

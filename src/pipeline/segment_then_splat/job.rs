@@ -18,6 +18,7 @@ use serde::{Deserialize, Serialize};
 
 use super::association::{AssociationOptions, generated_view_masks};
 use super::objects::{ObjectSummary, summarize_objects};
+use super::propagated_masks::propagated_view_masks;
 use super::scene_size::{SceneSize, SceneSizedFields};
 use super::track_merge::{TrackMergeRule, merge_lost_tracks};
 use super::training::{
@@ -35,6 +36,7 @@ use crate::pipeline::training_job::{
     train_with_checkpoints,
 };
 use crate::scene::{Level, LoadOptions, Scene, load_frame_rgb, load_scene};
+use crate::segment::propagation::PropagationOptions;
 use crate::segment::{AutomaticConfig, ClassicalConfig, MaskGenerator};
 use crate::splat::checkpoint::Checkpoint;
 use crate::splat::train::{EvalReport, ObjectLossConfig, TrainConfig, Trainer, TrainerMeta};
@@ -57,6 +59,10 @@ pub enum MaskSource {
     Automatic,
     /// The model-free classical segmenter, associated across views.
     Classical,
+    /// SAM-family automatic masks on the first training view, carried through the views in
+    /// dataset order by re-prompting the decoder with each object's previous mask (for
+    /// sequences: needs no sparse points).
+    Propagated,
 }
 
 /// The job's config: training settings (the object loss on by default), mask source, the
@@ -212,7 +218,7 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
     let train_seconds =
         train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?;
     let objects = finish(ctx, &scene, &mut trainer, train_seconds)?;
-    let embeddings = embed_objects(ctx, &scene, &trainer, &masks)?;
+    let embeddings = embed_objects(ctx, &scene, &trainer, &masks, &objects)?;
     Ok((objects, embeddings))
 }
 
@@ -253,6 +259,12 @@ fn view_masks_for(
             }
         }
         MaskSource::Classical => MaskGenerator::Classical(ClassicalConfig::default()),
+        MaskSource::Propagated => {
+            let model = sam_model(ctx).ok_or_else(|| {
+                fatal("masks: \"propagated\" needs a SAM-family model in models.dir")
+            })?;
+            return propagated_masks(ctx, scene, config, frames, model);
+        }
     };
     tracing::info!(?source, views = frames.len(), "generating masks");
     let (mut masks, association) = generated_view_masks(
@@ -282,6 +294,53 @@ fn view_masks_for(
     Ok(masks)
 }
 
+/// Stage 1 by re-prompting along the training views, then the lost-track merge.
+fn propagated_masks(
+    ctx: &JobContext,
+    scene: &Scene,
+    config: &SegmentThenSplatConfig,
+    frames: &[usize],
+    model: SamModel,
+) -> Result<ViewMaskSet, JobFailure> {
+    tracing::info!(views = frames.len(), "propagating masks");
+    let mut segmenter = SamPredictor::new(model.clone());
+    let mut generator = MaskGenerator::Automatic {
+        segmenter: Box::new(SamPredictor::new(model)),
+        config: AutomaticConfig::default(),
+    };
+    let (mut masks, propagation) = propagated_view_masks(
+        scene,
+        frames,
+        &mut segmenter,
+        &mut generator,
+        config.train.max_resolution,
+        &PropagationOptions::default(),
+    )
+    .map_err(fatal)?;
+    let merges = merge_lost_tracks(scene, &mut masks, &config.train, TrackMergeRule::default())
+        .map_err(fatal)?;
+    let objects = propagation.objects_per_level.map(|count| count as f64);
+    report(
+        ctx,
+        "segment",
+        1,
+        1,
+        &[
+            ("views", masks.views.len() as f64),
+            ("small_objects", objects[0]),
+            ("middle_objects", objects[1]),
+            ("large_objects", objects[2]),
+            ("new_object_checks", propagation.checks.len() as f64),
+            (
+                "duplicate_tracks_dropped",
+                propagation.duplicates.len() as f64,
+            ),
+            ("lost_track_merges", merges.iter().sum::<usize>() as f64),
+        ],
+    );
+    Ok(masks)
+}
+
 /// The configured SAM-family model, when the model directory has one.
 fn sam_model(ctx: &JobContext) -> Option<SamModel> {
     let store = ctx.models.store().ok()?;
@@ -298,6 +357,7 @@ fn embed_objects(
     scene: &Scene,
     trainer: &Trainer,
     masks: &ViewMaskSet,
+    objects: &[ObjectRecord],
 ) -> Result<Vec<ObjectEmbedding>, JobFailure> {
     let Some(model_id) = image_model_id(&ctx.models) else {
         tracing::info!("no CLIP image model configured: objects are stored without embeddings");
@@ -312,6 +372,10 @@ fn embed_objects(
         .into_iter()
         .map(|pair| (pair.train_view, pair.level, pair.object_id))
         .collect();
+    let kept: HashSet<(Level, u32)> = objects
+        .iter()
+        .map(|object| (object.level, object.object_id))
+        .collect();
     let total = masks.views.len() as u64;
     report(ctx, "embed", 0, total, &[]);
     let mut accumulator = EmbeddingAccumulator::default();
@@ -319,9 +383,16 @@ fn embed_objects(
         ctx.stop_requested()?;
         let image = load_frame_rgb(scene, view.frame_index, max_side).map_err(retryable)?;
         let image = image::DynamicImage::ImageRgb32F(image).into_rgb8();
+        // Only objects that kept Gaussians can answer a query: the others are not embedded.
+        let ids = Level::ALL.map(|level| {
+            view.ids(level)
+                .iter()
+                .map(|&id| if kept.contains(&(level, id)) { id } else { 0 })
+                .collect::<Vec<u32>>()
+        });
         let object_view = ObjectView {
             image: &image,
-            ids: Level::ALL.map(|level| view.ids(level)),
+            ids: [&ids[0][..], &ids[1][..], &ids[2][..]],
         };
         accumulator
             .add_view(

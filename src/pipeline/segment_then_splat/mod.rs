@@ -9,6 +9,7 @@ pub mod job;
 mod mask_links;
 pub mod objects;
 mod projected_visibility;
+pub mod propagated_masks;
 pub mod scene_size;
 pub mod track_merge;
 pub mod track_metrics;
