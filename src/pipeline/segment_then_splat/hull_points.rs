@@ -221,8 +221,8 @@ mod tests {
             max_resolution: None,
             ..TrainConfig::default()
         };
-        let model =
-            initial_segmented_model(&scene, &masks, &config, VotingRule::default()).expect("model");
+        let model = initial_segmented_model(&scene, &masks, &config, VotingRule::default(), 0)
+            .expect("model");
         let small_id = missing.ids[0];
         let members: Vec<Vec3> = model
             .object_ids

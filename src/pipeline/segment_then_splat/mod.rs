@@ -2,6 +2,7 @@
 //! initial points, training with the object loss, per-object language embeddings.
 
 pub mod association;
+pub mod background_shell;
 mod global_objects;
 pub mod hull_points;
 pub mod id_voting;

@@ -62,7 +62,7 @@ pub fn merge_lost_tracks(
     config: &TrainConfig,
     rule: TrackMergeRule,
 ) -> Result<[usize; 3], SegmentedTrainingError> {
-    let model = initial_segmented_model(scene, masks, config, VotingRule::default())?;
+    let model = initial_segmented_model(scene, masks, config, VotingRule::default(), 0)?;
     let centers: Vec<Vec3> = scene
         .frames
         .iter()

@@ -5,6 +5,7 @@
 use super::association::{
     AssociationError, AssociationOptions, AssociationReport, generated_view_masks,
 };
+use super::background_shell::background_shell_points;
 use super::hull_points::{HullFill, append_points, hull_points_for_missed_objects};
 use super::id_voting::{Observations, VotingRule, vote_object_ids};
 use super::track_merge::{TrackMergeRule, merge_lost_tracks};
@@ -45,13 +46,20 @@ pub enum SegmentedTrainingError {
 pub struct SegmentedTrainingOptions {
     pub voting: VotingRule,
     pub object_floors: [usize; 3],
+    /// Background Gaussians (no object) on a far sphere around the scene.
+    pub background_shell: usize,
 }
+
+/// Background shell Gaussians by default (the released code's count, placed far away rather
+/// than at the origin).
+pub const DEFAULT_BACKGROUND_SHELL: usize = 1000;
 
 impl Default for SegmentedTrainingOptions {
     fn default() -> Self {
         Self {
             voting: VotingRule::default(),
             object_floors: DEFAULT_OBJECT_FLOORS,
+            background_shell: DEFAULT_BACKGROUND_SHELL,
         }
     }
 }
@@ -70,6 +78,7 @@ pub fn initial_segmented_model(
     masks: &ViewMaskSet,
     config: &TrainConfig,
     voting: VotingRule,
+    background_shell: usize,
 ) -> Result<GaussianModel, SegmentedTrainingError> {
     let mut model = initial_model(scene, config)?;
     // Tracks in mask-view indices; only meaningful when the model is the sparse points in order.
@@ -97,6 +106,11 @@ pub fn initial_segmented_model(
             "visual-hull points for objects the sparse points missed"
         );
     }
+    // Appended after the vote: the shell never belongs to an object.
+    append_points(
+        &mut model,
+        &background_shell_points(scene, background_shell),
+    );
     Ok(model)
 }
 
@@ -174,7 +188,13 @@ pub fn segmented_trainer_from_view_masks(
     config
         .object_loss
         .get_or_insert_with(ObjectLossConfig::default);
-    let model = initial_segmented_model(scene, masks, &config, options.voting)?;
+    let model = initial_segmented_model(
+        scene,
+        masks,
+        &config,
+        options.voting,
+        options.background_shell,
+    )?;
     let mut trainer = Trainer::new(ctx, scene, config, Some(model))?;
     attach_object_training(ctx, &mut trainer, masks, options)?;
     Ok(trainer)
