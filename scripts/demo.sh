@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The main job on the embedded defaults, as a user runs it: start `segsplat serve` (SQLite and a
 # local blob dir under ./data, the best GPU or the software Vulkan adapter), upload a dataset,
-# train it with the `reconstruct` job while printing progress, and show where the results are.
+# run Segment then Splat on it (`segment_then_splat`: masks from the dataset, else SAM when a
+# model dir is configured, else the classical segmenter) while printing progress, then list the
+# objects it found, render one object's mask for frame 0 and show where the results are.
 #
 #   bash scripts/demo.sh [DATASET_DIR] [STEPS]
 #
@@ -32,7 +34,7 @@ scene=$(curl -sf -H 'content-type: application/gzip' --data-binary @"$work/scene
   "http://$http/v1/scenes" | json "['id']")
 echo "scene $scene uploaded"
 job=$(curl -sf -H 'content-type: application/json' \
-  -d "{\"kind\":\"reconstruct\",\"config\":{\"steps\":$steps,\"max_resolution\":512}}" \
+  -d "{\"kind\":\"segment_then_splat\",\"config\":{\"steps\":$steps,\"max_resolution\":256,\"checkpoint_every\":0}}" \
   "http://$http/v1/scenes/$scene/jobs" | json "['id']")
 echo "job $job queued; progress:"
 while :; do
@@ -41,4 +43,12 @@ while :; do
   case $(echo "$state" | json "['state']") in succeeded|failed|cancelled) break;; esac
   sleep 2
 done
-echo "artifacts: ./data/blobs/jobs/$job/output/ (scene.ply, labels.npy, metrics.json)"
+curl -sf "http://$http/v1/jobs/$job" | json "['state']" | grep -q succeeded || exit 1
+objects=$(curl -sf "http://$http/v1/scenes/$scene/objects?level=large")
+echo "$objects" | python3 -c "import json,sys; o=json.load(sys.stdin)['objects']; print(len(o), 'large objects; biggest:', sorted(o, key=lambda x: -x['gaussian_count'])[:3])"
+first=$(echo "$objects" | python3 -c "import json,sys; o=json.load(sys.stdin)['objects']; print(max(o, key=lambda x: x['gaussian_count'])['object_id'])")
+curl -sf -o mask_large_${first}_frame0.png \
+  "http://$http/v1/scenes/$scene/objects/large/$first/mask.png?frame_index=0&max_side=512"
+echo "mask of large object $first in frame 0: ./mask_large_${first}_frame0.png"
+echo "artifacts: ./data/blobs/jobs/$job/output/ (scene.ply, labels.npy, cameras.json, objects.json, metrics.json)"
+echo "query it: target/release/segsplat query $scene \"a figurine\" --frame 0 (with models.dir set)"
