@@ -19,13 +19,11 @@ use super::router::router;
 use super::serving::Serving;
 use super::state::{AppState, WorkerReadiness};
 use crate::config::Config;
-use crate::gpu::GpuContext;
 use crate::jobs::{
     HandlerRegistry, JobEventBus, JobHandler, LeaseReaper, WorkerPool, WorkerPoolOptions,
     WorkerSlot, open_adapters,
 };
 use crate::language::SharedTextEncoder;
-use crate::pipeline::serving::SceneCache;
 use crate::proto::scene_query_server::SceneQueryServer;
 use crate::store::{BlobStore, Database, LocalBlobStore, StoreError};
 
@@ -172,17 +170,7 @@ impl ServiceBuilder {
                 }),
         );
         let text_encoder = Arc::new(SharedTextEncoder::new(models.clone()));
-        let adapters = config.workers.adapters.clone();
-        let scene_cache = Arc::new(SceneCache::new(
-            config.query.cache_budget_mib.saturating_mul(1024 * 1024),
-            move || GpuContext::new(&adapters).map_err(|error| error.to_string()),
-        ));
-        let serving = Serving::new(
-            database.clone(),
-            blobs.clone(),
-            scene_cache,
-            config.query.max_mask_side,
-        );
+        let serving = Serving::from_config(&config, database.clone(), blobs.clone());
         let pool = (!slots.is_empty()).then(|| {
             WorkerPool::start(WorkerPoolOptions {
                 database: database.clone(),

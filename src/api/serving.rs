@@ -75,6 +75,21 @@ impl Serving {
         }
     }
 
+    /// The serving core as `config` sets it up: a scene cache with the configured budget that
+    /// opens the first adapter the workers' filter admits on its first mask request.
+    pub fn from_config(
+        config: &crate::config::Config,
+        database: Database,
+        blobs: Arc<dyn BlobStore>,
+    ) -> Self {
+        let adapters = config.workers.adapters.clone();
+        let cache = Arc::new(SceneCache::new(
+            config.query.cache_budget_mib.saturating_mul(1024 * 1024),
+            move || crate::gpu::GpuContext::new(&adapters).map_err(|error| error.to_string()),
+        ));
+        Self::new(database, blobs, cache, config.query.max_mask_side)
+    }
+
     pub fn cache(&self) -> &SceneCache {
         &self.cache
     }

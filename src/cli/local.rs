@@ -9,10 +9,8 @@ use anyhow::Context;
 use clap::Args;
 use segsplat::api::serving::Serving;
 use segsplat::config::{Config, ConfigOverrides};
-use segsplat::gpu::GpuContext;
 use segsplat::language::SharedTextEncoder;
 use segsplat::models::ModelsStatus;
-use segsplat::pipeline::serving::SceneCache;
 use segsplat::store::{Database, LocalBlobStore};
 
 /// Where the service keeps its data.
@@ -76,12 +74,7 @@ impl LocalService {
         } else {
             ModelsStatus::NotConfigured
         };
-        let adapters = config.workers.adapters.clone();
-        let cache = Arc::new(SceneCache::new(
-            config.query.cache_budget_mib.saturating_mul(1024 * 1024),
-            move || GpuContext::new(&adapters).map_err(|error| error.to_string()),
-        ));
-        let serving = Serving::new(database.clone(), blobs, cache, config.query.max_mask_side);
+        let serving = Serving::from_config(&config, database.clone(), blobs);
         Ok(Self {
             text_encoder: Arc::new(SharedTextEncoder::new(Arc::new(models_status))),
             database,

@@ -271,7 +271,7 @@ fn view_masks_for(
         }
     };
     tracing::info!(?source, views = frames.len(), "generating masks");
-    let (mut masks, association) = generated_view_masks(
+    let (masks, association) = generated_view_masks(
         scene,
         frames,
         &mut generator,
@@ -279,22 +279,31 @@ fn view_masks_for(
         &AssociationOptions::default(),
     )
     .map_err(fatal)?;
+    let objects = association.levels.map(|level| level.objects);
+    merge_and_report(ctx, scene, config, masks, objects, &[])
+}
+
+/// Stage 1's common end for generated masks: the lost-track merge, then the "segment" stage's
+/// report (views, objects per level, merges, and what the mask source adds).
+fn merge_and_report(
+    ctx: &JobContext,
+    scene: &Scene,
+    config: &SegmentThenSplatConfig,
+    mut masks: ViewMaskSet,
+    objects: [usize; 3],
+    extra: &[(&str, f64)],
+) -> Result<ViewMaskSet, JobFailure> {
     let merges = merge_lost_tracks(scene, &mut masks, &config.train, TrackMergeRule::default())
         .map_err(fatal)?;
-    let objects = association.levels.map(|level| level.objects as f64);
-    report(
-        ctx,
-        "segment",
-        1,
-        1,
-        &[
-            ("views", masks.views.len() as f64),
-            ("small_objects", objects[0]),
-            ("middle_objects", objects[1]),
-            ("large_objects", objects[2]),
-            ("lost_track_merges", merges.iter().sum::<usize>() as f64),
-        ],
-    );
+    let mut metrics = vec![
+        ("views", masks.views.len() as f64),
+        ("small_objects", objects[0] as f64),
+        ("middle_objects", objects[1] as f64),
+        ("large_objects", objects[2] as f64),
+        ("lost_track_merges", merges.iter().sum::<usize>() as f64),
+    ];
+    metrics.extend_from_slice(extra);
+    report(ctx, "segment", 1, 1, &metrics);
     Ok(masks)
 }
 
@@ -312,7 +321,7 @@ fn propagated_masks(
         segmenter: Box::new(SamPredictor::new(model)),
         config: AutomaticConfig::default(),
     };
-    let (mut masks, propagation) = propagated_view_masks(
+    let (masks, propagation) = propagated_view_masks(
         scene,
         frames,
         &mut segmenter,
@@ -321,28 +330,20 @@ fn propagated_masks(
         &PropagationOptions::default(),
     )
     .map_err(fatal)?;
-    let merges = merge_lost_tracks(scene, &mut masks, &config.train, TrackMergeRule::default())
-        .map_err(fatal)?;
-    let objects = propagation.objects_per_level.map(|count| count as f64);
-    report(
+    merge_and_report(
         ctx,
-        "segment",
-        1,
-        1,
+        scene,
+        config,
+        masks,
+        propagation.objects_per_level,
         &[
-            ("views", masks.views.len() as f64),
-            ("small_objects", objects[0]),
-            ("middle_objects", objects[1]),
-            ("large_objects", objects[2]),
             ("new_object_checks", propagation.checks.len() as f64),
             (
                 "duplicate_tracks_dropped",
                 propagation.duplicates.len() as f64,
             ),
-            ("lost_track_merges", merges.iter().sum::<usize>() as f64),
         ],
-    );
-    Ok(masks)
+    )
 }
 
 /// The configured SAM-family model, when the model directory has one.

@@ -16,6 +16,7 @@ const RASTERIZE_BACKWARD: &str = include_str!("../../../shaders/rasterize_backwa
 const GRAD_ATOMICS_NATIVE: &str =
     include_str!("../../../shaders/rasterize_grad_atomics_native.wgsl");
 const GRAD_ATOMICS_CAS: &str = include_str!("../../../shaders/rasterize_grad_atomics_cas.wgsl");
+const GRAD_FRAGMENT: &str = include_str!("../../../shaders/rasterize_grad_fragment.wgsl");
 const GRAD_EMIT_DIRECT: &str = include_str!("../../../shaders/rasterize_grad_emit_direct.wgsl");
 const GRAD_EMIT_SUBGROUP: &str = include_str!("../../../shaders/rasterize_grad_emit_subgroup.wgsl");
 const PROJECT_BACKWARD: &str = include_str!("../../../shaders/project_backward.wgsl");
@@ -80,7 +81,13 @@ impl RenderKernels {
             )?,
             rasterize_backward: build(
                 "rasterize_backward",
-                &[atomics, COMMON, grad_emit, RASTERIZE_BACKWARD],
+                &[
+                    atomics,
+                    COMMON,
+                    GRAD_FRAGMENT,
+                    grad_emit,
+                    RASTERIZE_BACKWARD,
+                ],
                 "rasterize_backward",
             )?,
             project_backward: build(
