@@ -6,6 +6,7 @@
 pub mod adam;
 pub mod camera;
 pub mod checkpoint;
+pub mod deform;
 pub mod densify;
 pub mod init;
 pub mod labels;

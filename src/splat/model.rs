@@ -393,6 +393,50 @@ impl GpuGaussians {
     }
 }
 
+/// The buffers one render reads: a [`GpuGaussians`] as stored, or with its geometry swapped for
+/// a deformed copy (dynamic scenes) while appearance and object ids stay shared.
+#[derive(Debug, Clone, Copy)]
+pub struct GaussianView<'a> {
+    pub means: &'a wgpu::Buffer,
+    pub log_scales: &'a wgpu::Buffer,
+    pub rotations: &'a wgpu::Buffer,
+    pub opacity_logits: &'a wgpu::Buffer,
+    pub sh_dc: &'a wgpu::Buffer,
+    pub sh_rest: [&'a wgpu::Buffer; SH_REST_GROUPS],
+    pub object_ids: &'a wgpu::Buffer,
+    pub count: usize,
+    pub capacity: usize,
+}
+
+impl GpuGaussians {
+    pub fn view(&self) -> GaussianView<'_> {
+        let p = &self.parameters;
+        GaussianView {
+            means: &p.means,
+            log_scales: &p.log_scales,
+            rotations: &p.rotations,
+            opacity_logits: &p.opacity_logits,
+            sh_dc: &p.sh_dc,
+            sh_rest: [&p.sh_rest[0], &p.sh_rest[1], &p.sh_rest[2]],
+            object_ids: &self.object_ids,
+            count: self.count,
+            capacity: self.capacity,
+        }
+    }
+}
+
+impl<'a> From<&'a GpuGaussians> for GaussianView<'a> {
+    fn from(gaussians: &'a GpuGaussians) -> Self {
+        gaussians.view()
+    }
+}
+
+impl<'a> From<&'a mut GpuGaussians> for GaussianView<'a> {
+    fn from(gaussians: &'a mut GpuGaussians) -> Self {
+        gaussians.view()
+    }
+}
+
 /// Gradients in the same layout as [`GpuGaussians`] (f32), plus the densification statistic.
 ///
 /// Kernels ADD into these buffers; the caller zeroes them once per training step with

@@ -13,7 +13,8 @@ use super::workspace::{
 use crate::gpu::kernel::{workgroups_2d, workgroups_for};
 use crate::gpu::sort::RadixSort;
 use crate::gpu::{ExclusiveScan, GpuContext, GpuError};
-use crate::splat::{GpuGaussianGrads, GpuGaussians, RenderCamera, RenderSettings};
+use crate::splat::model::GaussianView;
+use crate::splat::{GpuGaussianGrads, RenderCamera, RenderSettings};
 
 #[derive(Debug, thiserror::Error)]
 pub enum RenderError {
@@ -200,11 +201,11 @@ impl Renderer {
 
     /// Records a forward pass. The returned output holds the image (valid once the encoder is
     /// submitted) and the state [`Renderer::backward`] needs.
-    pub fn forward(
+    pub fn forward<'g>(
         &mut self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
-        gaussians: &GpuGaussians,
+        gaussians: impl Into<GaussianView<'g>>,
         camera: &RenderCamera,
         settings: &RenderSettings,
     ) -> Result<RenderOutput, RenderError> {
@@ -214,7 +215,8 @@ impl Renderer {
                 height: camera.height,
             });
         }
-        let count = gaussians.count();
+        let gaussians: GaussianView<'_> = gaussians.into();
+        let count = gaussians.count;
         let limit = Self::max_intersections(ctx);
         let wanted = (count * INITIAL_INTERSECTIONS_PER_GAUSSIAN) as u64;
         let capacity = (self.intersection_capacity as u64)
@@ -224,7 +226,7 @@ impl Renderer {
         self.intersection_capacity = capacity;
         let [tiles_x, tiles_y] = camera.tile_grid();
         let size = WorkspaceSize {
-            gaussians: gaussians.capacity().max(1),
+            gaussians: gaussians.capacity.max(1),
             pixels: camera.pixel_count(),
             tiles: (tiles_x * tiles_y) as usize,
             intersections: capacity,
@@ -309,7 +311,7 @@ impl Renderer {
         &mut self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
-        gaussians: &GpuGaussians,
+        gaussians: GaussianView<'_>,
         workspace: &RenderWorkspace,
         count: u32,
         [tiles_x, tiles_y]: [u32; 2],
@@ -317,20 +319,20 @@ impl Renderer {
         let max_groups = ctx.limits.max_compute_workgroups_per_dimension;
         let per_gaussian = workgroups_2d(workgroups_for(count, 256), max_groups);
         let k = &self.kernels;
-        let p = &gaussians.parameters;
+        let p = gaussians;
         let project = k.project_forward.bind(
             ctx,
             &[
                 &workspace.uniforms,
-                &p.means,
-                &p.log_scales,
-                &p.rotations,
-                &p.opacity_logits,
-                &p.sh_dc,
-                &p.sh_rest[0],
-                &p.sh_rest[1],
-                &p.sh_rest[2],
-                &gaussians.object_ids,
+                p.means,
+                p.log_scales,
+                p.rotations,
+                p.opacity_logits,
+                p.sh_dc,
+                p.sh_rest[0],
+                p.sh_rest[1],
+                p.sh_rest[2],
+                gaussians.object_ids,
                 &workspace.projected,
                 &workspace.tile_counts,
                 &workspace.depth_keys,
@@ -421,15 +423,16 @@ impl Renderer {
     /// Records the backward pass of `output` given `grad_image` (d loss / d image, the image's
     /// layout: `width * height` vec4 of d/d(r, g, b, alpha)). ADDS parameter gradients and the
     /// |d mean2d| statistic into `grads`; zero them once per step, not per render.
-    pub fn backward(
+    pub fn backward<'g>(
         &mut self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
-        gaussians: &GpuGaussians,
+        gaussians: impl Into<GaussianView<'g>>,
         output: &RenderOutput,
         grad_image: &wgpu::Buffer,
         grads: &mut GpuGaussianGrads,
     ) -> Result<(), RenderError> {
+        let gaussians: GaussianView<'_> = gaussians.into();
         let count = output.gaussian_count as usize;
         if grads.capacity() < count {
             return Err(RenderError::GradsTooSmall {
@@ -470,15 +473,15 @@ impl Renderer {
             workgroups_for(count as u32, 256),
             ctx.limits.max_compute_workgroups_per_dimension,
         );
-        let p = &gaussians.parameters;
+        let p = gaussians;
         let g = &grads.parameters;
         let geometry = k.project_backward.bind(
             ctx,
             &[
                 &workspace.uniforms,
-                &p.means,
-                &p.log_scales,
-                &p.rotations,
+                p.means,
+                p.log_scales,
+                p.rotations,
                 &workspace.projected,
                 &workspace.grad_projected,
                 &g.means,
@@ -494,11 +497,11 @@ impl Renderer {
             ctx,
             &[
                 &workspace.uniforms,
-                &p.means,
-                &p.sh_dc,
-                &p.sh_rest[0],
-                &p.sh_rest[1],
-                &p.sh_rest[2],
+                p.means,
+                p.sh_dc,
+                p.sh_rest[0],
+                p.sh_rest[1],
+                p.sh_rest[2],
                 &workspace.projected,
                 &workspace.grad_projected,
                 &g.means,
@@ -544,13 +547,14 @@ impl Renderer {
 
     /// Renders now (own encoder, submitted), re-rendering with grown buffers when the first
     /// attempt overflowed: for one-off renders (masks, evaluation, tests).
-    pub fn render_checked(
+    pub fn render_checked<'g>(
         &mut self,
         ctx: &GpuContext,
-        gaussians: &GpuGaussians,
+        gaussians: impl Into<GaussianView<'g>>,
         camera: &RenderCamera,
         settings: &RenderSettings,
     ) -> Result<RenderOutput, RenderError> {
+        let gaussians: GaussianView<'_> = gaussians.into();
         // A pending sync from earlier renders must not be mistaken for this render's.
         self.sync_capacity(ctx)?;
         // Each retry grows the capacity to 1.5x the needed count, so the second attempt fits

@@ -1,0 +1,53 @@
+//! The deformed geometry a render reads at one time: moved means, log-scales and rotations, with
+//! the canonical opacity, colour and object ids (the deformation never touches those, which is
+//! why object ids stay aligned at every time).
+
+use crate::gpu::{GpuContext, GpuError};
+use crate::splat::GpuGaussians;
+use crate::splat::model::GaussianView;
+
+#[derive(Debug)]
+pub struct DeformedGeometry {
+    pub means: wgpu::Buffer,
+    pub log_scales: wgpu::Buffer,
+    pub rotations: wgpu::Buffer,
+    capacity: usize,
+}
+
+fn buffer(ctx: &GpuContext, label: &str, words: usize) -> Result<wgpu::Buffer, GpuError> {
+    let bytes = (words.max(1) * 4) as u64;
+    ctx.check_binding_size(label, bytes)?;
+    Ok(ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: bytes,
+        usage: wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_DST
+            | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    }))
+}
+
+impl DeformedGeometry {
+    pub fn new(ctx: &GpuContext, capacity: usize) -> Result<Self, GpuError> {
+        Ok(Self {
+            means: buffer(ctx, "deformed.means", 3 * capacity)?,
+            log_scales: buffer(ctx, "deformed.log_scales", 3 * capacity)?,
+            rotations: buffer(ctx, "deformed.rotations", 4 * capacity)?,
+            capacity,
+        })
+    }
+
+    pub fn capacity(&self) -> usize {
+        self.capacity
+    }
+
+    /// The scene as a render sees it: this geometry over `canonical`'s appearance and ids.
+    pub fn view<'a>(&'a self, canonical: &'a GpuGaussians) -> GaussianView<'a> {
+        let mut view = canonical.view();
+        view.means = &self.means;
+        view.log_scales = &self.log_scales;
+        view.rotations = &self.rotations;
+        view.capacity = view.capacity.min(self.capacity);
+        view
+    }
+}

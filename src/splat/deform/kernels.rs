@@ -1,0 +1,317 @@
+//! The deformation field's pipelines and the small typed dispatch helpers over them.
+
+use wgpu::util::DeviceExt;
+
+use crate::gpu::kernel::{workgroups_2d, workgroups_for};
+use crate::gpu::validation::validated;
+use crate::gpu::{GpuContext, GpuError, Kernel};
+
+const GEMM: &str = include_str!("../../../shaders/mlp_gemm.wgsl");
+const COLUMN_SUMS: &str = include_str!("../../../shaders/mlp_column_sums.wgsl");
+const SPLIT_REDUCE: &str = include_str!("../../../shaders/mlp_split_reduce.wgsl");
+const ENCODE: &str = include_str!("../../../shaders/deform_encode.wgsl");
+const APPLY_COMMON: &str = include_str!("../../../shaders/deform_apply_common.wgsl");
+const APPLY_FORWARD: &str = include_str!("../../../shaders/deform_apply_forward.wgsl");
+const APPLY_BACKWARD: &str = include_str!("../../../shaders/deform_apply_backward.wgsl");
+
+/// Output tile side of `mlp_gemm.wgsl`.
+const GEMM_TILE: u32 = 64;
+/// Depth tile of `mlp_gemm.wgsl`: split ranges are multiples of it.
+const GEMM_DEPTH_TILE: u32 = 16;
+pub const FLAG_BIAS: u32 = 1;
+pub const FLAG_RELU: u32 = 2;
+pub const FLAG_MASK: u32 = 4;
+
+/// Uniform block of `mlp_gemm.wgsl` (see its header for the three products it serves).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct GemmParams {
+    pub rows: u32,
+    pub cols: u32,
+    pub depth: u32,
+    pub depth_per_split: u32,
+    pub a_offset: u32,
+    pub a_row_stride: u32,
+    pub a_depth_stride: u32,
+    pub b_offset: u32,
+    pub b_depth_stride: u32,
+    pub b_col_stride: u32,
+    pub c_offset: u32,
+    pub c_row_stride: u32,
+    pub c_split_stride: u32,
+    pub bias_offset: u32,
+    pub mask_offset: u32,
+    pub mask_row_stride: u32,
+    pub flags: u32,
+    pub _pad: [u32; 3],
+}
+
+/// The buffers of one GEMM; `bias` and `mask` are bound even when the flags ignore them.
+pub struct GemmBuffers<'a> {
+    pub a: &'a wgpu::Buffer,
+    pub b: &'a wgpu::Buffer,
+    pub bias: &'a wgpu::Buffer,
+    pub mask: &'a wgpu::Buffer,
+    pub c: &'a wgpu::Buffer,
+}
+
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ColumnSumParams {
+    rows: u32,
+    cols: u32,
+    rows_per_split: u32,
+    source_offset: u32,
+    source_row_stride: u32,
+    _pad: [u32; 3],
+}
+
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ReduceParams {
+    count: u32,
+    splits: u32,
+    target_offset: u32,
+    _pad: u32,
+}
+
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct EncodeParams {
+    pub count: u32,
+    pub first: u32,
+    pub row_stride: u32,
+    pub position_frequencies: u32,
+    pub time_frequencies: u32,
+    pub time: f32,
+    pub _pad: [u32; 2],
+}
+
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct ApplyParams {
+    pub count: u32,
+    pub first: u32,
+    pub head_stride: u32,
+    pub screw: u32,
+}
+
+/// How the rows summed by a weight or bias gradient are split: enough splits to fill a GPU when
+/// the output is small, each a whole number of depth tiles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RowSplit {
+    pub splits: u32,
+    pub rows_per_split: u32,
+}
+
+pub const MAX_SPLITS: u32 = 32;
+
+impl RowSplit {
+    pub fn for_rows(rows: u32) -> Self {
+        let wanted = rows.div_ceil(1024).clamp(1, MAX_SPLITS);
+        let rows_per_split = rows
+            .div_ceil(wanted)
+            .div_ceil(GEMM_DEPTH_TILE)
+            .max(1)
+            * GEMM_DEPTH_TILE;
+        Self {
+            splits: rows.div_ceil(rows_per_split).max(1),
+            rows_per_split,
+        }
+    }
+}
+
+#[derive(Debug)]
+pub struct DeformKernels {
+    gemm: Kernel,
+    column_sums: Kernel,
+    split_reduce: Kernel,
+    encode: Kernel,
+    apply_forward: Kernel,
+    apply_backward: Kernel,
+}
+
+fn uniform(ctx: &GpuContext, label: &str, bytes: &[u8]) -> wgpu::Buffer {
+    ctx.device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: bytes,
+            usage: wgpu::BufferUsages::UNIFORM,
+        })
+}
+
+fn per_item_grid(ctx: &GpuContext, items: u32) -> [u32; 3] {
+    workgroups_2d(
+        workgroups_for(items, 256),
+        ctx.limits.max_compute_workgroups_per_dimension,
+    )
+}
+
+impl DeformKernels {
+    pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
+        let build = |label: &'static str, sources: &[&str], entry: &str| {
+            validated(ctx, label, || Kernel::new(ctx, label, sources, entry, &[]))
+        };
+        Ok(Self {
+            gemm: build("mlp_gemm", &[GEMM], "gemm")?,
+            column_sums: build("mlp_column_sums", &[COLUMN_SUMS], "column_sums")?,
+            split_reduce: build("mlp_split_reduce", &[SPLIT_REDUCE], "split_reduce")?,
+            encode: build("deform_encode", &[ENCODE], "deform_encode")?,
+            apply_forward: build(
+                "deform_apply_forward",
+                &[APPLY_COMMON, APPLY_FORWARD],
+                "deform_apply_forward",
+            )?,
+            apply_backward: build(
+                "deform_apply_backward",
+                &[APPLY_COMMON, APPLY_BACKWARD],
+                "deform_apply_backward",
+            )?,
+        })
+    }
+
+    /// Records `c = epilogue(a b)` over `splits` depth ranges (`params.c_split_stride` apart).
+    pub fn gemm(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        params: GemmParams,
+        splits: u32,
+        buffers: GemmBuffers<'_>,
+    ) {
+        let uniforms = uniform(ctx, "mlp_gemm params", bytemuck::bytes_of(&params));
+        let bind = self.gemm.bind(
+            ctx,
+            &[
+                &uniforms,
+                buffers.a,
+                buffers.b,
+                buffers.bias,
+                buffers.mask,
+                buffers.c,
+            ],
+        );
+        let grid = [
+            params.cols.div_ceil(GEMM_TILE).max(1),
+            params.rows.div_ceil(GEMM_TILE).max(1),
+            splits.max(1),
+        ];
+        self.gemm.dispatch(encoder, &bind, grid);
+    }
+
+    /// Records per-split column sums of `source` rows (`[rows, cols]`, row stride given) into
+    /// `partials[split * cols + col]`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn column_sums(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        source: &wgpu::Buffer,
+        source_offset: u32,
+        source_row_stride: u32,
+        rows: u32,
+        cols: u32,
+        split: RowSplit,
+        partials: &wgpu::Buffer,
+    ) {
+        let params = ColumnSumParams {
+            rows,
+            cols,
+            rows_per_split: split.rows_per_split,
+            source_offset,
+            source_row_stride,
+            _pad: [0; 3],
+        };
+        let uniforms = uniform(ctx, "mlp_column_sums params", bytemuck::bytes_of(&params));
+        let bind = self.column_sums.bind(ctx, &[&uniforms, source, partials]);
+        self.column_sums
+            .dispatch(encoder, &bind, [cols.div_ceil(64).max(1), split.splits, 1]);
+    }
+
+    /// Records `target[offset + i] += sum_s partials[s * count + i]`.
+    pub fn split_reduce(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        partials: &wgpu::Buffer,
+        count: u32,
+        splits: u32,
+        target: &wgpu::Buffer,
+        target_offset: u32,
+    ) {
+        let params = ReduceParams {
+            count,
+            splits,
+            target_offset,
+            _pad: 0,
+        };
+        let uniforms = uniform(ctx, "mlp_split_reduce params", bytemuck::bytes_of(&params));
+        let bind = self.split_reduce.bind(ctx, &[&uniforms, partials, target]);
+        self.split_reduce
+            .dispatch(encoder, &bind, per_item_grid(ctx, count));
+    }
+
+    pub fn encode(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        params: EncodeParams,
+        means: &wgpu::Buffer,
+        encoded: &wgpu::Buffer,
+    ) {
+        let uniforms = uniform(ctx, "deform_encode params", bytemuck::bytes_of(&params));
+        let bind = self.encode.bind(ctx, &[&uniforms, means, encoded]);
+        self.encode
+            .dispatch(encoder, &bind, per_item_grid(ctx, params.count));
+    }
+
+    /// Binding order: head, canonical means, rotations, log-scales, then the three deformed
+    /// outputs.
+    pub fn apply_forward(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        params: ApplyParams,
+        buffers: &[&wgpu::Buffer; 7],
+    ) {
+        let uniforms = uniform(ctx, "deform_apply params", bytemuck::bytes_of(&params));
+        let mut all = vec![&uniforms];
+        all.extend_from_slice(buffers);
+        let bind = self.apply_forward.bind(ctx, &all);
+        self.apply_forward
+            .dispatch(encoder, &bind, per_item_grid(ctx, params.count));
+    }
+
+    /// Binding order: head, canonical means, rotations, grad means, grad rotations, grad
+    /// log-scales, grad head.
+    pub fn apply_backward(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        params: ApplyParams,
+        buffers: &[&wgpu::Buffer; 7],
+    ) {
+        let uniforms = uniform(ctx, "deform_apply params", bytemuck::bytes_of(&params));
+        let mut all = vec![&uniforms];
+        all.extend_from_slice(buffers);
+        let bind = self.apply_backward.bind(ctx, &all);
+        self.apply_backward
+            .dispatch(encoder, &bind, per_item_grid(ctx, params.count));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn row_splits_cover_the_rows_in_depth_tiles() {
+        for rows in [1u32, 15, 16, 17, 1000, 1025, 65536, 100_003] {
+            let split = RowSplit::for_rows(rows);
+            assert_eq!(split.rows_per_split % GEMM_DEPTH_TILE, 0);
+            assert!(split.splits * split.rows_per_split >= rows);
+            assert!((split.splits - 1) * split.rows_per_split < rows);
+            assert!(split.splits <= MAX_SPLITS);
+        }
+    }
+}

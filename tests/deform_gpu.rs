@@ -1,0 +1,285 @@
+//! The deformation field's WGSL kernels against the f64 reference (`splat::deform::reference` and
+//! `warp`, themselves checked against finite differences in their unit tests), and the GPU
+//! gradient against central differences of the GPU forward.
+//!
+//! Shapes are small but exercise everything the default 8 x 256 does: several 64-wide GEMM tiles
+//! (width 80), the skip concatenation, a head narrower than a tile, split-K weight gradients and
+//! more Gaussians than one chunk (so the backward recomputes chunks).
+//! Tolerances: forward outputs within 2e-5 relative to their scale; weight gradients within 1e-4
+//! of the largest gradient of their layer (f32 sums over 150 Gaussians).
+
+mod gpu_support;
+
+use gpu_support::{gpu_context, new_encoder, seeded_rng, submit};
+use rand::Rng;
+use segsplat::gpu::GpuContext;
+use segsplat::splat::deform::reference;
+use segsplat::splat::deform::warp::{Pose, warp, warp_backward};
+use segsplat::splat::deform::{DeformationField, DeformedGeometry, FieldShape, WarpKind};
+use segsplat::splat::{GaussianModel, GpuGaussianGrads, GpuGaussians, OBJECT_NONE};
+
+const COUNT: usize = 150;
+const CHUNK: usize = 64;
+const TIME: f32 = 0.37;
+
+fn shape(warp: WarpKind) -> FieldShape {
+    FieldShape {
+        depth: 4,
+        width: 80,
+        skip_after: 2,
+        position_frequencies: 4,
+        time_frequencies: 3,
+        warp,
+    }
+}
+
+fn random_model(seed: u64) -> GaussianModel {
+    let mut rng = seeded_rng(seed);
+    let mut model = GaussianModel::default();
+    for _ in 0..COUNT {
+        let mut v = || rng.random_range(-1.0f32..1.0);
+        model.push_simple(
+            [v(), v(), v()],
+            [v() - 2.0, v() - 2.0, v() - 2.0],
+            [v() + 1.5, v(), v(), v()],
+            v(),
+            [0.5; 3],
+            [OBJECT_NONE; 3],
+        );
+    }
+    model
+}
+
+fn pose_of(model: &GaussianModel, i: usize) -> Pose {
+    Pose {
+        mean: model.means[i].map(f64::from),
+        log_scale: model.log_scales[i].map(f64::from),
+        rotation: model.rotations[i].map(f64::from),
+    }
+}
+
+/// Scaled-down initial weights so the screw angles stay moderate and the outputs non-trivial.
+fn parameters(shape: &FieldShape, seed: u64) -> Vec<f32> {
+    let mut rng = seeded_rng(seed);
+    shape.initial_parameters(&mut rng)
+}
+
+struct Setup {
+    field: DeformationField,
+    canonical: GpuGaussians,
+    deformed: DeformedGeometry,
+    model: GaussianModel,
+    params: Vec<f32>,
+}
+
+fn setup(ctx: &GpuContext, warp_kind: WarpKind) -> Setup {
+    let shape = shape(warp_kind);
+    let params = parameters(&shape, 11);
+    let model = random_model(5);
+    Setup {
+        field: DeformationField::new(ctx, shape, &params, CHUNK).expect("field"),
+        canonical: GpuGaussians::upload(ctx, &model, COUNT).expect("upload"),
+        deformed: DeformedGeometry::new(ctx, COUNT).expect("geometry"),
+        model,
+        params,
+    }
+}
+
+fn read3(ctx: &GpuContext, buffer: &wgpu::Buffer) -> Vec<f32> {
+    ctx.read_vec::<f32>(buffer).expect("read")
+}
+
+fn check_forward(warp_kind: WarpKind) {
+    let Some(ctx) = gpu_context() else { return };
+    let mut s = setup(ctx, warp_kind);
+    let mut encoder = new_encoder(ctx);
+    s.field
+        .encode_forward(ctx, &mut encoder, &s.canonical, &s.deformed, TIME)
+        .expect("forward");
+    submit(ctx, encoder);
+    let means = read3(ctx, &s.deformed.means);
+    let rotations = read3(ctx, &s.deformed.rotations);
+    let log_scales = read3(ctx, &s.deformed.log_scales);
+    let params64: Vec<f64> = s.params.iter().map(|&p| f64::from(p)).collect();
+    let shape = *s.field.shape();
+    let mut worst: f64 = 0.0;
+    let mut moved: f64 = 0.0;
+    for i in 0..COUNT {
+        let pose = pose_of(&s.model, i);
+        let acts = reference::forward(&shape, &params64, pose.mean, f64::from(TIME));
+        let expected = warp(warp_kind, &pose, &acts.head);
+        for k in 0..3 {
+            worst = worst.max((f64::from(means[3 * i + k]) - expected.mean[k]).abs());
+            worst = worst.max((f64::from(log_scales[3 * i + k]) - expected.log_scale[k]).abs());
+            moved = moved.max((expected.mean[k] - pose.mean[k]).abs());
+        }
+        for k in 0..4 {
+            worst = worst.max((f64::from(rotations[4 * i + k]) - expected.rotation[k]).abs());
+        }
+    }
+    println!("{warp_kind:?}: max abs error {worst:.2e}, largest move {moved:.3}");
+    assert!(moved > 0.05, "the field barely moves anything ({moved})");
+    assert!(worst < 5e-5, "GPU forward differs from the reference by {worst}");
+}
+
+#[test]
+fn forward_matches_reference_with_translation() {
+    check_forward(WarpKind::Translation);
+}
+
+#[test]
+fn forward_matches_reference_with_screw_motion() {
+    check_forward(WarpKind::Screw);
+}
+
+/// Upstream gradients d loss / d deformed geometry, as a render would leave them.
+fn upstream(seed: u64) -> GaussianModel {
+    let mut model = random_model(seed);
+    for rotation in &mut model.rotations {
+        rotation[0] -= 1.5;
+    }
+    model
+}
+
+fn check_backward(warp_kind: WarpKind) {
+    let Some(ctx) = gpu_context() else { return };
+    let mut s = setup(ctx, warp_kind);
+    let upstream = upstream(9);
+    let grads = GpuGaussianGrads::new(ctx, COUNT).expect("grads");
+    grads.parameters.write(ctx, &upstream).expect("write grads");
+    let mut encoder = new_encoder(ctx);
+    s.field.encode_zero_grads(&mut encoder);
+    s.field
+        .encode_forward(ctx, &mut encoder, &s.canonical, &s.deformed, TIME)
+        .expect("forward");
+    s.field
+        .encode_backward(ctx, &mut encoder, &s.canonical, &grads, TIME)
+        .expect("backward");
+    submit(ctx, encoder);
+    let gpu_field_grads = s.field.read(ctx, &s.field.grads).expect("read");
+    let (gpu_canonical, _) = grads.download(ctx, COUNT).expect("download");
+
+    let shape = *s.field.shape();
+    let params64: Vec<f64> = s.params.iter().map(|&p| f64::from(p)).collect();
+    let mut expected_field = vec![0.0f64; params64.len()];
+    let mut worst_canonical: f64 = 0.0;
+    for i in 0..COUNT {
+        let pose = pose_of(&s.model, i);
+        let acts = reference::forward(&shape, &params64, pose.mean, f64::from(TIME));
+        let grad_deformed = pose_of(&upstream, i);
+        let (grad_canonical, grad_head) =
+            warp_backward(warp_kind, &pose, &acts.head, &grad_deformed);
+        reference::backward(&shape, &params64, &acts, &grad_head, &mut expected_field);
+        for k in 0..3 {
+            worst_canonical = worst_canonical
+                .max((f64::from(gpu_canonical.means[i][k]) - grad_canonical.mean[k]).abs());
+            worst_canonical = worst_canonical.max(
+                (f64::from(gpu_canonical.log_scales[i][k]) - grad_canonical.log_scale[k]).abs(),
+            );
+        }
+        for k in 0..4 {
+            worst_canonical = worst_canonical.max(
+                (f64::from(gpu_canonical.rotations[i][k]) - grad_canonical.rotation[k]).abs(),
+            );
+        }
+    }
+    assert!(
+        worst_canonical < 1e-4,
+        "canonical gradients differ by {worst_canonical}"
+    );
+    for (index, layer) in shape.layers().iter().enumerate() {
+        let range = layer.weight_offset..layer.bias_offset + layer.outputs;
+        let scale = expected_field[range.clone()]
+            .iter()
+            .fold(0.0f64, |m, g| m.max(g.abs()));
+        let worst = range
+            .clone()
+            .map(|j| (f64::from(gpu_field_grads[j]) - expected_field[j]).abs())
+            .fold(0.0, f64::max);
+        println!("{warp_kind:?} layer {index}: max error {worst:.2e} of scale {scale:.2e}");
+        assert!(scale > 0.0, "layer {index} got no gradient");
+        assert!(
+            worst <= 1e-4 * scale,
+            "layer {index}: weight gradients differ by {worst} (scale {scale})"
+        );
+    }
+}
+
+#[test]
+fn backward_matches_reference_with_translation() {
+    check_backward(WarpKind::Translation);
+}
+
+#[test]
+fn backward_matches_reference_with_screw_motion() {
+    check_backward(WarpKind::Screw);
+}
+
+/// The objective `sum_i upstream_i . deformed_i` evaluated on the GPU.
+fn gpu_objective(ctx: &GpuContext, s: &mut Setup, params: &[f32], upstream: &GaussianModel) -> f64 {
+    s.field.write_parameters(ctx, params).expect("write");
+    let mut encoder = new_encoder(ctx);
+    s.field
+        .encode_forward(ctx, &mut encoder, &s.canonical, &s.deformed, TIME)
+        .expect("forward");
+    submit(ctx, encoder);
+    let means = read3(ctx, &s.deformed.means);
+    let rotations = read3(ctx, &s.deformed.rotations);
+    let log_scales = read3(ctx, &s.deformed.log_scales);
+    let mut total = 0.0f64;
+    for i in 0..COUNT {
+        for k in 0..3 {
+            total += f64::from(means[3 * i + k]) * f64::from(upstream.means[i][k]);
+            total += f64::from(log_scales[3 * i + k]) * f64::from(upstream.log_scales[i][k]);
+        }
+        for k in 0..4 {
+            total += f64::from(rotations[4 * i + k]) * f64::from(upstream.rotations[i][k]);
+        }
+    }
+    total
+}
+
+#[test]
+fn gpu_gradient_matches_central_differences_of_the_gpu_forward() {
+    let Some(ctx) = gpu_context() else { return };
+    let mut s = setup(ctx, WarpKind::Screw);
+    let upstream = upstream(9);
+    let grads = GpuGaussianGrads::new(ctx, COUNT).expect("grads");
+    grads.parameters.write(ctx, &upstream).expect("write grads");
+    let mut encoder = new_encoder(ctx);
+    s.field.encode_zero_grads(&mut encoder);
+    s.field
+        .encode_forward(ctx, &mut encoder, &s.canonical, &s.deformed, TIME)
+        .expect("forward");
+    s.field
+        .encode_backward(ctx, &mut encoder, &s.canonical, &grads, TIME)
+        .expect("backward");
+    submit(ctx, encoder);
+    let analytic = s.field.read(ctx, &s.field.grads).expect("read");
+    // The parameters with the largest gradients of each layer: f32 differences resolve them.
+    let layers = s.field.shape().layers();
+    let base = s.params.clone();
+    let h = 1e-2f32;
+    let mut checked = 0;
+    for layer in &layers {
+        let range = layer.weight_offset..layer.bias_offset + layer.outputs;
+        let mut order: Vec<usize> = range.collect();
+        order.sort_by(|&a, &b| analytic[b].abs().total_cmp(&analytic[a].abs()));
+        for &j in order.iter().take(3) {
+            let mut plus = base.clone();
+            let mut minus = base.clone();
+            plus[j] += h;
+            minus[j] -= h;
+            let numeric = (gpu_objective(ctx, &mut s, &plus, &upstream)
+                - gpu_objective(ctx, &mut s, &minus, &upstream))
+                / (2.0 * f64::from(h));
+            let a = f64::from(analytic[j]);
+            assert!(
+                (numeric - a).abs() <= 2e-2 * a.abs().max(1e-3),
+                "parameter {j}: finite difference {numeric} vs analytic {a}"
+            );
+            checked += 1;
+        }
+    }
+    assert_eq!(checked, 3 * layers.len());
+}
