@@ -13,6 +13,7 @@ pub mod masks;
 pub mod nerfstudio;
 pub mod point_ply;
 pub mod synthetic;
+pub mod synthetic_dynamic;
 mod transforms_json;
 mod types;
 mod validate;

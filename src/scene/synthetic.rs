@@ -148,13 +148,17 @@ pub fn synthetic_world_from_cameras(spec: &SyntheticSpec) -> Vec<Mat4> {
 
 /// What a camera sees through one pixel centre: the nearest object hit, with the hit distance
 /// and the surface normal there.
-struct RayHit {
-    object_index: usize,
-    distance: f32,
-    normal: Vec3,
+pub(crate) struct RayHit {
+    pub object_index: usize,
+    pub distance: f32,
+    pub normal: Vec3,
 }
 
-fn cast_ray(origin: Vec3, direction: Vec3, objects: &[SyntheticObject]) -> Option<RayHit> {
+pub(crate) fn cast_ray(
+    origin: Vec3,
+    direction: Vec3,
+    objects: &[SyntheticObject],
+) -> Option<RayHit> {
     objects
         .iter()
         .enumerate()
@@ -176,7 +180,12 @@ fn cast_ray(origin: Vec3, direction: Vec3, objects: &[SyntheticObject]) -> Optio
         .min_by(|a, b| a.distance.total_cmp(&b.distance))
 }
 
-fn pixel_ray(intrinsics: &Intrinsics, world_from_camera: Mat4, u: f32, v: f32) -> (Vec3, Vec3) {
+pub(crate) fn pixel_ray(
+    intrinsics: &Intrinsics,
+    world_from_camera: Mat4,
+    u: f32,
+    v: f32,
+) -> (Vec3, Vec3) {
     let camera_direction = Vec3::new(
         (u - intrinsics.cx as f32) / intrinsics.fx as f32,
         (v - intrinsics.cy as f32) / intrinsics.fy as f32,
@@ -404,7 +413,7 @@ pub fn write_colmap(dir: &Path, spec: &SyntheticSpec, encoding: ColmapEncoding) 
 }
 
 /// Rows of an OpenGL camera-to-world matrix, as the transforms files store it.
-fn opengl_matrix_rows(world_from_camera: Mat4) -> Vec<Vec<f64>> {
+pub(crate) fn opengl_matrix_rows(world_from_camera: Mat4) -> Vec<Vec<f64>> {
     let opengl = world_from_camera * opencv_from_opengl_camera();
     (0..4)
         .map(|row| {
@@ -502,7 +511,7 @@ pub fn write_blender(dir: &Path, spec: &SyntheticSpec) -> io::Result<()> {
     Ok(())
 }
 
-fn write_json(path: &Path, value: &serde_json::Value) -> io::Result<()> {
+pub(crate) fn write_json(path: &Path, value: &serde_json::Value) -> io::Result<()> {
     let text = serde_json::to_string_pretty(value).map_err(io::Error::other)?;
     fs::write(path, text)
 }

@@ -154,9 +154,9 @@ impl FieldShape {
         self.layers().iter().map(LinearLayer::parameter_count).sum()
     }
 
-    /// PyTorch's default `nn.Linear` initialisation (what the released code trains from): weights
-    /// and biases uniform in `+-1/sqrt(inputs)`.
-    pub fn initial_parameters(&self, rng: &mut impl Rng) -> Vec<f32> {
+    /// PyTorch's default `nn.Linear` initialisation of every layer (what the released code
+    /// trains from): weights and biases uniform in `+-1/sqrt(inputs)`.
+    pub fn random_parameters(&self, rng: &mut impl Rng) -> Vec<f32> {
         let mut parameters = vec![0.0f32; self.parameter_count()];
         for layer in self.layers() {
             let bound = 1.0 / (layer.inputs as f32).sqrt();
@@ -164,6 +164,18 @@ impl FieldShape {
             for value in &mut parameters[layer.weight_offset..end] {
                 *value = rng.random_range(-bound..=bound);
             }
+        }
+        parameters
+    }
+
+    /// The training start: [`Self::random_parameters`] with the head at zero. The released
+    /// code's random head moves every Gaussian by a random offset the moment the warm-up ends; a
+    /// zero head starts the field as the identity, and its weight gradients (`dZ^T h`) are
+    /// non-zero from the first step, so it learns all the same.
+    pub fn initial_parameters(&self, rng: &mut impl Rng) -> Vec<f32> {
+        let mut parameters = self.random_parameters(rng);
+        if let Some(head) = self.layers().last() {
+            parameters[head.weight_offset..head.bias_offset + head.outputs].fill(0.0);
         }
         parameters
     }

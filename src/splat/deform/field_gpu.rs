@@ -287,7 +287,7 @@ impl DeformationField {
         self.output_slice(index - 1)
     }
 
-    fn buffer<'a>(workspace: &'a Workspace, storage: Storage) -> &'a wgpu::Buffer {
+    fn buffer(workspace: &Workspace, storage: Storage) -> &wgpu::Buffer {
         match storage {
             Storage::Skip => &workspace.skip,
             Storage::Hidden(index) => &workspace.hidden[index],

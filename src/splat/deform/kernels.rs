@@ -109,11 +109,8 @@ pub const MAX_SPLITS: u32 = 32;
 impl RowSplit {
     pub fn for_rows(rows: u32) -> Self {
         let wanted = rows.div_ceil(1024).clamp(1, MAX_SPLITS);
-        let rows_per_split = rows
-            .div_ceil(wanted)
-            .div_ceil(GEMM_DEPTH_TILE)
-            .max(1)
-            * GEMM_DEPTH_TILE;
+        let rows_per_split =
+            rows.div_ceil(wanted).div_ceil(GEMM_DEPTH_TILE).max(1) * GEMM_DEPTH_TILE;
         Self {
             splits: rows.div_ceil(rows_per_split).max(1),
             rows_per_split,
@@ -229,6 +226,7 @@ impl DeformKernels {
     }
 
     /// Records `target[offset + i] += sum_s partials[s * count + i]`.
+    #[allow(clippy::too_many_arguments)]
     pub fn split_reduce(
         &self,
         ctx: &GpuContext,

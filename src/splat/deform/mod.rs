@@ -10,6 +10,7 @@
 //! Object ids, opacity and colour stay on the canonical Gaussians, so the object filter and the
 //! object loss work unchanged at every time step.
 
+pub mod config;
 pub mod field;
 pub mod field_gpu;
 pub mod geometry;
@@ -17,6 +18,7 @@ mod kernels;
 pub mod reference;
 pub mod warp;
 
+pub use config::DeformationConfig;
 pub use field::{FieldShape, WarpKind};
 pub use field_gpu::{DeformError, DeformationField};
 pub use geometry::DeformedGeometry;

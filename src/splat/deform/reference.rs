@@ -128,7 +128,7 @@ mod tests {
         };
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
         let parameters: Vec<f64> = shape
-            .initial_parameters(&mut rng)
+            .random_parameters(&mut rng)
             .iter()
             .map(|&p| f64::from(p))
             .collect();

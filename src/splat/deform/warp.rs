@@ -72,7 +72,11 @@ fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 }
 
 fn axpy(alpha: f64, x: [f64; 3], y: [f64; 3]) -> [f64; 3] {
-    [alpha * x[0] + y[0], alpha * x[1] + y[1], alpha * x[2] + y[2]]
+    [
+        alpha * x[0] + y[0],
+        alpha * x[1] + y[1],
+        alpha * x[2] + y[2],
+    ]
 }
 
 /// `exp([w, v]) x = x + a (w x x) + b w x (w x x) + v + b (w x v) + c w x (w x v)`.
@@ -250,13 +254,19 @@ mod tests {
             let numeric = (objective(kind, &plus, &head, &weights)
                 - objective(kind, &minus, &head, &weights))
                 / (2.0 * h);
-            assert!((numeric - grad_pose.rotation[i]).abs() < 1e-6, "rotation {i}");
+            assert!(
+                (numeric - grad_pose.rotation[i]).abs() < 1e-6,
+                "rotation {i}"
+            );
         }
     }
 
     #[test]
     fn translation_gradients_match_finite_differences() {
-        check_gradients(WarpKind::Translation, (0..10).map(|i| 0.05 * i as f64).collect());
+        check_gradients(
+            WarpKind::Translation,
+            (0..10).map(|i| 0.05 * i as f64).collect(),
+        );
     }
 
     #[test]

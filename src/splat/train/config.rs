@@ -2,6 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::splat::deform::DeformationConfig;
 use crate::splat::densify::DensifyConfig;
 use crate::splat::schedule::LearningRates;
 use crate::splat::train::object_loss::ObjectLossConfig;
@@ -39,6 +40,9 @@ pub struct TrainConfig {
     /// The Segment-then-Splat object loss; `None` trains plain 3DGS. It acts once the trainer
     /// is given object masks ([`crate::splat::train::Trainer::set_object_targets`]).
     pub object_loss: Option<ObjectLossConfig>,
+    /// The deformation field of a dynamic scene; `None` trains a static scene. Each view is
+    /// rendered at its frame's time (0 when the frame has none).
+    pub deformation: Option<DeformationConfig>,
 }
 
 impl Default for TrainConfig {
@@ -60,6 +64,7 @@ impl Default for TrainConfig {
             max_gaussians: 6_000_000,
             random_init_count: 100_000,
             object_loss: None,
+            deformation: None,
         }
     }
 }
@@ -103,6 +108,11 @@ impl TrainConfig {
         }
         if let Some(object_loss) = &self.object_loss
             && let Err((field, problem)) = object_loss.validate()
+        {
+            return fail(field, &problem);
+        }
+        if let Some(deformation) = &self.deformation
+            && let Err((field, problem)) = deformation.validate()
         {
             return fail(field, &problem);
         }

@@ -7,6 +7,7 @@
 //! growth), and (b) at densification / opacity reset, which re-lays out every per-Gaussian buffer
 //! on the CPU (every 100 steps; see `splat::densify`).
 
+mod dynamics;
 mod object_step;
 
 use std::collections::BTreeSet;
@@ -62,6 +63,8 @@ pub enum TrainError {
     Gpu(#[from] GpuError),
     #[error(transparent)]
     Checkpoint(#[from] CheckpointError),
+    #[error(transparent)]
+    Deform(#[from] crate::splat::deform::DeformError),
     #[error(transparent)]
     ObjectTargets(#[from] object_step::ObjectTargetsError),
     #[error("checkpoint does not match this scene or config: {0}")]
@@ -130,6 +133,8 @@ pub struct Trainer {
     skipped_pairs: BTreeSet<SkippedPair>,
     started: Instant,
     steps_at_start: u32,
+    /// The deformation field of a dynamic scene.
+    dynamics: Option<dynamics::Dynamics>,
 }
 
 /// The initial model for a scene: its sparse points, or random points in the cameras' bounds.
@@ -220,8 +225,22 @@ impl Trainer {
             skipped_pairs: BTreeSet::new(),
             started: Instant::now(),
             steps_at_start: 0,
+            dynamics: None,
         };
         trainer.rng = ChaCha8Rng::seed_from_u64(trainer.config.seed);
+        if let Some(deformation) = trainer.config.deformation.clone() {
+            // Its own seeded stream, so a dynamic config leaves the view order unchanged.
+            let mut field_rng = ChaCha8Rng::seed_from_u64(trainer.config.seed ^ 0xdef0);
+            let parameters = deformation.field.initial_parameters(&mut field_rng);
+            let times: Vec<f32> = trainer.views.train.iter().map(|v| v.time).collect();
+            trainer.dynamics = Some(dynamics::Dynamics::new(
+                ctx,
+                deformation,
+                &parameters,
+                capacity,
+                times,
+            )?);
+        }
         debug_assert!(train_views > 0);
         Ok(trainer)
     }
@@ -291,11 +310,16 @@ impl Trainer {
             });
         self.grads.encode_zero(&mut encoder);
         encoder.clear_buffer(&self.loss_values, 0, None);
+        let view_time = self.views.train[view_index].time;
+        let time = self.training_time(view_time);
+        self.encode_deform_for_step(&mut encoder, time)?;
+        let ctx = &self.ctx;
         let view = &self.views.train[view_index];
         let camera = view.camera;
-        let output =
-            self.renderer
-                .forward(ctx, &mut encoder, &self.gaussians, &camera, &settings)?;
+        let scene = dynamics::render_view(&self.gaussians, &self.dynamics);
+        let output = self
+            .renderer
+            .forward(ctx, &mut encoder, scene, &camera, &settings)?;
         self.loss.encode(
             ctx,
             &mut encoder,
@@ -316,7 +340,7 @@ impl Trainer {
         self.renderer.backward(
             ctx,
             &mut encoder,
-            &self.gaussians,
+            scene,
             &output,
             &self.grad_image,
             &mut self.grads,
@@ -332,6 +356,7 @@ impl Trainer {
         );
         drop(output);
         self.encode_object_losses(&mut encoder, view_index, sh_degree)?;
+        self.encode_deform_backward_and_step(&mut encoder, step)?;
         self.encode_adam(&mut encoder, step, count)?;
         self.ctx.queue.submit([encoder.finish()]);
         self.step = step;
@@ -658,9 +683,26 @@ impl Trainer {
         };
         let mut report = EvalReport::default();
         for view in &self.views.test {
+            if self.dynamics.is_some() {
+                let mut encoder =
+                    self.ctx
+                        .device
+                        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                            label: Some("deform for evaluation"),
+                        });
+                dynamics::deform_to(
+                    &self.ctx,
+                    self.step,
+                    &mut self.dynamics,
+                    &self.gaussians,
+                    &mut encoder,
+                    view.time,
+                )?;
+                self.ctx.queue.submit([encoder.finish()]);
+            }
             let output = self.renderer.render_checked(
                 &self.ctx,
-                &self.gaussians,
+                dynamics::render_view(&self.gaussians, &self.dynamics),
                 &view.camera,
                 &settings,
             )?;
@@ -717,6 +759,12 @@ impl Trainer {
         checkpoint.put("densify.gradient_sums", &stats.gradient_sums);
         checkpoint.put("densify.visible_counts", &stats.visible_counts);
         checkpoint.put("densify.max_radii", &stats.max_radii);
+        if let Some(dynamics) = &self.dynamics {
+            let field = &dynamics.field;
+            checkpoint.put("deform.parameters", &field.read(ctx, &field.parameters)?);
+            checkpoint.put("deform.m", &field.read(ctx, &field.first_moment)?);
+            checkpoint.put("deform.v", &field.read(ctx, &field.second_moment)?);
+        }
         Ok(checkpoint)
     }
 
@@ -753,6 +801,13 @@ impl Trainer {
         trainer
             .renderer
             .set_intersection_capacity(meta.intersection_capacity);
+        if let Some(dynamics) = &trainer.dynamics {
+            let parameters: Vec<f32> = checkpoint.get("deform.parameters")?;
+            let first: Vec<f32> = checkpoint.get("deform.m")?;
+            let second: Vec<f32> = checkpoint.get("deform.v")?;
+            dynamics.field.write_parameters(ctx, &parameters)?;
+            dynamics.field.write_moments(ctx, &first, &second)?;
+        }
         Ok(trainer)
     }
 

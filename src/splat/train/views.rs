@@ -26,6 +26,8 @@ pub struct View {
     pub frame_index: usize,
     pub name: String,
     pub camera: RenderCamera,
+    /// The frame's normalised capture time (0 for static scenes).
+    pub time: f32,
     /// `width * height` vec4 (rgb, 1), row-major.
     pub target: wgpu::Buffer,
     /// RGB, row-major; kept for held-out views only (evaluation), empty otherwise.
@@ -87,6 +89,7 @@ impl Views {
                 frame_index,
                 name: frame.name.clone(),
                 camera,
+                time: frame.time.unwrap_or(0.0),
                 target,
                 target_rgb: if held_out {
                     pixels.iter().map(|p| [p[0], p[1], p[2]]).collect()

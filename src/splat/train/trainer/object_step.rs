@@ -102,13 +102,10 @@ impl Trainer {
                     background: [0.0; 3],
                     sh_degree,
                 };
-                let output = self.renderer.forward(
-                    &self.ctx,
-                    encoder,
-                    &self.gaussians,
-                    &view.camera,
-                    &settings,
-                )?;
+                let scene = super::dynamics::render_view(&self.gaussians, &self.dynamics);
+                let output =
+                    self.renderer
+                        .forward(&self.ctx, encoder, scene, &view.camera, &settings)?;
                 self.loss.encode(
                     &self.ctx,
                     encoder,
@@ -132,7 +129,7 @@ impl Trainer {
                 self.renderer.backward(
                     &self.ctx,
                     encoder,
-                    &self.gaussians,
+                    scene,
                     &output,
                     &self.grad_image,
                     &mut self.grads,
@@ -162,6 +159,8 @@ impl Trainer {
         let threshold = config.partial_iou_threshold;
         let pairs: Vec<SkippedPair> = collect_pairs(targets);
         let mut newly_skipped = Vec::new();
+        // Dynamic scenes: the geometry is deformed to each view's time before its renders.
+        let mut deformed_time = None;
         for batch in pairs.chunks(PARTIAL_FILTER_BATCH) {
             let mut encoder =
                 self.ctx
@@ -179,11 +178,23 @@ impl Trainer {
                     background: [0.0; 3],
                     sh_degree,
                 };
-                let camera = self.views.train[pair.train_view].camera;
+                let view = &self.views.train[pair.train_view];
+                let camera = view.camera;
+                if self.dynamics.is_some() && deformed_time != Some(view.time) {
+                    super::dynamics::deform_to(
+                        &self.ctx,
+                        self.step,
+                        &mut self.dynamics,
+                        &self.gaussians,
+                        &mut encoder,
+                        view.time,
+                    )?;
+                    deformed_time = Some(view.time);
+                }
                 outputs.push(self.renderer.forward(
                     &self.ctx,
                     &mut encoder,
-                    &self.gaussians,
+                    super::dynamics::render_view(&self.gaussians, &self.dynamics),
                     &camera,
                     &settings,
                 )?);

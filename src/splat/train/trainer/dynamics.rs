@@ -1,0 +1,156 @@
+//! Dynamic scenes in the training loop: the deformation field moves the canonical Gaussians to
+//! each view's time before its renders, and its backward pass runs once per step after every
+//! render's gradients are in (so the object loss trains the field too).
+
+use rand_distr::{Distribution, StandardNormal};
+
+use super::{TrainError, Trainer};
+use crate::gpu::GpuContext;
+use crate::splat::GpuGaussians;
+use crate::splat::deform::config::time_interval;
+use crate::splat::deform::{DeformationConfig, DeformationField, DeformedGeometry};
+use crate::splat::model::GaussianView;
+
+/// The field, its deformed geometry and what the current step deformed.
+pub(super) struct Dynamics {
+    pub config: DeformationConfig,
+    pub field: DeformationField,
+    pub geometry: DeformedGeometry,
+    /// Gap between distinct training times (scales the time noise).
+    pub time_interval: f32,
+    /// Time the geometry was last deformed to in this step, awaiting its backward pass.
+    pub deformed_at: Option<f32>,
+}
+
+impl Dynamics {
+    pub fn new(
+        ctx: &GpuContext,
+        config: DeformationConfig,
+        parameters: &[f32],
+        capacity: usize,
+        train_times: impl IntoIterator<Item = f32>,
+    ) -> Result<Self, TrainError> {
+        Ok(Self {
+            field: DeformationField::new(ctx, config.field, parameters, config.chunk_gaussians)?,
+            geometry: DeformedGeometry::new(ctx, capacity)?,
+            time_interval: time_interval(train_times),
+            deformed_at: None,
+            config,
+        })
+    }
+}
+
+/// What renders read: the deformed geometry once the field is active, else the canonical scene.
+pub(super) fn render_view<'a>(
+    gaussians: &'a GpuGaussians,
+    dynamics: &'a Option<Dynamics>,
+) -> GaussianView<'a> {
+    match dynamics {
+        Some(dynamics) if dynamics.deformed_at.is_some() => dynamics.geometry.view(gaussians),
+        _ => gaussians.view(),
+    }
+}
+
+/// Records the field's forward pass to `time` when it is active at `step` (and clears the
+/// deformed state otherwise); renders recorded after it see the moved scene. A free function so
+/// callers can hold other fields of the trainer meanwhile.
+pub(super) fn deform_to(
+    ctx: &GpuContext,
+    step: u32,
+    dynamics: &mut Option<Dynamics>,
+    gaussians: &GpuGaussians,
+    encoder: &mut wgpu::CommandEncoder,
+    time: f32,
+) -> Result<(), TrainError> {
+    let Some(dynamics) = dynamics.as_mut() else {
+        return Ok(());
+    };
+    if !dynamics.config.active_at(step) {
+        dynamics.deformed_at = None;
+        return Ok(());
+    }
+    if dynamics.geometry.capacity() < gaussians.capacity() {
+        dynamics.geometry = DeformedGeometry::new(ctx, gaussians.capacity())?;
+    }
+    dynamics
+        .field
+        .encode_forward(ctx, encoder, gaussians, &dynamics.geometry, time)?;
+    dynamics.deformed_at = Some(time);
+    Ok(())
+}
+
+impl Trainer {
+    /// Starts a step's deformation: forgets the previous step's (the canonical Gaussians have
+    /// moved since) and deforms to `time`.
+    pub(super) fn encode_deform_for_step(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        time: f32,
+    ) -> Result<(), TrainError> {
+        if let Some(dynamics) = self.dynamics.as_mut() {
+            dynamics.deformed_at = None;
+        }
+        deform_to(
+            &self.ctx,
+            self.step,
+            &mut self.dynamics,
+            &self.gaussians,
+            encoder,
+            time,
+        )
+    }
+
+    /// The training time of a view this step: its frame time plus the annealed time noise.
+    pub(super) fn training_time(&mut self, view_time: f32) -> f32 {
+        let step = self.step;
+        let Some(dynamics) = self.dynamics.as_ref() else {
+            return view_time;
+        };
+        let sigma = dynamics.config.time_noise_at(step, dynamics.time_interval);
+        if sigma <= 0.0 || !dynamics.config.active_at(step) {
+            return view_time;
+        }
+        let noise: f32 = StandardNormal.sample(&mut self.rng);
+        view_time + sigma * noise
+    }
+
+    /// Records the field's backward pass (turning the gradients of the deformed geometry into
+    /// canonical ones) and its Adam step, when this step deformed the scene. Must follow every
+    /// render of the step and precede the Gaussians' Adam step.
+    pub(super) fn encode_deform_backward_and_step(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        adam_step: u32,
+    ) -> Result<(), TrainError> {
+        let step = self.step;
+        let Some(dynamics) = self.dynamics.as_mut() else {
+            return Ok(());
+        };
+        let Some(time) = dynamics.deformed_at else {
+            return Ok(());
+        };
+        dynamics.field.encode_zero_grads(encoder);
+        dynamics
+            .field
+            .encode_backward(&self.ctx, encoder, &self.gaussians, &self.grads, time)?;
+        // The field's Adam counts its steps from its first active step, like a fresh optimiser.
+        let field_step = adam_step
+            .saturating_sub(dynamics.config.warm_up_steps)
+            .max(1);
+        let rate = dynamics.config.learning_rate_at(step);
+        dynamics
+            .field
+            .encode_adam(&self.ctx, encoder, &self.adam, rate, field_step)?;
+        Ok(())
+    }
+
+    /// The field's weights, for a dynamic scene (read back; waits for submitted work).
+    pub fn deformation_parameters(&self) -> Result<Option<Vec<f32>>, TrainError> {
+        match &self.dynamics {
+            Some(dynamics) => Ok(Some(
+                dynamics.field.read(&self.ctx, &dynamics.field.parameters)?,
+            )),
+            None => Ok(None),
+        }
+    }
+}

@@ -1,0 +1,140 @@
+//! Training a dynamic scene with the deformation field: the synthetic moving spheres
+//! (`scene::synthetic_dynamic`, D-NeRF layout, one camera pose per time). Held-out frames lie
+//! between training times. The same short schedule is trained twice, as a static scene and with
+//! the field: the field must beat the static model on held-out frames by a margin a broken
+//! forward or gradient cannot give (measured: 26.7 dB against 23.0 dB; asserted: 2.5 dB better
+//! and above 25 dB), and a checkpoint must restore the field bit for bit.
+
+use glam::Vec3;
+use rand::SeedableRng;
+use segsplat::gpu::GpuContext;
+use segsplat::scene::synthetic::SyntheticSpec;
+use segsplat::scene::synthetic_dynamic::write_dynamic_blender;
+use segsplat::scene::{LoadOptions, Scene, load_scene};
+use segsplat::splat::GaussianModel;
+use segsplat::splat::checkpoint::Checkpoint;
+use segsplat::splat::deform::{DeformationConfig, FieldShape};
+use segsplat::splat::init::random_gaussians;
+use segsplat::splat::train::{TrainConfig, Trainer, TrainerMeta};
+
+const STEPS: u32 = 1000;
+
+fn gpu() -> Option<GpuContext> {
+    match GpuContext::new_default() {
+        Ok(ctx) => Some(ctx),
+        Err(error) if std::env::var("SEGSPLAT_SKIP_GPU_TESTS").is_ok() => {
+            eprintln!("skipping: no GPU adapter ({error})");
+            None
+        }
+        Err(error) => panic!("no GPU adapter: {error}"),
+    }
+}
+
+fn dynamic_scene(dir: &std::path::Path) -> Scene {
+    let spec = SyntheticSpec {
+        frame_count: 40,
+        width: 64,
+        height: 48,
+        ..Default::default()
+    };
+    write_dynamic_blender(dir, &spec).expect("write scene");
+    load_scene(dir, &LoadOptions::default()).expect("load scene")
+}
+
+/// Random Gaussians in the box the spheres move in (the dataset has no points).
+fn initial() -> GaussianModel {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    random_gaussians(1500, Vec3::splat(-1.2), Vec3::splat(1.2), &mut rng)
+}
+
+fn deformation() -> DeformationConfig {
+    DeformationConfig {
+        field: FieldShape {
+            depth: 4,
+            width: 64,
+            skip_after: 2,
+            ..FieldShape::default()
+        },
+        warm_up_steps: 200,
+        // The released schedule decays over 40k steps; this short run keeps its early rates.
+        learning_rate_decay_steps: 40_000,
+        ..DeformationConfig::default()
+    }
+}
+
+fn config(scene: &Scene, steps: u32, dynamic: bool) -> TrainConfig {
+    TrainConfig {
+        steps,
+        max_resolution: None,
+        background: scene.background,
+        sh_degree_interval: 200,
+        max_sh_degree: 1,
+        densify_from: 100,
+        densify_until: steps / 2,
+        densify_interval: 100,
+        opacity_reset_interval: 0,
+        max_gaussians: 6000,
+        deformation: dynamic.then(deformation),
+        ..Default::default()
+    }
+}
+
+#[test]
+fn deformation_field_beats_a_static_model_on_held_out_times() {
+    let Some(ctx) = gpu() else { return };
+    let dir = tempfile::tempdir().expect("tempdir");
+    let scene = dynamic_scene(dir.path());
+    let mut reports = Vec::new();
+    for dynamic in [false, true] {
+        let mut trainer = Trainer::new(
+            &ctx,
+            &scene,
+            config(&scene, STEPS, dynamic),
+            Some(initial()),
+        )
+        .expect("trainer");
+        let started = std::time::Instant::now();
+        trainer.run(|_| true).expect("train");
+        let report = trainer.evaluate().expect("evaluate");
+        println!(
+            "dynamic={dynamic}: held-out PSNR {:.2} dB, SSIM {:.3}, {} Gaussians, {:.1} s",
+            report.psnr,
+            report.ssim,
+            trainer.gaussian_count(),
+            started.elapsed().as_secs_f64()
+        );
+        reports.push(report);
+    }
+    let (static_psnr, dynamic_psnr) = (reports[0].psnr, reports[1].psnr);
+    assert!(
+        dynamic_psnr > static_psnr + 2.5,
+        "the field gives {dynamic_psnr:.2} dB against {static_psnr:.2} dB static"
+    );
+    assert!(dynamic_psnr > 25.0, "held-out PSNR {dynamic_psnr:.2} dB");
+}
+
+#[test]
+fn checkpoint_restores_the_field_exactly() {
+    let Some(ctx) = gpu() else { return };
+    let dir = tempfile::tempdir().expect("tempdir");
+    let scene = dynamic_scene(dir.path());
+    let mut config = config(&scene, 60, true);
+    if let Some(deformation) = config.deformation.as_mut() {
+        deformation.warm_up_steps = 10;
+    }
+    let mut trainer = Trainer::new(&ctx, &scene, config, Some(initial())).expect("trainer");
+    trainer.run_until(30, |_| true).expect("train");
+    let saved = trainer.checkpoint().expect("checkpoint");
+    assert!(saved.sections.contains_key("deform.parameters"));
+    let bytes = saved.to_bytes().expect("encode");
+    let loaded = Checkpoint::<TrainerMeta>::from_bytes(&bytes).expect("decode");
+    let mut resumed = Trainer::resume(&ctx, &scene, &loaded).expect("resume");
+    let again = resumed.checkpoint().expect("checkpoint");
+    assert_eq!(again.sections, saved.sections, "state differs after resume");
+    assert_eq!(
+        trainer.deformation_parameters().expect("read"),
+        resumed.deformation_parameters().expect("read")
+    );
+    let progress = resumed.run(|_| true).expect("train");
+    assert_eq!(progress.step, 60);
+}
