@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
 # Installs what a fresh Debian machine lacks to build, test and run segsplat:
 # - Mesa's software Vulkan driver (lavapipe) and the Vulkan loader, so the GPU engine runs without a GPU;
-# - the ONNX Runtime shared library (from the `onnxruntime` wheel) for the model runtime.
+# - the ONNX Runtime shared library (from the `onnxruntime` wheel) for the model runtime;
+# - ffmpeg, which extracts frames from Neu3D camera videos (and makes the test videos).
 # Idempotent: skips what is already there.
 set -euo pipefail
 
 need_apt=()
-for package in mesa-vulkan-drivers libvulkan1 curl; do
+for package in mesa-vulkan-drivers libvulkan1 curl ffmpeg; do
   dpkg -s "$package" >/dev/null 2>&1 || need_apt+=("$package")
 done
 if [ ${#need_apt[@]} -gt 0 ]; then

@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::gpu::AdapterFilter;
+use crate::scene::VideoFrameOptions;
 
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
@@ -103,12 +104,15 @@ impl Default for LimitsConfig {
 pub struct SceneConfig {
     /// Background composited under RGBA (Blender) images, linear RGB in 0..1.
     pub background: [f32; 3],
+    /// How uploaded Neu3D videos become frame images (frame step, count, size, ffmpeg path).
+    pub video_frames: VideoFrameOptions,
 }
 
 impl Default for SceneConfig {
     fn default() -> Self {
         Self {
             background: [1.0, 1.0, 1.0],
+            video_frames: VideoFrameOptions::default(),
         }
     }
 }
@@ -334,6 +338,16 @@ impl Config {
         {
             return invalid("scene.background", "each channel must be within 0..1");
         }
+        let video_frames = &self.scene.video_frames;
+        if video_frames.frame_step == 0 {
+            return invalid("scene.video_frames.frame_step", "must be > 0");
+        }
+        if video_frames.max_frames == Some(0) || video_frames.max_side == Some(0) {
+            return invalid(
+                "scene.video_frames",
+                "max_frames and max_side must be > 0 when set",
+            );
+        }
         if self.query.max_mask_side == 0 {
             return invalid("query.max_mask_side", "must be > 0");
         }
@@ -511,6 +525,17 @@ mod tests {
         assert!(
             error.to_string().starts_with("jobs.heartbeat_secs:"),
             "{error}"
+        );
+
+        let error = Config::load(
+            None,
+            env(&[("SEGSPLAT_SCENE__VIDEO_FRAMES__FRAME_STEP", "0")]),
+            &ConfigOverrides::default(),
+        )
+        .unwrap_err();
+        assert_eq!(
+            error.to_string(),
+            "scene.video_frames.frame_step: must be > 0"
         );
     }
 

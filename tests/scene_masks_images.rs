@@ -173,6 +173,7 @@ fn blender_rgba_is_composited_on_the_configured_background() {
     );
     let black_options = LoadOptions {
         background: [0.0, 0.0, 0.0],
+        ..LoadOptions::default()
     };
     let black = load_scene(dir.path(), &black_options).unwrap();
     let image = load_frame_rgb(&black, 0, None).unwrap();

@@ -9,6 +9,7 @@ use common::archives::{
 use common::{TestService, entries_in, files_under, test_config};
 use segsplat::scene::colmap::ColmapEncoding;
 use segsplat::scene::synthetic::{self, SyntheticSpec};
+use segsplat::scene::synthetic_dynamic_formats;
 
 async fn start(dir: &std::path::Path) -> TestService {
     TestService::start(test_config(dir), vec![]).await
@@ -129,6 +130,93 @@ async fn every_format_and_archive_kind_uploads() {
     assert_eq!(status, 404);
     assert_eq!(body["error"]["code"], "not_found");
     assert!(!dir.path().join("blobs/scenes").join(&ids[1]).exists());
+    service.shutdown().await;
+}
+
+#[tokio::test]
+async fn dynamic_formats_upload_and_say_they_are_dynamic() {
+    let dir = tempfile::tempdir().unwrap();
+    let service = start(dir.path()).await;
+    let spec = small_spec();
+    let nerfies = dataset_files(|d| synthetic_dynamic_formats::write_nerfies(d, &spec));
+    let cases: Vec<(&str, Vec<u8>, &str, u32, u32)> = vec![
+        ("nerfies zip", zip_of(&nerfies), "nerfies", 4, 4),
+        (
+            "neu3d frames tar, wrapped in a folder",
+            tar_of(&wrapped(
+                "coffee",
+                dataset_files(|d| synthetic_dynamic_formats::write_neu3d(d, &spec, 3)),
+            )),
+            "neu3d",
+            12,
+            3,
+        ),
+        (
+            "neu3d videos zip",
+            zip_of(&dataset_files(|d| {
+                synthetic_dynamic_formats::write_neu3d_videos(d, &spec, 2)
+            })),
+            "neu3d",
+            8,
+            2,
+        ),
+        (
+            "d-nerf zip",
+            zip_of(&dataset_files(|d| {
+                synthetic::write_blender(
+                    d,
+                    &SyntheticSpec {
+                        with_time: true,
+                        ..spec.clone()
+                    },
+                )
+            })),
+            "blender",
+            4,
+            4,
+        ),
+    ];
+    let mut ids = Vec::new();
+    for (label, bytes, format, frames, times) in cases {
+        let (status, body) = service.upload(bytes, "application/octet-stream").await;
+        assert_eq!(status, 201, "{label}: {body}");
+        assert_eq!(body["format"], format, "{label}");
+        assert_eq!(body["frame_count"], frames, "{label}");
+        assert_eq!(body["dynamic"], true, "{label}");
+        assert_eq!(body["time_count"], times, "{label}");
+        assert_eq!(
+            body["resolutions"],
+            serde_json::json!([[16, 12]]),
+            "{label}"
+        );
+        ids.push(body["id"].as_str().unwrap().to_string());
+    }
+    // Frames decoded from the uploaded videos are stored with the scene.
+    let stored = files_under(&dir.path().join("blobs/scenes").join(&ids[2]).join("files"));
+    assert!(
+        stored.iter().any(|p| p.starts_with("cam01/images")),
+        "{stored:?}"
+    );
+    // A static scene says it is not dynamic, also when read back.
+    let (status, body) = service
+        .upload(archives::colmap_zip(spec.clone()), "application/zip")
+        .await;
+    assert_eq!(status, 201, "{body}");
+    let (_, stored_static) = service
+        .get_json(&format!("/v1/scenes/{}", body["id"].as_str().unwrap()))
+        .await;
+    assert_eq!(stored_static["dynamic"], false, "{stored_static}");
+    assert_eq!(stored_static["time_count"], 0, "{stored_static}");
+
+    // A broken Nerfies capture is a 422 naming the missing camera file.
+    let broken: Vec<_> = nerfies
+        .into_iter()
+        .filter(|(name, _)| name != "camera/000001.json")
+        .collect();
+    let (status, body) = service.upload(zip_of(&broken), "application/zip").await;
+    assert_eq!(status, 422, "{body}");
+    let message = body["error"]["message"].as_str().unwrap();
+    assert!(message.contains("camera/000001.json"), "{message}");
     service.shutdown().await;
 }
 

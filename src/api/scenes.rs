@@ -32,9 +32,13 @@ const RAW_ARCHIVE_TYPES: [&str; 7] = [
 pub struct SceneResponse {
     pub id: String,
     pub name: String,
-    /// `colmap`, `nerfstudio` or `blender`.
+    /// `colmap`, `nerfstudio`, `blender` (also D-NeRF), `nerfies` (also HyperNeRF) or `neu3d`.
     pub format: String,
     pub frame_count: u32,
+    /// Whether frames carry capture times (D-NeRF, Nerfies/HyperNeRF, Neu3D).
+    pub dynamic: bool,
+    /// Distinct capture times (normalised to 0..1); 0 for static scenes.
+    pub time_count: u32,
     /// Distinct image sizes as `[width, height]`.
     pub resolutions: Vec<[u32; 2]>,
     pub sparse_point_count: u64,
@@ -54,6 +58,8 @@ impl From<&SceneRecord> for SceneResponse {
                 .and_then(|value| value.as_str().map(str::to_string))
                 .unwrap_or_default(),
             frame_count: summary.frame_count,
+            dynamic: summary.time_count > 0,
+            time_count: summary.time_count,
             resolutions: summary.resolutions.clone(),
             sparse_point_count: summary.sparse_point_count,
             mask_levels: summary
@@ -77,7 +83,8 @@ pub struct UploadParams {
     pub name: Option<String>,
 }
 
-/// Uploads a dataset archive (zip, tar or tar.gz; COLMAP, nerfstudio or Blender layout), as the
+/// Uploads a dataset archive (zip, tar or tar.gz; COLMAP, nerfstudio, Blender/D-NeRF,
+/// Nerfies/HyperNeRF or Neu3D layout), as the
 /// raw body or as the one file field of a multipart form. The body is streamed to disk.
 #[utoipa::path(post, path = "/v1/scenes", tag = "scenes", params(UploadParams),
     request_body(content = Vec<u8>, description = "zip, tar or tar.gz archive",
@@ -118,6 +125,8 @@ pub async fn upload_scene(
         },
         load_options: LoadOptions {
             background: config.scene.background,
+            video_frames: config.scene.video_frames.clone(),
+            ..LoadOptions::default()
         },
         blobs: state.blobs.clone(),
         blob_prefix: blob_prefix.clone(),

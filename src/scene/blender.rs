@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
+use super::images::image_size;
 use super::transforms_json::{opencv_world_from_camera, read_json, relative_file_path};
 use super::{Frame, FrameSplit, Intrinsics, LoadOptions, Scene, SceneError, SceneFormat};
 
@@ -25,7 +26,7 @@ struct TransformsFile {
 struct FrameEntry {
     file_path: String,
     transform_matrix: Vec<Vec<f64>>,
-    /// D-NeRF capture time (0..1).
+    /// D-NeRF capture time, normalised to 0..1 by the dataset itself.
     time: Option<f32>,
 }
 
@@ -84,6 +85,15 @@ fn append_frames(
 ) -> Result<(), SceneError> {
     for (frame_index, entry) in transforms.frames.iter().enumerate() {
         let image_path = image_path(root, &entry.file_path, file, frame_index)?;
+        // D-NeRF times are already normalised; anything else would break that promise.
+        if let Some(time) = entry.time
+            && !(0.0..=1.0).contains(&time)
+        {
+            return Err(SceneError::Parse {
+                file: file.to_string(),
+                message: format!("frame {frame_index}: time {time} is outside 0..1"),
+            });
+        }
         frames.push(Frame {
             name: slash_separated(&image_path),
             image_path,
@@ -138,16 +148,7 @@ fn intrinsics_from_first_image(
     angle_x: f64,
     angle_y: Option<f64>,
 ) -> Result<Intrinsics, SceneError> {
-    let file = first_image.display().to_string();
-    let full_path = root.join(first_image);
-    if !full_path.is_file() {
-        return Err(SceneError::MissingImage { file });
-    }
-    let (width, height) =
-        image::image_dimensions(&full_path).map_err(|error| SceneError::UndecodableImage {
-            file,
-            message: error.to_string(),
-        })?;
+    let (width, height) = image_size(root, first_image)?;
     if !(angle_x > 0.0 && angle_x < std::f64::consts::PI) {
         return Err(SceneError::Parse {
             file: TRAIN_TRANSFORMS_FILE.to_string(),

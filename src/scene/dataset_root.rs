@@ -3,7 +3,7 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use super::{SceneError, blender, colmap, nerfstudio};
+use super::{SceneError, blender, colmap, nerfies, nerfstudio, neu3d};
 
 /// `root` when it holds a dataset; otherwise its single visible sub-folder when it has exactly
 /// one (zipping a folder wraps everything in it). Only one level is looked through.
@@ -22,6 +22,8 @@ fn holds_dataset(dir: &Path) -> bool {
     colmap::find_model(dir).is_some()
         || dir.join(nerfstudio::TRANSFORMS_FILE).is_file()
         || dir.join(blender::TRAIN_TRANSFORMS_FILE).is_file()
+        || nerfies::is_nerfies(dir)
+        || neu3d::is_neu3d(dir)
 }
 
 /// Entries of `dir` except hidden ones and macOS archive debris.

@@ -52,6 +52,20 @@ pub(crate) fn decode_image(root: &Path, relative_path: &Path) -> Result<DynamicI
         })
 }
 
+/// The size of the image at `relative_path` under `root`, from its header only (loaders that
+/// must know image sizes before validation decodes anything); errors name that relative path.
+pub(crate) fn image_size(root: &Path, relative_path: &Path) -> Result<(u32, u32), SceneError> {
+    let file = relative_path.display().to_string();
+    let full_path = root.join(relative_path);
+    if !full_path.is_file() {
+        return Err(SceneError::MissingImage { file });
+    }
+    image::image_dimensions(&full_path).map_err(|error| SceneError::UndecodableImage {
+        file,
+        message: error.to_string(),
+    })
+}
+
 /// Frame `frame_index` as 0..1 RGB floats, RGBA composited on `scene.background`, downscaled so
 /// the longest side is at most `max_side` (Lanczos3, never upscaled). Scale the frame's
 /// intrinsics with [`crate::scene::Intrinsics::scaled`] and the same

@@ -1,7 +1,9 @@
 //! Datasets: archive unpacking, format detection, parsing and validation into one [`Scene`].
 //!
 //! Cameras come out in the OpenCV convention (x right, y down, z forward) whatever the source
-//! format used (nerfstudio and Blender store OpenGL-convention poses and are converted here).
+//! format used (nerfstudio and Blender store OpenGL-convention poses, Neu3D LLFF's
+//! down-right-back axes; they are converted here). Dynamic formats (D-NeRF, Nerfies/HyperNeRF,
+//! Neu3D) give every frame a capture time normalised to [0, 1].
 
 pub mod archive;
 pub mod blender;
@@ -10,13 +12,18 @@ mod dataset_path;
 mod dataset_root;
 mod images;
 pub mod masks;
+pub mod nerfies;
 pub mod nerfstudio;
+pub mod neu3d;
+mod npy;
 pub mod point_ply;
 pub mod synthetic;
 pub mod synthetic_dynamic;
+pub mod synthetic_dynamic_formats;
 mod transforms_json;
 mod types;
 mod validate;
+pub mod video_frames;
 
 pub use archive::{ArchiveError, UnpackLimits, UnpackStats, unpack_archive};
 pub use dataset_root::resolve_dataset_root;
@@ -46,7 +53,7 @@ pub enum InputErrorClass {
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
     #[error(
-        "no dataset found: expected COLMAP (sparse/0 or sparse), nerfstudio transforms.json or Blender transforms_train.json{found}"
+        "no dataset found: expected COLMAP (sparse/0 or sparse), nerfstudio transforms.json, Blender/D-NeRF transforms_train.json, Nerfies/HyperNeRF dataset.json with camera/, or Neu3D poses_bounds.npy{found}"
     )]
     UnknownFormat { found: String },
     #[error("{file}: {message}")]
@@ -57,6 +64,13 @@ pub enum SceneError {
     UndecodableImage { file: String, message: String },
     #[error("{file}: {message}")]
     Inconsistent { file: String, message: String },
+    #[error("{file}: video cannot be decoded: {message}")]
+    UndecodableVideo { file: String, message: String },
+    /// The server lacks the video decoder program (a deployment problem, not the upload's).
+    #[error(
+        "the video decoder {program:?} is not installed (needed to extract frames from videos)"
+    )]
+    VideoDecoderMissing { program: String },
     #[error("{file}: {source}")]
     Io {
         file: String,
@@ -72,17 +86,22 @@ impl SceneError {
             SceneError::Parse { .. }
             | SceneError::MissingImage { .. }
             | SceneError::UndecodableImage { .. }
-            | SceneError::Inconsistent { .. } => InputErrorClass::Invalid,
-            SceneError::Io { .. } => InputErrorClass::Internal,
+            | SceneError::Inconsistent { .. }
+            | SceneError::UndecodableVideo { .. } => InputErrorClass::Invalid,
+            SceneError::Io { .. } | SceneError::VideoDecoderMissing { .. } => {
+                InputErrorClass::Internal
+            }
         }
     }
 }
 
 /// Detects the format under `root` and parses cameras, frames, sparse points and mask layout.
-/// Cheap: images are not decoded (see [`validate_scene`]).
+/// Cheap: images are not decoded (see [`validate_scene`]), with one exception: Neu3D cameras
+/// given only as videos are decoded once into frame images inside `root` (see [`neu3d`]).
 ///
 /// Formats are tried in this order: COLMAP (`sparse/0` or `sparse`), nerfstudio
-/// (`transforms.json`), Blender NeRF (`transforms_train.json`). When none is at `root` itself but
+/// (`transforms.json`), Blender NeRF / D-NeRF (`transforms_train.json`), Nerfies/HyperNeRF
+/// (`dataset.json` and `camera/`), Neu3D (`poses_bounds.npy`). When none is at `root` itself but
 /// `root` holds exactly one folder (ignoring hidden entries and `__MACOSX`), that folder is the
 /// dataset root: users often archive the dataset folder itself. [`Scene::root`] is the folder
 /// actually used.
@@ -94,6 +113,10 @@ pub fn load_scene(root: &Path, options: &LoadOptions) -> Result<Scene, SceneErro
         nerfstudio::load_nerfstudio(&dataset_root, options)?
     } else if dataset_root.join(blender::TRAIN_TRANSFORMS_FILE).is_file() {
         blender::load_blender(&dataset_root, options)?
+    } else if nerfies::is_nerfies(&dataset_root) {
+        nerfies::load_nerfies(&dataset_root, options)?
+    } else if neu3d::is_neu3d(&dataset_root) {
+        neu3d::load_neu3d(&dataset_root, options)?
     } else {
         return Err(SceneError::UnknownFormat {
             found: dataset_root::describe_contents(&dataset_root),

@@ -30,7 +30,7 @@ pub enum SyntheticImageFormat {
 }
 
 impl SyntheticImageFormat {
-    fn extension(self) -> &'static str {
+    pub(super) fn extension(self) -> &'static str {
         match self {
             SyntheticImageFormat::Png => "png",
             SyntheticImageFormat::Jpeg => "jpg",
@@ -199,12 +199,12 @@ pub(crate) fn pixel_ray(
 }
 
 /// One rendered view: colour with coverage, and the object index per pixel.
-struct RenderedView {
-    rgba: image::RgbaImage,
+pub(super) struct RenderedView {
+    pub(super) rgba: image::RgbaImage,
     object_from_pixel: Vec<Option<usize>>,
 }
 
-fn render_view(intrinsics: &Intrinsics, world_from_camera: Mat4) -> RenderedView {
+pub(super) fn render_view(intrinsics: &Intrinsics, world_from_camera: Mat4) -> RenderedView {
     let objects = synthetic_objects();
     let (width, height) = (intrinsics.width, intrinsics.height);
     let mut rgba = image::RgbaImage::new(width, height);
@@ -259,7 +259,7 @@ fn surface_points() -> Vec<(usize, Vec3)> {
 }
 
 /// The surface points with their object colours, without tracks.
-fn surface_point_cloud() -> SparsePoints {
+pub(super) fn surface_point_cloud() -> SparsePoints {
     let objects = synthetic_objects();
     let points = surface_points();
     SparsePoints {
@@ -299,7 +299,11 @@ fn observe(
     visible.then_some([f64::from(u), f64::from(v)])
 }
 
-fn write_image(path: &Path, view: &RenderedView, format: SyntheticImageFormat) -> io::Result<()> {
+pub(super) fn write_image(
+    path: &Path,
+    view: &RenderedView,
+    format: SyntheticImageFormat,
+) -> io::Result<()> {
     if let Some(parent) = path.parent() {
         fs::create_dir_all(parent)?;
     }
@@ -317,7 +321,7 @@ fn write_image(path: &Path, view: &RenderedView, format: SyntheticImageFormat) -
 
 /// Writes masks for `frame_name` at every requested level: small and large as 8-bit, middle as
 /// 16-bit, so both depths get exercised.
-fn write_masks(
+pub(super) fn write_masks(
     dir: &Path,
     spec: &SyntheticSpec,
     frame_name: &str,

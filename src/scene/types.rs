@@ -10,7 +10,12 @@ use serde::{Deserialize, Serialize};
 pub enum SceneFormat {
     Colmap,
     Nerfstudio,
+    /// Blender NeRF, including D-NeRF (whose frames carry a `time`).
     Blender,
+    /// Nerfies and HyperNeRF captures (`dataset.json`, `camera/<id>.json`, `rgb/<scale>x/`).
+    Nerfies,
+    /// Neu3D / Plenoptic video (`poses_bounds.npy`, one video or frame folder per camera).
+    Neu3d,
 }
 
 /// Object granularity levels; also the mask folder names.
@@ -62,6 +67,13 @@ impl Intrinsics {
     /// ratios actually achieved, so the result matches the resized image to the pixel.
     pub fn scaled(&self, factor: f64) -> Intrinsics {
         let (width, height) = crate::scene::scaled_size(self.width, self.height, factor);
+        self.resized(width, height)
+    }
+
+    /// The intrinsics of this camera for its image resized to exactly `width` x `height`: focal
+    /// lengths and principal point scale by the per-axis ratios (datasets that ship downscaled
+    /// images give full-resolution cameras).
+    pub fn resized(&self, width: u32, height: u32) -> Intrinsics {
         let x_ratio = f64::from(width) / f64::from(self.width.max(1));
         let y_ratio = f64::from(height) / f64::from(self.height.max(1));
         Intrinsics {
@@ -96,7 +108,9 @@ pub struct Frame {
     pub intrinsics: Intrinsics,
     /// Camera-to-world, OpenCV convention (x right, y down, z forward).
     pub world_from_camera: Mat4,
-    /// Capture time in seconds for dynamic scenes.
+    /// Capture time of dynamic scenes, normalised to [0, 1] over the dataset (D-NeRF `time` as
+    /// given, Nerfies `time_id` over its maximum, Neu3D frame index over the last index);
+    /// `None` for static scenes.
     pub time: Option<f32>,
     /// COLMAP image id, when the source has one (links 2D-3D tracks).
     pub source_id: Option<u32>,
@@ -177,17 +191,67 @@ pub struct Scene {
     pub background: [f32; 3],
 }
 
+impl Scene {
+    /// Whether any frame has a capture time (D-NeRF, Nerfies/HyperNeRF, Neu3D).
+    pub fn is_dynamic(&self) -> bool {
+        self.frames.iter().any(|frame| frame.time.is_some())
+    }
+
+    /// The distinct capture times, ascending (empty for static scenes).
+    pub fn frame_times(&self) -> Vec<f32> {
+        let mut times: Vec<f32> = self.frames.iter().filter_map(|frame| frame.time).collect();
+        times.sort_by(f32::total_cmp);
+        times.dedup();
+        times
+    }
+}
+
 /// Options for [`crate::scene::load_scene`].
 #[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default)]
 pub struct LoadOptions {
     /// Background for RGBA (Blender) images, 0..1 sRGB-encoded RGB; white by default.
     pub background: [f32; 3],
+    /// Nerfies/HyperNeRF: which `rgb/<scale>x/` folder to read (e.g. 2 for `rgb/2x`); `None`
+    /// takes the smallest scale present (the highest resolution; the engine downscales itself).
+    pub nerfies_scale: Option<u32>,
+    /// Neu3D: how videos are turned into frame images when a camera has no extracted frames.
+    pub video_frames: VideoFrameOptions,
 }
 
 impl Default for LoadOptions {
     fn default() -> Self {
         Self {
             background: [1.0, 1.0, 1.0],
+            nerfies_scale: None,
+            video_frames: VideoFrameOptions::default(),
+        }
+    }
+}
+
+/// Frame extraction from Neu3D camera videos (done once, with the `ffmpeg` program, into
+/// `<camera>/images/` next to the video).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct VideoFrameOptions {
+    /// Keep every `frame_step`-th video frame (1 keeps all).
+    pub frame_step: u32,
+    /// At most this many frames per camera (after stepping); `None` keeps all.
+    pub max_frames: Option<u32>,
+    /// Longest side of the extracted images; `None` keeps the size `poses_bounds.npy` gives.
+    /// 1352 by default: half of Neu3D's 2704x2028, as 4DGS and Deformable-3DGS train on.
+    pub max_side: Option<u32>,
+    /// The ffmpeg program, looked up on `PATH` unless a path is given.
+    pub ffmpeg: PathBuf,
+}
+
+impl Default for VideoFrameOptions {
+    fn default() -> Self {
+        Self {
+            frame_step: 1,
+            max_frames: None,
+            max_side: Some(1352),
+            ffmpeg: PathBuf::from("ffmpeg"),
         }
     }
 }
@@ -202,4 +266,8 @@ pub struct SceneSummary {
     pub sparse_point_count: u64,
     /// Levels for which user masks were given.
     pub mask_levels: Vec<Level>,
+    /// Distinct capture times; 0 for static scenes (absent in summaries stored before dynamic
+    /// formats existed, which were all static).
+    #[serde(default)]
+    pub time_count: u32,
 }

@@ -75,6 +75,7 @@ pub fn validate_scene(scene: &Scene) -> Result<SceneSummary, SceneError> {
             .as_ref()
             .map(|layout| layout.given_levels())
             .unwrap_or_default(),
+        time_count: scene.frame_times().len() as u32,
     })
 }
 
