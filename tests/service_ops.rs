@@ -280,6 +280,7 @@ async fn grpc_health_and_scene_job_object_reads_without_auth() {
         .list_objects(proto::ListObjectsRequest {
             scene_id: scene_id.clone(),
             level: 0,
+            time: None,
         })
         .await
         .unwrap()
@@ -289,6 +290,7 @@ async fn grpc_health_and_scene_job_object_reads_without_auth() {
         .list_objects(proto::ListObjectsRequest {
             scene_id: scene_id.clone(),
             level: proto::Level::Large as i32,
+            time: None,
         })
         .await
         .unwrap()

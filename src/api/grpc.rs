@@ -9,12 +9,13 @@ use std::time::Instant;
 use futures::Stream;
 use tonic::{Request, Response, Status};
 
-use super::query::{QueryFailure, run_query};
+use super::query::{QueryFailure, placement, run_query};
 use super::serving::{ServeFailure, Serving};
 use crate::language::{DEFAULT_RELEVANCY_THRESHOLD, Granularity, QueryOptions, SharedTextEncoder};
 use crate::pipeline::serving::{
     EncodedMask, EncodedMaskData, MaskFormat, MaskView, PinholeIntrinsics, ServingError,
 };
+use crate::pipeline::segment_then_splat::objects::ObjectSummary;
 use crate::proto;
 use crate::proto::scene_query_server::SceneQuery;
 use crate::scene::Level;
@@ -60,6 +61,7 @@ impl SceneQueryService {
             }
             (_, None) => None,
         };
+        let time = time_from_proto(query.time.or(query.view.as_ref().and_then(|v| v.time)))?;
         let outcome = run_query(
             &self.database,
             &self.text_encoder,
@@ -69,6 +71,14 @@ impl SceneQueryService {
         )
         .await
         .map_err(query_failure_status)?;
+        let moved = if outcome.matches.is_empty() {
+            None
+        } else {
+            self.serving
+                .objects_at(&query.scene_id, time, view.as_ref())
+                .await
+                .map_err(serve_failure_status)?
+        };
         let masks = match (view, format) {
             (Some(view), Some(format)) if !outcome.matches.is_empty() => {
                 let objects = outcome
@@ -77,7 +87,14 @@ impl SceneQueryService {
                     .map(|found| (found.object.level, found.object.object_id))
                     .collect();
                 self.serving
-                    .render_masks(&query.scene_id, view, objects, query.visible_only, format)
+                    .render_masks(
+                        &query.scene_id,
+                        view,
+                        time,
+                        objects,
+                        query.visible_only,
+                        format,
+                    )
                     .await
                     .map_err(serve_failure_status)?
             }
@@ -88,7 +105,7 @@ impl SceneQueryService {
             .into_iter()
             .enumerate()
             .map(|(rank, found)| proto::QueryMatch {
-                object: Some(object_to_proto(found.object)),
+                object: Some(object_to_proto(placed(found.object, moved.as_deref()))),
                 score: found.score,
                 relevancy: found.relevancy,
                 mask: masks
@@ -118,6 +135,8 @@ struct QueryParts {
     top_k: u32,
     min_score: Option<f32>,
     view: Option<proto::View>,
+    /// Dynamic scenes: the answer's time (else the view's).
+    time: Option<f64>,
     mask_encoding: i32,
     visible_only: bool,
 }
@@ -143,6 +162,7 @@ impl QueryParts {
             time: message.time,
             max_side: None,
         });
+        self.time = message.time;
         self.mask_encoding = message.mask_encoding;
     }
 }
@@ -156,6 +176,25 @@ fn mask_format_from_proto(value: i32) -> Result<Option<MaskFormat>, Status> {
             "mask_encoding: unknown value {value}"
         ))),
     }
+}
+
+/// A requested time, checked to be a number.
+fn time_from_proto(time: Option<f64>) -> Result<Option<f32>, Status> {
+    match time {
+        Some(value) if !value.is_finite() => Err(Status::invalid_argument(format!(
+            "time: {value} is not a finite number"
+        ))),
+        other => Ok(other.map(|value| value as f32)),
+    }
+}
+
+/// The object with its centroid and bounds where a dynamic scene has it at the asked time.
+fn placed(mut object: ObjectRecord, moved: Option<&[ObjectSummary]>) -> ObjectRecord {
+    let place = placement(&object, moved);
+    object.centroid = place.centroid;
+    object.bounds_min = place.bounds_min;
+    object.bounds_max = place.bounds_max;
+    object
 }
 
 fn view_from_proto(view: &proto::View) -> Result<MaskView, Status> {
@@ -388,6 +427,7 @@ impl SceneQuery for SceneQueryService {
             granularity: request.granularity,
             top_k: request.top_k,
             min_score: request.min_score,
+            time: request.time,
             view: request.view,
             mask_encoding: request.mask_encoding,
             visible_only: request.visible_only,
@@ -461,8 +501,19 @@ impl SceneQuery for SceneQueryService {
             .list_objects(&request.scene_id, level_from_proto(level))
             .await
             .map_err(internal)?;
+        let moved = match time_from_proto(request.time)? {
+            Some(time) if !objects.is_empty() => self
+                .serving
+                .objects_at(&request.scene_id, Some(time), None)
+                .await
+                .map_err(serve_failure_status)?,
+            _ => None,
+        };
         Ok(Response::new(proto::ListObjectsResponse {
-            objects: objects.into_iter().map(object_to_proto).collect(),
+            objects: objects
+                .into_iter()
+                .map(|object| object_to_proto(placed(object, moved.as_deref())))
+                .collect(),
         }))
     }
 
@@ -486,11 +537,13 @@ impl SceneQuery for SceneQueryService {
             .ok_or_else(|| Status::invalid_argument("view: required"))
             .and_then(view_from_proto)?;
         let format = mask_format_from_proto(request.mask_encoding)?.unwrap_or_default();
+        let time = time_from_proto(request.view.as_ref().and_then(|v| v.time))?;
         let masks = self
             .serving
             .render_masks(
                 &request.scene_id,
                 view,
+                time,
                 vec![(level, request.object_id)],
                 request.visible_only,
                 format,

@@ -63,9 +63,27 @@ pub struct ViewRequest {
     /// z forward), in the scene's world frame and units.
     pub camera_to_world: Option<[[f64; 4]; 4]>,
     pub intrinsics: Option<PinholeIntrinsics>,
+    /// Dynamic scenes: the normalised capture time (0..1 spans the training frames) to render
+    /// at. Default: the frame's own time for `frame_index`, else the scene's first time. Static
+    /// scenes ignore it.
+    pub time: Option<f32>,
+}
+
+/// Checks a requested time is a number.
+pub fn parse_time(time: Option<f32>) -> Result<Option<f32>, ApiError> {
+    match time {
+        Some(value) if !value.is_finite() => Err(ApiError::bad_request(format!(
+            "time: {value} is not a finite number"
+        ))),
+        other => Ok(other),
+    }
 }
 
 impl ViewRequest {
+    pub fn time(&self) -> Result<Option<f32>, ApiError> {
+        parse_time(self.time)
+    }
+
     pub fn to_view(&self) -> Result<MaskView, ApiError> {
         match (self.frame_index, self.camera_to_world, self.intrinsics) {
             (Some(index), None, None) => Ok(MaskView::Frame {
@@ -198,12 +216,14 @@ pub async fn render_masks(
         .map(|object| Ok((parse_level(&object.level)?, object.object_id)))
         .collect::<Result<Vec<_>, ApiError>>()?;
     let view = request.view.to_view()?;
+    let time = request.view.time()?;
     let format = parse_mask_format(request.mask_format.as_deref())?;
     let masks = state
         .serving
         .render_masks(
             &id,
             view,
+            time,
             objects,
             request.visible_masks.unwrap_or(false),
             format,
@@ -222,6 +242,8 @@ pub struct MaskPngParams {
     pub max_side: Option<u32>,
     /// `true`: only the part no other Gaussian hides.
     pub visible: Option<bool>,
+    /// Dynamic scenes: the time to render at (default: the frame's own time).
+    pub time: Option<f32>,
 }
 
 #[utoipa::path(get, path = "/v1/scenes/{id}/objects/{level}/{object_id}/mask.png",
@@ -249,6 +271,7 @@ pub async fn object_mask_png(
         .render_masks(
             &id,
             view,
+            parse_time(params.time)?,
             vec![(level, object_id)],
             visible,
             MaskFormat::Png,

@@ -6,6 +6,8 @@ use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
 use super::error::{ApiError, ApiResult, ErrorBody};
+use super::masks::parse_time;
+use super::query::placement;
 use super::state::AppState;
 use crate::scene::Level;
 use crate::store::objects::ObjectRecord;
@@ -34,6 +36,9 @@ pub struct ObjectList {
 pub struct ObjectListParams {
     /// Only objects of this level (`small`, `middle`, `large`).
     pub level: Option<String>,
+    /// Dynamic scenes: centroids and bounds where the objects are at this normalised time
+    /// (0..1 spans the training frames). Default: the scene's first time, as stored.
+    pub time: Option<f32>,
 }
 
 impl From<&ObjectRecord> for ObjectResponse {
@@ -76,8 +81,26 @@ pub async fn list_objects(
         .get_scene(&id)
         .await?
         .ok_or_else(|| ApiError::not_found(format!("scene {id} not found")))?;
+    let time = parse_time(params.time)?;
     let records = state.database.list_objects(&id, level).await?;
+    let moved = match time {
+        Some(time) if !records.is_empty() => {
+            state.serving.objects_at(&id, Some(time), None).await?
+        }
+        _ => None,
+    };
     Ok(Json(ObjectList {
-        objects: records.iter().map(ObjectResponse::from).collect(),
+        objects: records
+            .iter()
+            .map(|record| {
+                let place = placement(record, moved.as_deref());
+                ObjectResponse {
+                    centroid: place.centroid,
+                    bounds_min: place.bounds_min,
+                    bounds_max: place.bounds_max,
+                    ..ObjectResponse::from(record)
+                }
+            })
+            .collect(),
     }))
 }

@@ -12,12 +12,13 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::error::{ApiError, ApiResult, ErrorBody};
-use super::masks::{MaskBody, ViewRequest, parse_mask_format};
+use super::masks::{MaskBody, ViewRequest, parse_mask_format, parse_time};
 use super::state::AppState;
 use crate::language::{
     CANONICAL_PHRASES, CandidateObject, DEFAULT_RELEVANCY_THRESHOLD, QueryOptions,
     QueryOptionsError, SharedTextEncoder, TextEncoderUnavailable, answer_query,
 };
+use crate::pipeline::segment_then_splat::objects::ObjectSummary;
 use crate::store::objects::ObjectRecord;
 use crate::store::{Database, StoreError};
 
@@ -175,6 +176,10 @@ pub struct QueryRequest {
     pub mask_format: Option<String>,
     /// With `view`: also the visible-only masks (the part no other Gaussian hides).
     pub visible_masks: Option<bool>,
+    /// Dynamic scenes: the normalised capture time of the answer (0..1 spans the training
+    /// frames). Centroids, bounds and masks are where the objects are then. Default: the view's
+    /// `time`, else its frame's time, else the scene's first time. Static scenes ignore it.
+    pub time: Option<f32>,
 }
 
 /// One matching object.
@@ -246,6 +251,10 @@ pub async fn query_scene(
         .map(ViewRequest::to_view)
         .transpose()?;
     let format = parse_mask_format(request.mask_format.as_deref())?;
+    let time = match parse_time(request.time)? {
+        Some(time) => Some(time),
+        None => request.view.as_ref().map(ViewRequest::time).transpose()?.flatten(),
+    };
     let outcome = run_query(
         &state.database,
         &state.text_encoder,
@@ -254,6 +263,11 @@ pub async fn query_scene(
         options,
     )
     .await?;
+    let moved = if outcome.matches.is_empty() {
+        None
+    } else {
+        state.serving.objects_at(&id, time, view.as_ref()).await?
+    };
     let masks = match view {
         Some(view) if !outcome.matches.is_empty() => {
             let objects = outcome
@@ -264,7 +278,7 @@ pub async fn query_scene(
             let visible = request.visible_masks.unwrap_or(false);
             state
                 .serving
-                .render_masks(&id, view, objects, visible, format)
+                .render_masks(&id, view, time, objects, visible, format)
                 .await?
         }
         _ => Vec::new(),
@@ -275,21 +289,51 @@ pub async fn query_scene(
             .matches
             .iter()
             .enumerate()
-            .map(|(rank, found)| QueryMatchResponse {
+            .map(|(rank, found)| {
+                let place = placement(&found.object, moved.as_deref());
+                QueryMatchResponse {
                 level: found.object.level.name().to_string(),
                 object_id: found.object.object_id,
                 score: found.score,
                 relevancy: found.relevancy,
-                centroid: found.object.centroid,
-                bounds_min: found.object.bounds_min,
-                bounds_max: found.object.bounds_max,
+                centroid: place.centroid,
+                bounds_min: place.bounds_min,
+                bounds_max: place.bounds_max,
                 mask: masks.get(rank).map(|masks| MaskBody::from(&masks.mask)),
                 visible_mask: masks
                     .get(rank)
                     .and_then(|masks| masks.visible_mask.as_ref())
                     .map(MaskBody::from),
+                }
             })
             .collect(),
         model_id: outcome.model_id,
     }))
+}
+
+/// Where an object is: its stored summary, or where a dynamic scene has it at the asked time.
+pub struct Placement {
+    pub centroid: [f32; 3],
+    pub bounds_min: [f32; 3],
+    pub bounds_max: [f32; 3],
+}
+
+pub fn placement(object: &ObjectRecord, moved: Option<&[ObjectSummary]>) -> Placement {
+    let at_time = moved.and_then(|summaries| {
+        summaries
+            .iter()
+            .find(|s| s.level == object.level && s.object_id == object.object_id)
+    });
+    match at_time {
+        Some(summary) => Placement {
+            centroid: summary.centroid,
+            bounds_min: summary.bounds_min,
+            bounds_max: summary.bounds_max,
+        },
+        None => Placement {
+            centroid: object.centroid,
+            bounds_min: object.bounds_min,
+            bounds_max: object.bounds_max,
+        },
+    }
 }

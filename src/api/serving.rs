@@ -6,6 +6,7 @@ use std::sync::Arc;
 
 use crate::jobs::job_output_prefix as output_prefix;
 use crate::pipeline::segment_then_splat::job::KIND as SEGMENT_THEN_SPLAT;
+use crate::pipeline::segment_then_splat::objects::ObjectSummary;
 use crate::pipeline::serving::{
     EncodedMask, LoadedScene, MaskFormat, MaskView, ObjectMasks, SceneCache, ServingError,
     TrainedScene, encode_mask, object_ply,
@@ -14,14 +15,17 @@ use crate::scene::Level;
 use crate::store::jobs::JobRecord;
 use crate::store::{BlobError, BlobStore, Database, StoreError};
 
-/// Results files a client may download from a scene's trained version.
-pub const DOWNLOADABLE_FILES: [&str; 6] = [
+/// Results files a client may download from a scene's trained version (the deformation
+/// field's two files exist for dynamic scenes only).
+pub const DOWNLOADABLE_FILES: [&str; 8] = [
     "scene.ply",
     "labels.npy",
     "cameras.json",
     "objects.json",
     "metrics.json",
     "skipped_pairs.json",
+    "deformation.json",
+    "deformation.bin",
 ];
 
 /// Why a mask or export request got no answer; each maps to one REST status and one gRPC code.
@@ -126,17 +130,18 @@ impl Serving {
         .await
     }
 
-    /// Renders and encodes the masks of `objects` for `view`.
+    /// Renders and encodes the masks of `objects` for `view` (at `time` for a dynamic scene).
     pub async fn render_masks(
         &self,
         scene_id: &str,
         view: MaskView,
+        time: Option<f32>,
         objects: Vec<(Level, u32)>,
         visible_too: bool,
         format: MaskFormat,
     ) -> Result<Vec<EncodedObjectMasks>, ServeFailure> {
         let rendered = self
-            .render_bit_masks(scene_id, view, objects, visible_too)
+            .render_bit_masks(scene_id, view, time, objects, visible_too)
             .await?;
         blocking(move || {
             rendered
@@ -159,11 +164,14 @@ impl Serving {
         .await
     }
 
-    /// Renders the masks of `objects` for `view` (unencoded: evaluation and the CLI).
+    /// Renders the masks of `objects` for `view` (unencoded: evaluation and the CLI). A
+    /// dynamic scene renders at `time`, else at the frame's own time for a frame view, else at
+    /// its first time; a static scene ignores `time`.
     pub async fn render_bit_masks(
         &self,
         scene_id: &str,
         view: MaskView,
+        time: Option<f32>,
         objects: Vec<(Level, u32)>,
         visible_too: bool,
     ) -> Result<Vec<ObjectMasks>, ServeFailure> {
@@ -183,11 +191,38 @@ impl Serving {
         let max_mask_side = self.max_mask_side;
         let masks = blocking(move || {
             let camera = view.render_camera(&scene.cameras, max_mask_side)?;
-            Ok(cache.render_masks(&scene, &camera, &objects, visible_too)?)
+            let time = scene.effective_time(time, view.frame_time(&scene.cameras));
+            Ok(cache.render_masks(&scene, &camera, &objects, visible_too, time)?)
         })
         .await?;
         metrics::histogram!("segsplat_mask_render_seconds").record(started.elapsed().as_secs_f64());
         Ok(masks)
+    }
+
+    /// The objects where they are at `time` (or the frame's time) when the scene is dynamic;
+    /// `None` for a static scene, whose stored object table holds at every time.
+    pub async fn objects_at(
+        &self,
+        scene_id: &str,
+        time: Option<f32>,
+        view: Option<&MaskView>,
+    ) -> Result<Option<Vec<ObjectSummary>>, ServeFailure> {
+        // Static scenes answer from the object table without claiming the GPU.
+        let dynamic = self
+            .database
+            .get_scene(scene_id)
+            .await?
+            .is_some_and(|scene| scene.summary.time_count > 0);
+        if !dynamic {
+            return Ok(None);
+        }
+        let scene = self.loaded_scene(scene_id).await?;
+        let frame_time = view.and_then(|view| view.frame_time(&scene.cameras));
+        let Some(time) = scene.effective_time(time, frame_time) else {
+            return Ok(None);
+        };
+        let cache = Arc::clone(&self.cache);
+        blocking(move || Ok(cache.objects_at(&scene, time)?)).await
     }
 
     /// One trained file of the scene's served version.

@@ -131,6 +131,7 @@ async fn run_async(args: EvalArgs, config_file: Option<PathBuf>) -> anyhow::Resu
                     .render_bit_masks(
                         &scene_id,
                         view(frame.frame_index),
+                        None,
                         batch.to_vec(),
                         args.visible,
                     )
@@ -183,6 +184,7 @@ async fn run_async(args: EvalArgs, config_file: Option<PathBuf>) -> anyhow::Resu
                     .render_bit_masks(
                         &scene_id,
                         view(frame.frame_index),
+                        None,
                         vec![(object.level, object.object_id)],
                         args.visible,
                     )

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args;
-use segsplat::api::query::run_query;
+use segsplat::api::query::{placement, run_query};
 use segsplat::language::{DEFAULT_RELEVANCY_THRESHOLD, QueryOptions};
 use segsplat::pipeline::serving::{MaskView, mask_png};
 use serde::Serialize;
@@ -35,6 +35,10 @@ pub struct QueryArgs {
     /// Also write the visible-only masks (`*-visible.png`).
     #[arg(long)]
     pub visible: bool,
+    /// Dynamic scenes: the normalised time (0..1 spans the training frames) of the centroids,
+    /// bounds and masks. Default: each frame's own time for masks, the first time otherwise.
+    #[arg(long)]
+    pub time: Option<f32>,
     /// Folder for the PNGs.
     #[arg(long, default_value = "masks")]
     pub out: PathBuf,
@@ -88,6 +92,11 @@ async fn run_async(args: QueryArgs, config_file: Option<PathBuf>) -> anyhow::Res
         std::fs::create_dir_all(&args.out)
             .with_context(|| format!("cannot create {}", args.out.display()))?;
     }
+    let moved = if outcome.matches.is_empty() {
+        None
+    } else {
+        local.serving.objects_at(&scene_id, args.time, None).await?
+    };
     let mut objects = Vec::new();
     for (rank, found) in outcome.matches.iter().enumerate() {
         let level = found.object.level;
@@ -100,7 +109,13 @@ async fn run_async(args: QueryArgs, config_file: Option<PathBuf>) -> anyhow::Res
             };
             let masks = local
                 .serving
-                .render_bit_masks(&scene_id, view, vec![(level, object_id)], args.visible)
+                .render_bit_masks(
+                    &scene_id,
+                    view,
+                    args.time,
+                    vec![(level, object_id)],
+                    args.visible,
+                )
                 .await?;
             let Some(masks) = masks.first() else {
                 continue;
@@ -116,14 +131,15 @@ async fn run_async(args: QueryArgs, config_file: Option<PathBuf>) -> anyhow::Res
                 written.push(path);
             }
         }
+        let place = placement(&found.object, moved.as_deref());
         objects.push(AnswerObject {
             level: level.name().to_string(),
             object_id,
             score: found.score,
             relevancy: found.relevancy,
-            centroid: found.object.centroid,
-            bounds_min: found.object.bounds_min,
-            bounds_max: found.object.bounds_max,
+            centroid: place.centroid,
+            bounds_min: place.bounds_min,
+            bounds_max: place.bounds_max,
             masks: written,
         });
     }

@@ -39,6 +39,9 @@ use crate::scene::{Level, LoadOptions, Scene, load_frame_rgb, load_scene};
 use crate::segment::propagation::PropagationOptions;
 use crate::segment::{AutomaticConfig, ClassicalConfig, MaskGenerator};
 use crate::splat::checkpoint::Checkpoint;
+use crate::splat::deform::{
+    DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE, DeformationHeader, StoredDeformation,
+};
 use crate::splat::train::{EvalReport, ObjectLossConfig, TrainConfig, Trainer, TrainerMeta};
 use crate::store::objects::{ObjectEmbedding, ObjectRecord};
 
@@ -190,6 +193,9 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
     let frames = training_frames(&scene, &config.train);
     let size = SceneSize::of(frames.len());
     config.scene_sized.apply(size, &mut config.train);
+    config
+        .scene_sized
+        .apply_deformation(scene.is_dynamic(), &mut config.train);
     tracing::info!(
         ?size,
         steps = config.train.steps,
@@ -198,6 +204,7 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
             .object_loss
             .as_ref()
             .map(|o| o.objects_per_level),
+        dynamic = config.train.deformation.is_some(),
         "training settings"
     );
     // Stage 1 runs again on a resumed attempt: every mask source is deterministic, and the
@@ -237,6 +244,11 @@ fn view_masks_for(
     let max_side = config.train.max_resolution;
     let source = match config.masks {
         MaskSource::Auto if scene.masks.is_some() => MaskSource::User,
+        // A moving scene has no multi-view geometry to associate masks with: carry them
+        // through the sequence instead.
+        MaskSource::Auto if scene.is_dynamic() && sam_model(ctx).is_some() => {
+            MaskSource::Propagated
+        }
         MaskSource::Auto if sam_model(ctx).is_some() => MaskSource::Automatic,
         MaskSource::Auto => MaskSource::Classical,
         chosen => chosen,
@@ -316,20 +328,32 @@ fn propagated_masks(
     model: SamModel,
 ) -> Result<ViewMaskSet, JobFailure> {
     tracing::info!(views = frames.len(), "propagating masks");
+    // A sequence is carried in capture-time order (video order); the views go back to the
+    // training order afterwards, which the object targets follow.
+    let mut in_time_order = frames.to_vec();
+    in_time_order.sort_by(|&a, &b| {
+        let time = |index: usize| scene.frames[index].time.unwrap_or(0.0);
+        time(a).total_cmp(&time(b)).then(a.cmp(&b))
+    });
     let mut segmenter = SamPredictor::new(model.clone());
     let mut generator = MaskGenerator::Automatic {
         segmenter: Box::new(SamPredictor::new(model)),
         config: AutomaticConfig::default(),
     };
-    let (masks, propagation) = propagated_view_masks(
+    let (mut masks, propagation) = propagated_view_masks(
         scene,
-        frames,
+        &in_time_order,
         &mut segmenter,
         &mut generator,
         config.train.max_resolution,
         &PropagationOptions::default(),
     )
     .map_err(fatal)?;
+    let position: std::collections::HashMap<usize, usize> =
+        frames.iter().enumerate().map(|(i, &f)| (f, i)).collect();
+    masks
+        .views
+        .sort_by_key(|view| position.get(&view.frame_index).copied().unwrap_or(usize::MAX));
     merge_and_report(
         ctx,
         scene,
@@ -456,7 +480,23 @@ fn finish(
 ) -> Result<Vec<ObjectRecord>, JobFailure> {
     let held_out = trainer.evaluate().map_err(train_failure)?;
     let model = trainer.model().map_err(train_failure)?;
-    let summaries = summarize_objects(&model);
+    // A dynamic scene's objects are summarised where they are at its first time (queries at
+    // other times compute their own); its field is stored next to the canonical Gaussians.
+    let times = scene.frame_times();
+    let first_time = times.first().copied().unwrap_or(0.0);
+    let summaries = summarize_objects(&trainer.model_at(first_time).map_err(train_failure)?);
+    let deformation = match (trainer.deformation_config(), trainer.deformation_parameters()) {
+        (Some(config), Ok(Some(parameters))) => Some(StoredDeformation {
+            header: DeformationHeader {
+                field: config.field,
+                parameter_count: parameters.len(),
+                time_range: [first_time, times.last().copied().unwrap_or(first_time)],
+            },
+            parameters,
+        }),
+        (_, Err(error)) => return Err(train_failure(error)),
+        _ => None,
+    };
     let skipped: Vec<SkippedFramePair> = trainer
         .skipped_pairs()
         .into_iter()
@@ -492,6 +532,11 @@ fn finish(
             serde_json::to_vec_pretty(&metrics).map_err(fatal)?,
         ),
     ];
+    let mut documents = documents.to_vec();
+    if let Some(deformation) = &deformation {
+        documents.push((DEFORMATION_FILE, deformation.header_bytes().map_err(fatal)?));
+        documents.push((DEFORMATION_WEIGHTS_FILE, deformation.weight_bytes()));
+    }
     store_outputs(ctx, &model, scene, &documents)?;
     report_evaluation(ctx, &metrics.held_out, metrics.gaussians);
     Ok(summaries

@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::gpu::GpuContext;
 use crate::scene::Level;
-use crate::splat::model::SH_C0;
+use crate::splat::model::{GaussianView, SH_C0};
 use crate::splat::render::{RenderError, Renderer};
 use crate::splat::{
     GaussianModel, GpuGaussians, OBJECT_NONE, ObjectFilter, RenderCamera, RenderSettings,
@@ -118,10 +118,10 @@ const MIN_ALPHA_FOR_DEPTH: f32 = 1e-3;
 const VISIBLE_DEPTH_TOLERANCE: f32 = 0.03;
 
 /// Renders `filter`'s Gaussians (the whole scene, or one object) from `camera`.
-pub fn render_layer(
+pub fn render_layer<'g>(
     ctx: &GpuContext,
     renderer: &mut Renderer,
-    gaussians: &GpuGaussians,
+    gaussians: impl Into<GaussianView<'g>>,
     camera: &RenderCamera,
     filter: ObjectFilter,
 ) -> Result<RenderedLayer, RenderError> {

@@ -6,6 +6,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::splat::deform::DeformationConfig;
 use crate::splat::train::{ObjectLossConfig, TrainConfig};
 
 /// Scenes with fewer training views than this are "small".
@@ -54,6 +55,9 @@ pub struct SceneSizedFields {
     pub objects_per_level: bool,
     /// `object_loss.middle_from` and `large_from`: 5k and 10k steps of the run.
     pub level_schedule: bool,
+    /// `deformation`: the deformation field (METHOD.md "Dynamic scenes") for scenes whose
+    /// frames carry times, none for static ones.
+    pub deformation: bool,
 }
 
 impl SceneSizedFields {
@@ -64,6 +68,14 @@ impl SceneSizedFields {
             steps: absent("/steps"),
             objects_per_level: absent("/object_loss/objects_per_level"),
             level_schedule: absent("/object_loss/middle_from") && absent("/object_loss/large_from"),
+            deformation: absent("/deformation"),
+        }
+    }
+
+    /// Turns the deformation field on for a dynamic scene when the config left it out.
+    pub fn apply_deformation(self, dynamic: bool, config: &mut TrainConfig) {
+        if self.deformation && dynamic && config.deformation.is_none() {
+            config.deformation = Some(DeformationConfig::default());
         }
     }
 
@@ -100,6 +112,7 @@ mod tests {
                 steps: true,
                 objects_per_level: false,
                 level_schedule: true,
+                deformation: true,
             }
         );
         let mut config = TrainConfig {
@@ -125,5 +138,21 @@ mod tests {
         let mut given = TrainConfig::default();
         SceneSizedFields::default().apply(SceneSize::Small, &mut given);
         assert_eq!(given.steps, TrainConfig::default().steps);
+    }
+
+    #[test]
+    fn deformation_follows_the_scene_unless_given() {
+        let left_out = SceneSizedFields::left_out_of(&serde_json::json!({}));
+        let mut dynamic = TrainConfig::default();
+        left_out.apply_deformation(true, &mut dynamic);
+        assert_eq!(dynamic.deformation, Some(DeformationConfig::default()));
+        let mut static_scene = TrainConfig::default();
+        left_out.apply_deformation(false, &mut static_scene);
+        assert_eq!(static_scene.deformation, None);
+        // An explicit `"deformation": null` keeps a dynamic scene static.
+        let given = SceneSizedFields::left_out_of(&serde_json::json!({"deformation": null}));
+        let mut forced_static = TrainConfig::default();
+        given.apply_deformation(true, &mut forced_static);
+        assert_eq!(forced_static.deformation, None);
     }
 }

@@ -6,6 +6,7 @@ pub mod cameras;
 pub mod mask_encoding;
 pub mod object_export;
 pub mod scene_cache;
+pub mod scene_motion;
 pub mod trained_scene;
 pub mod view;
 

@@ -13,9 +13,12 @@ use lru::LruCache;
 
 use super::ServingError;
 use super::cameras::SceneCamera;
+use super::scene_motion::SceneMotion;
 use super::trained_scene::TrainedScene;
 use crate::gpu::GpuContext;
-use crate::pipeline::segment_then_splat::objects::{full_mask, render_layer, visible_mask};
+use crate::pipeline::segment_then_splat::objects::{
+    ObjectSummary, full_mask, render_layer, summarize_objects, visible_mask,
+};
 use crate::scene::Level;
 use crate::segment::BitMask;
 use crate::splat::render::Renderer;
@@ -32,7 +35,23 @@ pub struct LoadedScene {
     pub cameras: Vec<SceneCamera>,
     pub gaussian_count: usize,
     gaussians: GpuGaussians,
+    /// The deformation field of a dynamic scene.
+    motion: Option<Mutex<SceneMotion>>,
     bytes: u64,
+}
+
+impl LoadedScene {
+    /// The span of training times of a dynamic scene; `None` for a static one.
+    pub fn time_range(&self) -> Option<[f32; 2]> {
+        self.motion.as_ref().map(|motion| lock(motion).time_range)
+    }
+
+    /// The time a request means: the asked one, else the frame's, else the scene's first.
+    /// Static scenes have no time (anything asked is ignored: they look the same at all times).
+    pub fn effective_time(&self, asked: Option<f32>, frame_time: Option<f32>) -> Option<f32> {
+        let [first, _] = self.time_range()?;
+        Some(asked.or(frame_time).unwrap_or(first))
+    }
 }
 
 impl std::fmt::Debug for LoadedScene {
@@ -184,12 +203,20 @@ impl SceneCache {
         }
         let gaussians = GpuGaussians::upload(&gpu.ctx, &trained.model, trained.model.len())
             .map_err(|error| ServingError::Gpu(error.to_string()))?;
+        let gaussian_count = trained.model.len();
+        let motion = match &trained.deformation {
+            Some(stored) => Some(SceneMotion::new(&gpu.ctx, stored, trained.model)?),
+            None => None,
+        };
+        let bytes = gaussian_count as u64 * BYTES_PER_GAUSSIAN
+            + motion.as_ref().map_or(0, SceneMotion::extra_bytes);
         let scene = Arc::new(LoadedScene {
             key: key.to_string(),
             cameras: trained.cameras,
-            gaussian_count: trained.model.len(),
-            bytes: trained.model.len() as u64 * BYTES_PER_GAUSSIAN,
+            gaussian_count,
+            bytes,
             gaussians,
+            motion: motion.map(Mutex::new),
         });
         tracing::info!(
             gaussians = scene.gaussian_count,
@@ -216,18 +243,25 @@ impl SceneCache {
         Ok(scene)
     }
 
-    /// Renders each object's mask from `camera` (and its visible part when `visible_too`).
+    /// Renders each object's mask from `camera` (and its visible part when `visible_too`), at
+    /// `time` for a dynamic scene (see [`LoadedScene::effective_time`]).
     pub fn render_masks(
         &self,
         scene: &LoadedScene,
         camera: &RenderCamera,
         objects: &[(Level, u32)],
         visible_too: bool,
+        time: Option<f32>,
     ) -> Result<Vec<ObjectMasks>, ServingError> {
         let gpu = self.gpu()?;
         let mut renderer = lock(&gpu.renderer);
+        let mut motion = scene.motion.as_ref().map(lock);
+        let gaussians = match (motion.as_deref_mut(), time) {
+            (Some(motion), Some(time)) => motion.at(&gpu.ctx, &scene.gaussians, time)?,
+            _ => scene.gaussians.view(),
+        };
         let render = |renderer: &mut Renderer, filter| {
-            render_layer(&gpu.ctx, renderer, &scene.gaussians, camera, filter)
+            render_layer(&gpu.ctx, renderer, gaussians, camera, filter)
                 .map_err(|error| ServingError::Gpu(error.to_string()))
         };
         let whole = if visible_too {
@@ -261,5 +295,22 @@ impl SceneCache {
                 })
             })
             .collect()
+    }
+
+    /// Every object's summary (centroid, bounds, colour) where it is at `time`: from the
+    /// deformed Gaussians of a dynamic scene, `None` for a static one (its stored summaries hold).
+    pub fn objects_at(
+        &self,
+        scene: &LoadedScene,
+        time: f32,
+    ) -> Result<Option<Vec<ObjectSummary>>, ServingError> {
+        let Some(motion) = scene.motion.as_ref() else {
+            return Ok(None);
+        };
+        let gpu = self.gpu()?;
+        // The renderer lock orders this after any render using the moved geometry.
+        let _renderer = lock(&gpu.renderer);
+        let model = lock(motion).model_at(&gpu.ctx, &scene.gaussians, time)?;
+        Ok(Some(summarize_objects(&model)))
     }
 }

@@ -1,12 +1,14 @@
 //! A finished training job's scene as the serving side loads it: the Gaussians (`scene.ply`),
 //! their object ids (`labels.npy`, PLY order) and the cameras they were trained from
-//! (`cameras.json`), from a job's blob prefix or from a local output folder.
+//! (`cameras.json`), and for a dynamic scene its deformation field (`deformation.json` and
+//! `deformation.bin`), from a job's blob prefix or from a local output folder.
 
 use std::path::Path;
 
 use super::ServingError;
 use super::cameras::{CAMERAS_FILE, SceneCamera};
 use crate::splat::GaussianModel;
+use crate::splat::deform::{DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE, StoredDeformation};
 use crate::splat::labels::read_labels;
 use crate::splat::ply::read_ply;
 use crate::store::{BlobError, BlobStore};
@@ -22,6 +24,8 @@ pub struct TrainedScene {
     pub sh_degree: u32,
     /// In the dataset's frame order: frame index = position.
     pub cameras: Vec<SceneCamera>,
+    /// The deformation field of a dynamic scene (`model` is then its canonical Gaussians).
+    pub deformation: Option<StoredDeformation>,
 }
 
 impl TrainedScene {
@@ -75,10 +79,24 @@ impl TrainedScene {
                     problem: error.to_string(),
                 }
             })?;
+        let deformation = match read(DEFORMATION_FILE) {
+            Ok(header) => {
+                let weights = read(DEFORMATION_WEIGHTS_FILE)?;
+                Some(StoredDeformation::parse(&header, &weights).map_err(|error| {
+                    ServingError::Corrupt {
+                        file: DEFORMATION_FILE.to_string(),
+                        problem: error.to_string(),
+                    }
+                })?)
+            }
+            Err(ServingError::MissingFile { .. }) => None,
+            Err(error) => return Err(error),
+        };
         Ok(Self {
             model,
             sh_degree: imported.sh_degree,
             cameras,
+            deformation,
         })
     }
 }

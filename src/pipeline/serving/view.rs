@@ -72,6 +72,16 @@ impl MaskView {
     }
 }
 
+impl MaskView {
+    /// The capture time of the frame a frame view names (dynamic scenes).
+    pub fn frame_time(&self, cameras: &[SceneCamera]) -> Option<f32> {
+        match self {
+            MaskView::Frame { index, .. } => cameras.get(*index).and_then(|camera| camera.time),
+            MaskView::Pose { .. } => None,
+        }
+    }
+}
+
 fn bad_view(problem: impl Into<String>) -> ServingError {
     ServingError::BadView(problem.into())
 }

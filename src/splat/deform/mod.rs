@@ -13,6 +13,7 @@
 pub mod config;
 pub mod field;
 pub mod field_gpu;
+pub mod file;
 pub mod geometry;
 mod kernels;
 pub mod reference;
@@ -21,4 +22,5 @@ pub mod warp;
 pub use config::DeformationConfig;
 pub use field::{FieldShape, WarpKind};
 pub use field_gpu::{DeformError, DeformationField};
+pub use file::{DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE, DeformationHeader, StoredDeformation};
 pub use geometry::DeformedGeometry;

@@ -6,7 +6,7 @@ use rand_distr::{Distribution, StandardNormal};
 
 use super::{TrainError, Trainer};
 use crate::gpu::GpuContext;
-use crate::splat::GpuGaussians;
+use crate::splat::{GaussianModel, GpuGaussians};
 use crate::splat::deform::config::time_interval;
 use crate::splat::deform::{DeformationConfig, DeformationField, DeformedGeometry};
 use crate::splat::model::GaussianView;
@@ -152,5 +152,58 @@ impl Trainer {
             )),
             None => Ok(None),
         }
+    }
+}
+
+impl Trainer {
+    /// The scene as it is at `time`: the canonical model with the field's geometry at that time
+    /// (the canonical model itself for a static scene). Reads back; waits for the GPU.
+    pub fn model_at(&mut self, time: f32) -> Result<GaussianModel, TrainError> {
+        let mut model = self.gaussians.download(&self.ctx)?;
+        let Some(dynamics) = self.dynamics.as_mut() else {
+            return Ok(model);
+        };
+        if dynamics.geometry.capacity() < self.gaussians.capacity() {
+            dynamics.geometry = DeformedGeometry::new(&self.ctx, self.gaussians.capacity())?;
+        }
+        let mut encoder = self
+            .ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("deform for read-back"),
+            });
+        dynamics.field.encode_forward(
+            &self.ctx,
+            &mut encoder,
+            &self.gaussians,
+            &dynamics.geometry,
+            time,
+        )?;
+        self.ctx.queue.submit([encoder.finish()]);
+        // The next step deforms afresh.
+        dynamics.deformed_at = None;
+        let count = model.len();
+        let read = |buffer: &wgpu::Buffer| -> Result<Vec<f32>, TrainError> {
+            Ok(self.ctx.read_vec::<f32>(buffer)?)
+        };
+        let means = read(&dynamics.geometry.means)?;
+        let log_scales = read(&dynamics.geometry.log_scales)?;
+        let rotations = read(&dynamics.geometry.rotations)?;
+        for i in 0..count {
+            model.means[i] = [means[3 * i], means[3 * i + 1], means[3 * i + 2]];
+            model.log_scales[i] = [log_scales[3 * i], log_scales[3 * i + 1], log_scales[3 * i + 2]];
+            model.rotations[i] = [
+                rotations[4 * i],
+                rotations[4 * i + 1],
+                rotations[4 * i + 2],
+                rotations[4 * i + 3],
+            ];
+        }
+        Ok(model)
+    }
+
+    /// The deformation config of a dynamic scene.
+    pub fn deformation_config(&self) -> Option<&DeformationConfig> {
+        self.dynamics.as_ref().map(|d| &d.config)
     }
 }
