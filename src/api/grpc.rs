@@ -12,10 +12,10 @@ use tonic::{Request, Response, Status};
 use super::query::{QueryFailure, placement, run_query};
 use super::serving::{ServeFailure, Serving};
 use crate::language::{DEFAULT_RELEVANCY_THRESHOLD, Granularity, QueryOptions, SharedTextEncoder};
+use crate::pipeline::segment_then_splat::objects::ObjectSummary;
 use crate::pipeline::serving::{
     EncodedMask, EncodedMaskData, MaskFormat, MaskView, PinholeIntrinsics, ServingError,
 };
-use crate::pipeline::segment_then_splat::objects::ObjectSummary;
 use crate::proto;
 use crate::proto::scene_query_server::SceneQuery;
 use crate::scene::Level;

@@ -253,7 +253,12 @@ pub async fn query_scene(
     let format = parse_mask_format(request.mask_format.as_deref())?;
     let time = match parse_time(request.time)? {
         Some(time) => Some(time),
-        None => request.view.as_ref().map(ViewRequest::time).transpose()?.flatten(),
+        None => request
+            .view
+            .as_ref()
+            .map(ViewRequest::time)
+            .transpose()?
+            .flatten(),
     };
     let outcome = run_query(
         &state.database,
@@ -292,18 +297,18 @@ pub async fn query_scene(
             .map(|(rank, found)| {
                 let place = placement(&found.object, moved.as_deref());
                 QueryMatchResponse {
-                level: found.object.level.name().to_string(),
-                object_id: found.object.object_id,
-                score: found.score,
-                relevancy: found.relevancy,
-                centroid: place.centroid,
-                bounds_min: place.bounds_min,
-                bounds_max: place.bounds_max,
-                mask: masks.get(rank).map(|masks| MaskBody::from(&masks.mask)),
-                visible_mask: masks
-                    .get(rank)
-                    .and_then(|masks| masks.visible_mask.as_ref())
-                    .map(MaskBody::from),
+                    level: found.object.level.name().to_string(),
+                    object_id: found.object.object_id,
+                    score: found.score,
+                    relevancy: found.relevancy,
+                    centroid: place.centroid,
+                    bounds_min: place.bounds_min,
+                    bounds_max: place.bounds_max,
+                    mask: masks.get(rank).map(|masks| MaskBody::from(&masks.mask)),
+                    visible_mask: masks
+                        .get(rank)
+                        .and_then(|masks| masks.visible_mask.as_ref())
+                        .map(MaskBody::from),
                 }
             })
             .collect(),

@@ -1,8 +1,10 @@
 //! A small dynamic scene with known motion, for tests and benchmarks: the three synthetic spheres
 //! move along known paths and spin (each is painted in two tones split by a plane through its
-//! axis, so the spin shows), seen by a camera that circles once over the sequence, one view per
-//! time as in D-NeRF and HyperNeRF. Written as D-NeRF (Blender with `time`) with exact instance
-//! masks per frame, so the ground truth of every pixel and every centre is known.
+//! axis, so the spin shows), one view per time as in D-NeRF: the camera jumps around the scene
+//! from frame to frame (golden-angle azimuths, alternating heights), as D-NeRF's synthetic scenes
+//! do, so the views of any short span of time see the objects from many sides. Written as D-NeRF
+//! (Blender with `time`) with exact instance masks per frame, so the ground truth of every pixel
+//! and every centre is known.
 
 use std::f32::consts::PI;
 use std::fs;
@@ -10,13 +12,17 @@ use std::io;
 use std::path::Path;
 
 use glam::{Mat4, Vec3};
+
+const CAMERA_DISTANCE: f32 = 4.0;
+/// Fraction of a turn between consecutive frames' azimuths (the golden ratio's).
+const GOLDEN_TURN: f32 = 0.618_034;
 use image::{ImageFormat, Luma, Rgba};
 use serde_json::json;
 
 use super::masks::mask_path;
 use super::synthetic::{
     SyntheticObject, SyntheticSpec, cast_ray, opengl_matrix_rows, pixel_ray, synthetic_intrinsics,
-    synthetic_objects, synthetic_world_from_cameras, write_json,
+    synthetic_objects, write_json,
 };
 use super::{Level, blender};
 
@@ -43,6 +49,28 @@ pub fn dynamic_objects_at(t: f32) -> Vec<SyntheticObject> {
         .map(|(index, object)| SyntheticObject {
             center: dynamic_object_center(index, t),
             ..*object
+        })
+        .collect()
+}
+
+/// Camera-to-world poses (OpenCV axes) of the frames: azimuth advancing by the golden turn,
+/// height alternating between three levels, always looking at the origin.
+pub fn dynamic_world_from_cameras(spec: &SyntheticSpec) -> Vec<Mat4> {
+    (0..spec.frame_count)
+        .map(|index| {
+            let azimuth = std::f32::consts::TAU * (index as f32 * GOLDEN_TURN).fract();
+            let height = [1.5, 0.4, 2.4][index % 3];
+            let ring = (CAMERA_DISTANCE * CAMERA_DISTANCE - height * height).sqrt();
+            let eye = Vec3::new(ring * azimuth.cos(), ring * azimuth.sin(), height);
+            let forward = (-eye).normalize();
+            let right = forward.cross(Vec3::Z).normalize();
+            let down = forward.cross(right);
+            Mat4::from_cols(
+                right.extend(0.0),
+                down.extend(0.0),
+                forward.extend(0.0),
+                eye.extend(1.0),
+            )
         })
         .collect()
 }
@@ -105,7 +133,7 @@ pub fn write_dynamic_blender(dir: &Path, spec: &SyntheticSpec) -> io::Result<()>
     let camera_angle_x = 2.0 * (0.5 * f64::from(spec.width) / intrinsics.fx).atan();
     let objects = synthetic_objects();
     let (mut train, mut test) = (Vec::new(), Vec::new());
-    let poses = synthetic_world_from_cameras(spec);
+    let poses = dynamic_world_from_cameras(spec);
     for (index, world_from_camera) in poses.into_iter().enumerate() {
         let t = dynamic_frame_time(index, spec.frame_count);
         let split = if is_dynamic_test_frame(index) {

@@ -196,6 +196,9 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
     config
         .scene_sized
         .apply_deformation(scene.is_dynamic(), &mut config.train);
+    config
+        .scene_sized
+        .apply_background(scene.background, &mut config.train);
     tracing::info!(
         ?size,
         steps = config.train.steps,
@@ -351,9 +354,12 @@ fn propagated_masks(
     .map_err(fatal)?;
     let position: std::collections::HashMap<usize, usize> =
         frames.iter().enumerate().map(|(i, &f)| (f, i)).collect();
-    masks
-        .views
-        .sort_by_key(|view| position.get(&view.frame_index).copied().unwrap_or(usize::MAX));
+    masks.views.sort_by_key(|view| {
+        position
+            .get(&view.frame_index)
+            .copied()
+            .unwrap_or(usize::MAX)
+    });
     merge_and_report(
         ctx,
         scene,
@@ -485,7 +491,10 @@ fn finish(
     let times = scene.frame_times();
     let first_time = times.first().copied().unwrap_or(0.0);
     let summaries = summarize_objects(&trainer.model_at(first_time).map_err(train_failure)?);
-    let deformation = match (trainer.deformation_config(), trainer.deformation_parameters()) {
+    let deformation = match (
+        trainer.deformation_config(),
+        trainer.deformation_parameters(),
+    ) {
         (Some(config), Ok(Some(parameters))) => Some(StoredDeformation {
             header: DeformationHeader {
                 field: config.field,

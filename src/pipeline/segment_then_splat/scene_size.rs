@@ -58,6 +58,9 @@ pub struct SceneSizedFields {
     /// `deformation`: the deformation field (METHOD.md "Dynamic scenes") for scenes whose
     /// frames carry times, none for static ones.
     pub deformation: bool,
+    /// `background`: the colour the scene's RGBA images are composited on (white for Blender
+    /// and D-NeRF), so transparent pixels are not learnt as a coloured haze.
+    pub background: bool,
 }
 
 impl SceneSizedFields {
@@ -69,6 +72,14 @@ impl SceneSizedFields {
             objects_per_level: absent("/object_loss/objects_per_level"),
             level_schedule: absent("/object_loss/middle_from") && absent("/object_loss/large_from"),
             deformation: absent("/deformation"),
+            background: absent("/background"),
+        }
+    }
+
+    /// Uses the scene's compositing background when the config left it out.
+    pub fn apply_background(self, scene_background: [f32; 3], config: &mut TrainConfig) {
+        if self.background {
+            config.background = scene_background;
         }
     }
 
@@ -113,6 +124,7 @@ mod tests {
                 objects_per_level: false,
                 level_schedule: true,
                 deformation: true,
+                background: true,
             }
         );
         let mut config = TrainConfig {

@@ -81,6 +81,7 @@ pub fn initial_segmented_model(
     background_shell: usize,
 ) -> Result<GaussianModel, SegmentedTrainingError> {
     let mut model = initial_model(scene, config)?;
+    let masks = &voting_views(scene, masks);
     // Tracks in mask-view indices; only meaningful when the model is the sparse points in order.
     let tracks = match &scene.points {
         Some(points) if points.positions.len() == model.len() => {
@@ -112,6 +113,43 @@ pub fn initial_segmented_model(
         &background_shell_points(scene, background_shell),
     );
     Ok(model)
+}
+
+/// Share of a dynamic scene's time span, from its first time, whose views vote for the initial
+/// object ids.
+const DYNAMIC_VOTING_TIME_SHARE: f32 = 0.25;
+/// Views that vote in a dynamic scene at least (when it has them).
+const DYNAMIC_VOTING_MIN_VIEWS: usize = 4;
+
+/// The views whose masks vote for the initial ids. In a static scene, all. In a moving one, an
+/// object is somewhere else in every view, so a point would win a majority only in the core its
+/// object never leaves; the views of the earliest times vote instead: the deformation field
+/// starts as the identity, so the canonical Gaussians begin where the scene is then, and the
+/// field carries each object's Gaussians to its other times.
+fn voting_views<'a>(scene: &Scene, masks: &'a ViewMaskSet) -> std::borrow::Cow<'a, ViewMaskSet> {
+    let time = |view: &super::view_masks::ViewMasks| {
+        scene
+            .frames
+            .get(view.frame_index)
+            .and_then(|frame| frame.time)
+    };
+    let times: Vec<f32> = masks.views.iter().filter_map(time).collect();
+    if !scene.is_dynamic() || times.len() < masks.views.len() || times.is_empty() {
+        return std::borrow::Cow::Borrowed(masks);
+    }
+    let first = times.iter().copied().fold(f32::INFINITY, f32::min);
+    let last = times.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+    let mut sorted = times.clone();
+    sorted.sort_by(f32::total_cmp);
+    let nth = sorted[DYNAMIC_VOTING_MIN_VIEWS.min(sorted.len()) - 1];
+    let cutoff = (first + DYNAMIC_VOTING_TIME_SHARE * (last - first)).max(nth);
+    let views = masks
+        .views
+        .iter()
+        .filter(|view| time(view).is_some_and(|t| t <= cutoff))
+        .cloned()
+        .collect();
+    std::borrow::Cow::Owned(ViewMaskSet { views })
 }
 
 /// Each sparse point's COLMAP track as (index into `masks.views`, full-resolution pixel), keeping

@@ -82,12 +82,14 @@ impl TrainedScene {
         let deformation = match read(DEFORMATION_FILE) {
             Ok(header) => {
                 let weights = read(DEFORMATION_WEIGHTS_FILE)?;
-                Some(StoredDeformation::parse(&header, &weights).map_err(|error| {
-                    ServingError::Corrupt {
-                        file: DEFORMATION_FILE.to_string(),
-                        problem: error.to_string(),
-                    }
-                })?)
+                Some(
+                    StoredDeformation::parse(&header, &weights).map_err(|error| {
+                        ServingError::Corrupt {
+                            file: DEFORMATION_FILE.to_string(),
+                            problem: error.to_string(),
+                        }
+                    })?,
+                )
             }
             Err(ServingError::MissingFile { .. }) => None,
             Err(error) => return Err(error),

@@ -144,22 +144,28 @@ pub fn initial_model(scene: &Scene, config: &TrainConfig) -> Result<GaussianMode
             gaussians_from_points(&points.positions, &points.colors)
         }
         _ => {
-            let centers = camera_centers(scene);
-            let extent = scene_extent(&centers);
-            let center = centers.iter().copied().sum::<Vec3>() / centers.len().max(1) as f32;
+            let (min, max) = random_init_bounds(scene);
             let mut rng = ChaCha8Rng::seed_from_u64(config.seed ^ 0x1417);
-            random_gaussians(
-                config.random_init_count,
-                center - Vec3::splat(extent),
-                center + Vec3::splat(extent),
-                &mut rng,
-            )
+            random_gaussians(config.random_init_count, min, max, &mut rng)
         }
     };
     if model.is_empty() {
         return Err(TrainError::EmptyModel);
     }
     Ok(model)
+}
+
+/// Where random initial Gaussians go: Blender / D-NeRF scenes follow the NeRF-synthetic
+/// convention of an object inside [-1.3, 1.3]^3 around the origin (3DGS and Deformable 3DGS
+/// initialise there); other scenes fill the cameras' bounds.
+fn random_init_bounds(scene: &Scene) -> (Vec3, Vec3) {
+    if scene.format == crate::scene::SceneFormat::Blender {
+        return (Vec3::splat(-1.3), Vec3::splat(1.3));
+    }
+    let centers = camera_centers(scene);
+    let extent = scene_extent(&centers);
+    let center = centers.iter().copied().sum::<Vec3>() / centers.len().max(1) as f32;
+    (center - Vec3::splat(extent), center + Vec3::splat(extent))
 }
 
 fn camera_centers(scene: &Scene) -> Vec<Vec3> {

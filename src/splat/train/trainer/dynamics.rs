@@ -6,10 +6,10 @@ use rand_distr::{Distribution, StandardNormal};
 
 use super::{TrainError, Trainer};
 use crate::gpu::GpuContext;
-use crate::splat::{GaussianModel, GpuGaussians};
 use crate::splat::deform::config::time_interval;
 use crate::splat::deform::{DeformationConfig, DeformationField, DeformedGeometry};
 use crate::splat::model::GaussianView;
+use crate::splat::{GaussianModel, GpuGaussians};
 
 /// The field, its deformed geometry and what the current step deformed.
 pub(super) struct Dynamics {
@@ -191,7 +191,11 @@ impl Trainer {
         let rotations = read(&dynamics.geometry.rotations)?;
         for i in 0..count {
             model.means[i] = [means[3 * i], means[3 * i + 1], means[3 * i + 2]];
-            model.log_scales[i] = [log_scales[3 * i], log_scales[3 * i + 1], log_scales[3 * i + 2]];
+            model.log_scales[i] = [
+                log_scales[3 * i],
+                log_scales[3 * i + 1],
+                log_scales[3 * i + 2],
+            ];
             model.rotations[i] = [
                 rotations[4 * i],
                 rotations[4 * i + 1],

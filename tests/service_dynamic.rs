@@ -1,0 +1,244 @@
+//! A dynamic scene end to end through the service: the synthetic moving, spinning spheres
+//! (`scene::synthetic_dynamic`, D-NeRF layout with exact instance masks per frame, one camera
+//! pose per time) are uploaded, trained by a `segment_then_splat` job with the deformation field
+//! and the object loss at each frame's time, then asked about at held-out times (every fourth
+//! frame, between training times):
+//! - masks: each small object's visible mask for a held-out frame against the true silhouette;
+//! - positions: each object's centroid at held-out times against its true path;
+//! - the same through gRPC `ListObjects` with a time, and errors for a bad time.
+
+mod common;
+
+use std::time::Duration;
+
+use base64::Engine;
+use common::{TestService, archives};
+use segsplat::proto;
+use segsplat::scene::Level;
+use segsplat::scene::synthetic::SyntheticSpec;
+use segsplat::scene::synthetic_dynamic::{
+    dynamic_frame_time, dynamic_object_center, dynamic_true_mask, dynamic_world_from_cameras,
+    is_dynamic_test_frame, write_dynamic_blender,
+};
+use segsplat::segment::BitMask;
+
+const FRAMES: usize = 40;
+
+fn spec() -> SyntheticSpec {
+    SyntheticSpec {
+        frame_count: FRAMES,
+        width: 64,
+        height: 48,
+        with_masks: Some(Level::ALL.to_vec()),
+        ..SyntheticSpec::default()
+    }
+}
+
+fn png_mask(data: &str) -> BitMask {
+    let bytes = base64::engine::general_purpose::STANDARD
+        .decode(data)
+        .expect("base64");
+    let image = image::load_from_memory(&bytes).expect("png").into_luma8();
+    let values: Vec<bool> = image.pixels().map(|pixel| pixel.0[0] > 127).collect();
+    BitMask::from_bools(image.width(), image.height(), &values).expect("mask")
+}
+
+fn iou(a: &[bool], b: &[bool]) -> f64 {
+    let intersection = a.iter().zip(b).filter(|(x, y)| **x && **y).count();
+    let union = a.iter().zip(b).filter(|(x, y)| **x || **y).count();
+    if union == 0 {
+        1.0
+    } else {
+        intersection as f64 / union as f64
+    }
+}
+
+fn distance(a: [f32; 3], b: glam::Vec3) -> f32 {
+    (glam::Vec3::from_array(a) - b).length()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_moving_scene_is_segmented_and_queried_in_time() {
+    let data = tempfile::tempdir().expect("tempdir");
+    let Some(client) = TestService::start_on_gpu(data.path(), |_| {}).await else {
+        return;
+    };
+    let files = archives::dataset_files(|dir| write_dynamic_blender(dir, &spec()));
+    let (status, scene) = client
+        .upload(archives::zip_of(&files), "application/zip")
+        .await;
+    assert_eq!(status, 201, "{scene}");
+    assert_eq!(scene["dynamic"], true, "{scene}");
+    assert_eq!(scene["time_count"], FRAMES, "{scene}");
+    let scene_id = scene["id"].as_str().expect("id").to_string();
+
+    // The deformation field, the scene's white background and user masks all come from the
+    // scene; the schedule is shortened for the test.
+    let job_id = client
+        .create_job(
+            &scene_id,
+            "segment_then_splat",
+            serde_json::json!({
+                "steps": 1000, "checkpoint_every": 0, "random_init_count": 2000,
+                "max_sh_degree": 1, "sh_degree_interval": 200, "densify_from": 100,
+                "densify_until": 500, "opacity_reset_interval": 0, "max_gaussians": 6000,
+                "background_shell": 200,
+                "object_loss": {"middle_from": 1.0, "large_from": 1.0},
+                "deformation": {
+                    "field": {"depth": 4, "width": 64, "skip_after": 2},
+                    "warm_up_steps": 200, "learning_rate_decay_steps": 40000
+                }
+            }),
+        )
+        .await;
+    let job = client
+        .wait_for_state(&job_id, "succeeded", Duration::from_secs(1200))
+        .await;
+    println!("job progress: {}", job["progress"]);
+    let (_, metrics) = client
+        .get_json(&format!("/v1/scenes/{scene_id}/trained/metrics.json"))
+        .await;
+    println!("metrics: {metrics}");
+    let (_, objects) = client
+        .get_json(&format!("/v1/scenes/{scene_id}/objects"))
+        .await;
+    for object in objects["objects"].as_array().into_iter().flatten() {
+        println!(
+            "object {} {}: {} Gaussians at {}",
+            object["level"], object["object_id"], object["gaussian_count"], object["centroid"]
+        );
+    }
+    let (status, header) = client
+        .get_json(&format!("/v1/scenes/{scene_id}/trained/deformation.json"))
+        .await;
+    assert_eq!(status, 200, "{header}");
+    assert_eq!(header["field"]["width"], 64);
+
+    // Masks at held-out frames (each renders at its frame's time). The scene lists Blender's
+    // training frames before its test frames: find each synthetic frame by its file name.
+    let poses = dynamic_world_from_cameras(&spec());
+    let (status, cameras) = client
+        .get_json(&format!("/v1/scenes/{scene_id}/trained/cameras.json"))
+        .await;
+    assert_eq!(status, 200, "{cameras}");
+    let scene_index = |frame: usize| -> usize {
+        let suffix = format!("/r_{frame}.png");
+        cameras
+            .as_array()
+            .and_then(|cameras| {
+                cameras.iter().position(|camera| {
+                    camera["name"]
+                        .as_str()
+                        .is_some_and(|name| name.ends_with(&suffix))
+                })
+            })
+            .unwrap_or_else(|| panic!("no camera for frame {frame}"))
+    };
+    let all_small = serde_json::json!([
+        {"level": "small", "object_id": 1},
+        {"level": "small", "object_id": 2},
+        {"level": "small", "object_id": 3}
+    ]);
+    let mut frame_ious = Vec::new();
+    for frame in (0..FRAMES).filter(|&i| is_dynamic_test_frame(i)) {
+        let (status, body) = client
+            .post_json(
+                &format!("/v1/scenes/{scene_id}/masks"),
+                serde_json::json!({"objects": all_small, "view": {"frame_index": scene_index(frame)},
+                                   "visible_masks": true, "mask_format": "png"}),
+            )
+            .await;
+        assert_eq!(status, 200, "{body}");
+        let t = dynamic_frame_time(frame, FRAMES);
+        let truth = dynamic_true_mask(&spec(), poses[frame], t, Level::Small);
+        let mut ious = Vec::new();
+        for (object, masks) in body["masks"].as_array().expect("masks").iter().enumerate() {
+            let rendered = png_mask(masks["visible_mask"]["data"].as_str().expect("png"));
+            let object_id = object as u32 + 1;
+            let true_pixels: Vec<bool> = truth.iter().map(|&id| id == object_id).collect();
+            if true_pixels.iter().any(|&inside| inside) {
+                ious.push(iou(&rendered.to_bools(), &true_pixels));
+            }
+        }
+        println!("frame {frame} (t = {t:.2}): IoU {ious:.2?}");
+        frame_ious.push(ious.iter().sum::<f64>() / ious.len().max(1) as f64);
+    }
+    let miou = frame_ious.iter().sum::<f64>() / frame_ious.len() as f64;
+    println!("held-out mIoU {miou:.3} over {} frames", frame_ious.len());
+    assert!(miou >= 0.6, "held-out mIoU {miou:.3}");
+
+    // Centroids along the true paths at held-out times.
+    let mut worst: f32 = 0.0;
+    let mut errors = Vec::new();
+    for frame in (0..FRAMES).filter(|&i| is_dynamic_test_frame(i)) {
+        let t = dynamic_frame_time(frame, FRAMES);
+        let (status, list) = client
+            .get_json(&format!(
+                "/v1/scenes/{scene_id}/objects?level=small&time={t}"
+            ))
+            .await;
+        assert_eq!(status, 200, "{list}");
+        for object in list["objects"].as_array().expect("objects") {
+            let id = object["object_id"].as_u64().expect("id") as usize;
+            let centroid: [f32; 3] =
+                serde_json::from_value(object["centroid"].clone()).expect("centroid");
+            let error = distance(centroid, dynamic_object_center(id - 1, t));
+            worst = worst.max(error);
+            errors.push(error);
+        }
+    }
+    let mean = errors.iter().sum::<f32>() / errors.len() as f32;
+    println!("centroid error at held-out times: mean {mean:.3}, worst {worst:.3}");
+    assert!(
+        mean < 0.1 && worst < 0.2,
+        "centroids off their paths: mean {mean}, worst {worst}"
+    );
+
+    // The first object moves 0.7 along y over the sequence; its centroid must follow (the
+    // sequence's ends are the field's least constrained times: more than half the way).
+    let centroid_at = |list: &serde_json::Value| -> [f32; 3] {
+        let object = list["objects"]
+            .as_array()
+            .and_then(|objects| objects.iter().find(|o| o["object_id"] == 1))
+            .expect("object 1");
+        serde_json::from_value(object["centroid"].clone()).expect("centroid")
+    };
+    let (_, start) = client
+        .get_json(&format!("/v1/scenes/{scene_id}/objects?level=small&time=0"))
+        .await;
+    let (_, end) = client
+        .get_json(&format!("/v1/scenes/{scene_id}/objects?level=small&time=1"))
+        .await;
+    let moved = centroid_at(&end)[1] - centroid_at(&start)[1];
+    assert!(moved > 0.4 && moved < 0.9, "object 1 moved {moved} along y");
+
+    // gRPC ListObjects at a time agrees with REST.
+    let mut grpc = client.grpc().await;
+    let listed = grpc
+        .list_objects(proto::ListObjectsRequest {
+            scene_id: scene_id.clone(),
+            level: proto::Level::Small as i32,
+            time: Some(1.0),
+        })
+        .await
+        .expect("list")
+        .into_inner();
+    let grpc_centroid = listed
+        .objects
+        .iter()
+        .find(|o| o.object_id == 1)
+        .and_then(|o| o.centroid.clone())
+        .expect("centroid");
+    let rest = centroid_at(&end);
+    assert!((grpc_centroid.y - rest[1]).abs() < 1e-5);
+
+    // A time that is not a number is refused.
+    let (status, body) = client
+        .post_json(
+            &format!("/v1/scenes/{scene_id}/masks"),
+            serde_json::json!({"objects": all_small, "view": {"frame_index": 3, "time": "soon"}}),
+        )
+        .await;
+    assert!(status == 400 || status == 422, "{status}: {body}");
+    client.shutdown().await;
+}
