@@ -1,9 +1,10 @@
 //! Training a dynamic scene with the deformation field: the synthetic moving spheres
-//! (`scene::synthetic_dynamic`, D-NeRF layout, one camera pose per time). Held-out frames lie
+//! (`scene::synthetic_dynamic`, D-NeRF layout, one camera pose per time, the camera jumping
+//! around the scene). Held-out frames lie
 //! between training times. The same short schedule is trained twice, as a static scene and with
 //! the field: the field must beat the static model on held-out frames by a margin a broken
-//! forward or gradient cannot give (measured: 26.7 dB against 23.0 dB; asserted: 2.5 dB better
-//! and above 25 dB), and a checkpoint must restore the field bit for bit.
+//! forward or gradient cannot give (measured: 24.2 dB against 19.2 dB; asserted: 3 dB better
+//! and above 22 dB), and a checkpoint must restore the field bit for bit.
 
 use glam::Vec3;
 use rand::SeedableRng;
@@ -107,10 +108,10 @@ fn deformation_field_beats_a_static_model_on_held_out_times() {
     }
     let (static_psnr, dynamic_psnr) = (reports[0].psnr, reports[1].psnr);
     assert!(
-        dynamic_psnr > static_psnr + 2.5,
+        dynamic_psnr > static_psnr + 3.0,
         "the field gives {dynamic_psnr:.2} dB against {static_psnr:.2} dB static"
     );
-    assert!(dynamic_psnr > 25.0, "held-out PSNR {dynamic_psnr:.2} dB");
+    assert!(dynamic_psnr > 22.0, "held-out PSNR {dynamic_psnr:.2} dB");
 }
 
 #[test]

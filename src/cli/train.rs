@@ -8,6 +8,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use segsplat::pipeline::reconstruct::{ReconstructMetrics, write_scene_files};
 use segsplat::splat::checkpoint::Checkpoint;
+use segsplat::splat::deform::{DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE, DeformationConfig};
 use segsplat::splat::train::{TrainConfig, Trainer, TrainerMeta};
 
 #[derive(Args)]
@@ -33,6 +34,10 @@ pub struct TrainArgs {
     /// Steps between checkpoints written to `OUT/train.ckpt` (0 = only at the end).
     #[arg(long, default_value_t = 1000)]
     pub checkpoint_every: u32,
+    /// Train a dynamic dataset (frames with times) as a static scene, without the deformation
+    /// field it otherwise gets when the config does not set one.
+    #[arg(long)]
+    pub no_deformation: bool,
 }
 
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
@@ -53,11 +58,14 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     if let Some(seed) = args.seed {
         config.seed = seed;
     }
+    let scene = super::open_scene(&args.dataset)?;
+    if scene.is_dynamic() && config.deformation.is_none() && !args.no_deformation {
+        config.deformation = Some(DeformationConfig::default());
+    }
     config.validate()?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let checkpoint_path = args.out.join("train.ckpt");
-    let scene = super::open_scene(&args.dataset)?;
     let ctx = super::open_gpu()?;
     let mut trainer = if args.resume && checkpoint_path.exists() {
         let checkpoint = Checkpoint::<TrainerMeta>::load(&checkpoint_path)?;
@@ -92,6 +100,13 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let held_out = trainer.evaluate()?;
     let model = trainer.model()?;
     write_scene_files(&model, &scene, &args.out)?;
+    if let Some(stored) = trainer.stored_deformation(&scene.frame_times())? {
+        std::fs::write(args.out.join(DEFORMATION_FILE), stored.header_bytes()?)?;
+        std::fs::write(
+            args.out.join(DEFORMATION_WEIGHTS_FILE),
+            stored.weight_bytes(),
+        )?;
+    }
     let metrics = ReconstructMetrics {
         steps: trainer.step(),
         gaussians: model.len(),

@@ -16,6 +16,7 @@ use crate::gpu::GpuContext;
 use crate::jobs::{JobContext, JobFailure, JobHandler};
 use crate::scene::{LoadOptions, Scene, load_scene};
 use crate::splat::checkpoint::Checkpoint;
+use crate::splat::deform::{DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE};
 use crate::splat::labels::write_labels;
 use crate::splat::model::GaussianModel;
 use crate::splat::ply::write_ply;
@@ -32,6 +33,9 @@ pub struct ReconstructConfig {
     pub train: TrainConfig,
     /// Steps between checkpoints (0 = only at the end).
     pub checkpoint_every: u32,
+    /// Set on submission when the config left `deformation` out: a dynamic scene then trains
+    /// with the default deformation field (`"deformation": null` keeps it static).
+    pub deformation_from_scene: bool,
 }
 
 impl Default for ReconstructConfig {
@@ -39,6 +43,7 @@ impl Default for ReconstructConfig {
         Self {
             train: TrainConfig::default(),
             checkpoint_every: 1000,
+            deformation_from_scene: false,
         }
     }
 }
@@ -79,11 +84,14 @@ impl JobHandler for ReconstructHandler {
     }
 
     fn validate_config(&self, config: &serde_json::Value) -> Result<serde_json::Value, String> {
-        let parsed: ReconstructConfig = if config.is_null() {
+        let mut parsed: ReconstructConfig = if config.is_null() {
             ReconstructConfig::default()
         } else {
             serde_json::from_value(config.clone()).map_err(|error| error.to_string())?
         };
+        if config.get("deformation_from_scene").is_none() {
+            parsed.deformation_from_scene = config.get("deformation").is_none();
+        }
         parsed.train.validate().map_err(|error| error.to_string())?;
         serde_json::to_value(&parsed).map_err(|error| error.to_string())
     }
@@ -100,12 +108,16 @@ impl JobHandler for ReconstructHandler {
 }
 
 fn run_blocking(ctx: &JobContext) -> Result<(), JobFailure> {
-    let config: ReconstructConfig = serde_json::from_value(ctx.config.clone()).map_err(fatal)?;
+    let mut config: ReconstructConfig =
+        serde_json::from_value(ctx.config.clone()).map_err(fatal)?;
     let gpu: Arc<GpuContext> = ctx
         .gpu
         .clone()
         .ok_or_else(|| fatal("the reconstruct job needs a GPU worker"))?;
     let scene = load_scene(&ctx.scene_dir, &LoadOptions::default()).map_err(fatal)?;
+    if config.deformation_from_scene && scene.is_dynamic() && config.train.deformation.is_none() {
+        config.train.deformation = Some(Default::default());
+    }
     let mut trainer = match ctx.load_checkpoint(CHECKPOINT_NAME).map_err(retryable)? {
         Some(bytes) => {
             let checkpoint = Checkpoint::<TrainerMeta>::from_bytes(&bytes).map_err(retryable)?;
@@ -134,7 +146,16 @@ fn finish(
         held_out,
     };
     let metrics_json = serde_json::to_vec_pretty(&metrics).map_err(fatal)?;
-    store_outputs(ctx, &model, scene, &[("metrics.json", metrics_json)])?;
+    let mut documents = vec![("metrics.json", metrics_json)];
+    // A config with `deformation` trains a dynamic scene's field; it is stored with the scene.
+    if let Some(stored) = trainer
+        .stored_deformation(&scene.frame_times())
+        .map_err(train_failure)?
+    {
+        documents.push((DEFORMATION_FILE, stored.header_bytes().map_err(fatal)?));
+        documents.push((DEFORMATION_WEIGHTS_FILE, stored.weight_bytes()));
+    }
+    store_outputs(ctx, &model, scene, &documents)?;
     report_evaluation(ctx, &metrics.held_out, metrics.gaussians);
     Ok(())
 }

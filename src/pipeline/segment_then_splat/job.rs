@@ -35,13 +35,11 @@ use crate::pipeline::training_job::{
     fatal, report, report_evaluation, retryable, store_outputs, train_failure,
     train_with_checkpoints,
 };
-use crate::scene::{Level, LoadOptions, Scene, load_frame_rgb, load_scene};
+use crate::scene::{Level, LoadOptions, Scene, SceneFormat, load_frame_rgb, load_scene};
 use crate::segment::propagation::PropagationOptions;
 use crate::segment::{AutomaticConfig, ClassicalConfig, MaskGenerator};
 use crate::splat::checkpoint::Checkpoint;
-use crate::splat::deform::{
-    DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE, DeformationHeader, StoredDeformation,
-};
+use crate::splat::deform::{DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE};
 use crate::splat::train::{EvalReport, ObjectLossConfig, TrainConfig, Trainer, TrainerMeta};
 use crate::store::objects::{ObjectEmbedding, ObjectRecord};
 
@@ -196,9 +194,10 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
     config
         .scene_sized
         .apply_deformation(scene.is_dynamic(), &mut config.train);
+    let rgba = scene.format == SceneFormat::Blender;
     config
         .scene_sized
-        .apply_background(scene.background, &mut config.train);
+        .apply_background(rgba.then_some(scene.background), &mut config.train);
     tracing::info!(
         ?size,
         steps = config.train.steps,
@@ -491,21 +490,7 @@ fn finish(
     let times = scene.frame_times();
     let first_time = times.first().copied().unwrap_or(0.0);
     let summaries = summarize_objects(&trainer.model_at(first_time).map_err(train_failure)?);
-    let deformation = match (
-        trainer.deformation_config(),
-        trainer.deformation_parameters(),
-    ) {
-        (Some(config), Ok(Some(parameters))) => Some(StoredDeformation {
-            header: DeformationHeader {
-                field: config.field,
-                parameter_count: parameters.len(),
-                time_range: [first_time, times.last().copied().unwrap_or(first_time)],
-            },
-            parameters,
-        }),
-        (_, Err(error)) => return Err(train_failure(error)),
-        _ => None,
-    };
+    let deformation = trainer.stored_deformation(&times).map_err(train_failure)?;
     let skipped: Vec<SkippedFramePair> = trainer
         .skipped_pairs()
         .into_iter()

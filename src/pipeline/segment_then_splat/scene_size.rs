@@ -58,8 +58,8 @@ pub struct SceneSizedFields {
     /// `deformation`: the deformation field (METHOD.md "Dynamic scenes") for scenes whose
     /// frames carry times, none for static ones.
     pub deformation: bool,
-    /// `background`: the colour the scene's RGBA images are composited on (white for Blender
-    /// and D-NeRF), so transparent pixels are not learnt as a coloured haze.
+    /// `background`: for scenes of RGBA images (Blender, D-NeRF), the colour they are composited
+    /// on (white), so transparent pixels are not learnt as a haze of that colour.
     pub background: bool,
 }
 
@@ -76,10 +76,11 @@ impl SceneSizedFields {
         }
     }
 
-    /// Uses the scene's compositing background when the config left it out.
-    pub fn apply_background(self, scene_background: [f32; 3], config: &mut TrainConfig) {
-        if self.background {
-            config.background = scene_background;
+    /// Uses the colour transparent images were composited on (`Some` for scenes with RGBA
+    /// images: Blender / D-NeRF) when the config left `background` out.
+    pub fn apply_background(self, composited_on: Option<[f32; 3]>, config: &mut TrainConfig) {
+        if let (true, Some(background)) = (self.background, composited_on) {
+            config.background = background;
         }
     }
 

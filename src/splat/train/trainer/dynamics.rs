@@ -7,7 +7,9 @@ use rand_distr::{Distribution, StandardNormal};
 use super::{TrainError, Trainer};
 use crate::gpu::GpuContext;
 use crate::splat::deform::config::time_interval;
-use crate::splat::deform::{DeformationConfig, DeformationField, DeformedGeometry};
+use crate::splat::deform::{
+    DeformationConfig, DeformationField, DeformationHeader, DeformedGeometry, StoredDeformation,
+};
 use crate::splat::model::GaussianView;
 use crate::splat::{GaussianModel, GpuGaussians};
 
@@ -209,5 +211,29 @@ impl Trainer {
     /// The deformation config of a dynamic scene.
     pub fn deformation_config(&self) -> Option<&DeformationConfig> {
         self.dynamics.as_ref().map(|d| &d.config)
+    }
+}
+
+impl Trainer {
+    /// The trained field as stored next to the canonical Gaussians, with the span of the scene's
+    /// `times` (distinct, ascending); `None` for a static scene. Reads back.
+    pub fn stored_deformation(
+        &self,
+        times: &[f32],
+    ) -> Result<Option<StoredDeformation>, TrainError> {
+        let (Some(config), Some(parameters)) =
+            (self.deformation_config(), self.deformation_parameters()?)
+        else {
+            return Ok(None);
+        };
+        let first = times.first().copied().unwrap_or(0.0);
+        Ok(Some(StoredDeformation {
+            header: DeformationHeader {
+                field: config.field,
+                parameter_count: parameters.len(),
+                time_range: [first, times.last().copied().unwrap_or(first)],
+            },
+            parameters,
+        }))
     }
 }
