@@ -236,6 +236,83 @@ async fn a_moving_scene_is_segmented_and_queried_in_time() {
     let rest = centroid_at(&end);
     assert!((grpc_centroid.y - rest[1]).abs() < 1e-5);
 
+    // gRPC RenderMask for a (pose, t) pair: a held-out frame's camera as a pose at that frame's
+    // time gives the frame's mask; the same pose at another time does not.
+    let frame = 19;
+    let camera = &cameras[scene_index(frame)];
+    let rows: Vec<f64> = camera["camera_to_world"]
+        .as_array()
+        .expect("rows")
+        .iter()
+        .flat_map(|row| {
+            row.as_array()
+                .expect("row")
+                .iter()
+                .map(|v| v.as_f64().expect("f64"))
+        })
+        .collect();
+    let pose_view = |time: f64| proto::View {
+        source: Some(proto::view::Source::Pose(proto::PoseView {
+            pose: Some(proto::Pose {
+                camera_to_world: rows.clone(),
+            }),
+            intrinsics: Some(proto::Intrinsics {
+                fx: camera["fx"].as_f64().expect("fx"),
+                fy: camera["fy"].as_f64().expect("fy"),
+                cx: camera["cx"].as_f64().expect("cx"),
+                cy: camera["cy"].as_f64().expect("cy"),
+                width: camera["width"].as_u64().expect("width") as u32,
+                height: camera["height"].as_u64().expect("height") as u32,
+            }),
+        })),
+        time: Some(time),
+        max_side: None,
+    };
+    let mask_at = |view: proto::View| {
+        let mut grpc = grpc.clone();
+        let scene_id = scene_id.clone();
+        async move {
+            let mask = grpc
+                .render_mask(proto::RenderMaskRequest {
+                    scene_id,
+                    level: proto::Level::Small as i32,
+                    object_id: 1,
+                    view: Some(view),
+                    mask_encoding: proto::MaskEncoding::Png as i32,
+                    visible_only: false,
+                })
+                .await
+                .expect("render mask")
+                .into_inner()
+                .mask
+                .expect("mask");
+            let image = image::load_from_memory(&mask.data)
+                .expect("png")
+                .into_luma8();
+            image.pixels().map(|p| p.0[0] > 127).collect::<Vec<bool>>()
+        }
+    };
+    let t = f64::from(dynamic_frame_time(frame, FRAMES));
+    let at_frame_time = mask_at(pose_view(t)).await;
+    let (status, body) = client
+        .post_json(
+            &format!("/v1/scenes/{scene_id}/masks"),
+            serde_json::json!({"objects": [{"level": "small", "object_id": 1}],
+                               "view": {"frame_index": scene_index(frame)}, "mask_format": "png"}),
+        )
+        .await;
+    assert_eq!(status, 200, "{body}");
+    let rest = png_mask(body["masks"][0]["mask"]["data"].as_str().expect("png")).to_bools();
+    assert_eq!(
+        at_frame_time, rest,
+        "a pose at the frame's time renders the frame's mask"
+    );
+    let at_start = mask_at(pose_view(0.0)).await;
+    assert!(
+        iou(&at_start, &at_frame_time) < 0.9,
+        "the object should have moved between t = 0 and t = {t}"
+    );
+
     // A time that is not a number is refused.
     let (status, body) = client
         .post_json(
