@@ -33,7 +33,8 @@ enum Command {
     Worker(WorkerArgs),
     /// List the GPU adapters wgpu can see, as JSON.
     Adapters,
-    /// Write a small synthetic COLMAP dataset (three spheres, 32 views, masks) for demos.
+    /// Write a small synthetic COLMAP dataset (three spheres, 32 views, masks) for demos; with
+    /// `--dynamic`, moving spheres as a D-NeRF dataset (one time per view).
     SyntheticScene(SyntheticSceneArgs),
     /// Train a scene locally (plain 3DGS) with a progress bar.
     Train(cli::train::TrainArgs),
@@ -74,6 +75,10 @@ struct SyntheticSceneArgs {
     width: u32,
     #[arg(long, default_value_t = 120)]
     height: u32,
+    /// Moving, spinning spheres in the D-NeRF layout (Blender with a `time` per frame, every
+    /// fourth frame held out), e.g. for `segsplat bench --deformation`.
+    #[arg(long)]
+    dynamic: bool,
 }
 
 #[derive(Args)]
@@ -180,6 +185,7 @@ fn init_logging(config: &Config) -> anyhow::Result<()> {
 fn write_synthetic_scene(args: &SyntheticSceneArgs) -> anyhow::Result<()> {
     use segsplat::scene::Level;
     use segsplat::scene::synthetic::{SyntheticSpec, write_colmap};
+    use segsplat::scene::synthetic_dynamic::write_dynamic_blender;
     let spec = SyntheticSpec {
         frame_count: args.frames,
         width: args.width,
@@ -187,13 +193,14 @@ fn write_synthetic_scene(args: &SyntheticSceneArgs) -> anyhow::Result<()> {
         with_masks: Some(Level::ALL.to_vec()),
         ..SyntheticSpec::default()
     };
-    write_colmap(
-        &args.dir,
-        &spec,
-        segsplat::scene::colmap::ColmapEncoding::Binary,
-    )
-    .with_context(|| format!("cannot write {}", args.dir.display()))?;
-    println!("wrote a synthetic COLMAP dataset to {}", args.dir.display());
+    let (written, kind) = if args.dynamic {
+        (write_dynamic_blender(&args.dir, &spec), "dynamic D-NeRF")
+    } else {
+        let encoding = segsplat::scene::colmap::ColmapEncoding::Binary;
+        (write_colmap(&args.dir, &spec, encoding), "COLMAP")
+    };
+    written.with_context(|| format!("cannot write {}", args.dir.display()))?;
+    println!("wrote a synthetic {kind} dataset to {}", args.dir.display());
     Ok(())
 }
 

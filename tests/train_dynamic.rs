@@ -139,3 +139,91 @@ fn checkpoint_restores_the_field_exactly() {
     let progress = resumed.run(|_| true).expect("train");
     assert_eq!(progress.step, 60);
 }
+
+fn segsplat(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_segsplat"))
+        .args(args)
+        .output()
+        .expect("run segsplat")
+}
+
+/// `segsplat synthetic-scene --dynamic` writes a D-NeRF scene and `segsplat bench
+/// --deformation --json` trains it with and without the field (tiny settings: 3 steps, 32 px,
+/// a 2 x 16 field) and reports the field's shape, size, both step rates and their ratio.
+#[test]
+fn bench_reports_the_deformation_field_cost() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().expect("temp dir");
+    let scene_dir = dir.path().join("dynamic");
+    let scene = scene_dir.to_str().expect("utf-8 path");
+    let written = segsplat(&[
+        "synthetic-scene",
+        scene,
+        "--dynamic",
+        "--frames",
+        "8",
+        "--width",
+        "32",
+        "--height",
+        "24",
+    ]);
+    assert!(written.status.success(), "{written:?}");
+    let output = segsplat(&[
+        "bench",
+        scene,
+        "--steps",
+        "3",
+        "--max-resolution",
+        "32",
+        "--no-densify",
+        "--init-random",
+        "500",
+        "--timing-repeats",
+        "1",
+        "--deformation",
+        "--field-depth",
+        "2",
+        "--field-width",
+        "16",
+        "--json",
+    ]);
+    assert!(output.status.success(), "{output:?}");
+    let report: serde_json::Value =
+        serde_json::from_slice(&output.stdout).expect("bench prints one JSON object");
+    assert_eq!(report["steps"], 3, "{report}");
+    assert_eq!(report["gaussians_start"], 500, "{report}");
+    assert_eq!(report["gaussians_end"], 500, "--no-densify keeps the count");
+    let deformation = &report["deformation"];
+    let shape = FieldShape {
+        depth: 2,
+        width: 16,
+        // No skip below depth 4 (the kernels cannot join the input after layer 1).
+        skip_after: 0,
+        ..FieldShape::default()
+    };
+    assert_eq!(
+        deformation["field"],
+        serde_json::to_value(shape).expect("shape as JSON"),
+        "{report}"
+    );
+    assert_eq!(deformation["parameters"], shape.parameter_count());
+    // Frames 3 and 7 are held out: six training times.
+    assert_eq!(deformation["training_times"], 6, "{report}");
+    let rate = |key: &str| deformation[key].as_f64().unwrap_or(f64::NAN);
+    for key in [
+        "steps_per_sec",
+        "static_steps_per_sec",
+        "field_forward_ms",
+        "field_backward_ms",
+    ] {
+        assert!(rate(key) > 0.0, "{key}: {report}");
+    }
+    assert_eq!(
+        rate("steps_per_sec"),
+        report["steps_per_sec"].as_f64().unwrap_or(0.0)
+    );
+    let ratio = rate("static_steps_per_sec") / rate("steps_per_sec");
+    assert!((rate("step_time_ratio") - ratio).abs() < 1e-9, "{report}");
+}

@@ -1,6 +1,8 @@
 //! `segsplat bench DIR`: trains plain 3DGS (or, with `--object-loss`, with the Segment-then-Splat
 //! object loss on the dataset's own or classical masks) and reports speed and held-out quality as
-//! one JSON object (see the README for figures measured with it).
+//! one JSON object (see the README for figures measured with it). With `--deformation` it trains
+//! the same Gaussians twice, as a static scene and with the deformation field, and reports what
+//! the field costs per step.
 
 use std::path::PathBuf;
 
@@ -10,6 +12,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use segsplat::scene::Scene;
 use segsplat::splat::GaussianModel;
+use segsplat::splat::deform::{DeformationConfig, FieldShape};
 use segsplat::splat::init::random_gaussians;
 use segsplat::splat::train::trainer::initial_model;
 use segsplat::splat::train::{TrainConfig, Trainer};
@@ -44,6 +47,19 @@ pub struct BenchArgs {
     /// `m` for `--object-loss`.
     #[arg(long, default_value_t = 3)]
     pub objects_per_level: u32,
+    /// Also train with the deformation field moving the Gaussians from step 0 (no warm-up),
+    /// after a static run with the same Gaussians, resolution, steps and seed, and report the
+    /// field's cost (`deformation` in the report; the other figures are the run with the
+    /// field). A static dataset works too: every view then has time 0, which costs the same.
+    #[arg(long)]
+    pub deformation: bool,
+    /// Layers of the deformation field (default 8); the input skip joins after depth / 2
+    /// (no skip below depth 4).
+    #[arg(long, requires = "deformation")]
+    pub field_depth: Option<u32>,
+    /// Width of the deformation field's hidden layers (default 256).
+    #[arg(long, requires = "deformation")]
+    pub field_width: Option<u32>,
     /// Print one JSON object (otherwise a readable summary).
     #[arg(long)]
     pub json: bool,
@@ -155,6 +171,29 @@ fn random_model_in_points_bounds(scene: &mut Scene, count: usize, seed: u64) -> 
     }
 }
 
+/// What the deformation field costs: the same run with and without it.
+#[derive(Serialize)]
+struct DeformationReport {
+    field: FieldShape,
+    parameters: usize,
+    /// Distinct times among the training views (1 for a static dataset).
+    training_times: usize,
+    /// With the field (equal to the report's `steps_per_sec`).
+    steps_per_sec: f64,
+    train_seconds: f64,
+    /// The same steps on the same Gaussians without the field.
+    static_steps_per_sec: f64,
+    static_train_seconds: f64,
+    static_psnr: f64,
+    /// Dynamic step time over static step time: the step with the field takes this many
+    /// times as long.
+    step_time_ratio: f64,
+    /// Mean wall time of the field's forward pass over every Gaussian, and of its backward
+    /// pass (Adam excluded), each submitted and waited for, after training.
+    field_forward_ms: f64,
+    field_backward_ms: f64,
+}
+
 #[derive(Serialize)]
 struct BenchReport {
     adapter: String,
@@ -180,6 +219,67 @@ struct BenchReport {
     peak_resident_mib: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     object_loss: Option<ObjectLossReport>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    deformation: Option<DeformationReport>,
+}
+
+/// The field `--deformation` trains: the default shape, resized by the flags.
+fn deformation_config(args: &BenchArgs) -> DeformationConfig {
+    let mut field = FieldShape::default();
+    if let Some(depth) = args.field_depth {
+        field.depth = depth;
+        // The released code joins the input again after layer D // 2; the kernels cannot join
+        // it after layer 1, so fields of depth 2 or 3 have no skip.
+        field.skip_after = if depth >= 4 { depth / 2 } else { 0 };
+    }
+    if let Some(width) = args.field_width {
+        field.width = width;
+    }
+    DeformationConfig {
+        field,
+        warm_up_steps: 0,
+        ..DeformationConfig::default()
+    }
+}
+
+/// A trainer for `config` (with the object loss when asked), and its object-loss report.
+fn bench_trainer(
+    ctx: &segsplat::gpu::GpuContext,
+    scene: &Scene,
+    config: TrainConfig,
+    initial: Option<GaussianModel>,
+    args: &BenchArgs,
+) -> anyhow::Result<(Trainer, Option<ObjectLossReport>)> {
+    if args.object_loss {
+        let (trainer, report) =
+            object_loss_trainer(ctx, scene, config, initial, args.objects_per_level)?;
+        Ok((trainer, Some(report)))
+    } else {
+        Ok((Trainer::new(ctx, scene, config, initial)?, None))
+    }
+}
+
+/// The static half of `--deformation`: trains `config` without the field (same Gaussians),
+/// returning (steps/s, seconds, held-out PSNR). Its trainer is dropped before the dynamic run
+/// so the two never hold memory at once.
+fn static_baseline(
+    ctx: &segsplat::gpu::GpuContext,
+    scene: &Scene,
+    config: &TrainConfig,
+    initial: Option<GaussianModel>,
+    args: &BenchArgs,
+) -> anyhow::Result<(f64, f64, f64)> {
+    let config = TrainConfig {
+        deformation: None,
+        ..config.clone()
+    };
+    let (mut trainer, _) = bench_trainer(ctx, scene, config, initial, args)?;
+    // The same warm-up before training as the dynamic run gets, so neither pays first-use costs
+    // (intersection buffers sized by the first renders) inside its timed loop.
+    trainer.time_passes(args.timing_repeats)?;
+    let progress = trainer.run(|_| true)?;
+    let eval = trainer.evaluate()?;
+    Ok((progress.steps_per_sec, progress.elapsed_secs, eval.psnr))
 }
 
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
@@ -198,18 +298,51 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     if args.no_densify {
         config.densify_until = 0;
     }
-    let (mut trainer, object_loss) = if args.object_loss {
-        let (trainer, report) =
-            object_loss_trainer(&ctx, &scene, config, initial, args.objects_per_level)?;
-        (trainer, Some(report))
+    let baseline = if args.deformation {
+        config.deformation = Some(deformation_config(&args));
+        config.validate()?;
+        Some(static_baseline(
+            &ctx,
+            &scene,
+            &config,
+            initial.clone(),
+            &args,
+        )?)
     } else {
-        (Trainer::new(&ctx, &scene, config, initial)?, None)
+        None
     };
+    let (mut trainer, object_loss) = bench_trainer(&ctx, &scene, config, initial, &args)?;
     let gaussians_start = trainer.gaussian_count();
     let (forward_ms_start, backward_ms_start) = trainer.time_passes(args.timing_repeats)?;
     let progress = trainer.run(|_| true)?;
     let (forward_ms_end, backward_ms_end) = trainer.time_passes(args.timing_repeats)?;
+    let field_timing = trainer.time_deformation(args.timing_repeats)?;
     let eval = trainer.evaluate()?;
+    let deformation = match (baseline, trainer.deformation_shape(), field_timing) {
+        (
+            Some((static_steps_per_sec, static_train_seconds, static_psnr)),
+            Some((field, parameters)),
+            Some((field_forward_ms, field_backward_ms)),
+        ) => {
+            let mut times: Vec<f32> = trainer.views().train.iter().map(|v| v.time).collect();
+            times.sort_by(f32::total_cmp);
+            times.dedup();
+            Some(DeformationReport {
+                field,
+                parameters,
+                training_times: times.len(),
+                steps_per_sec: progress.steps_per_sec,
+                train_seconds: progress.elapsed_secs,
+                static_steps_per_sec,
+                static_train_seconds,
+                static_psnr,
+                step_time_ratio: static_steps_per_sec / progress.steps_per_sec,
+                field_forward_ms,
+                field_backward_ms,
+            })
+        }
+        _ => None,
+    };
     let [image_width, image_height] = trainer.views().max_size();
     let report = BenchReport {
         adapter: ctx.report.name.clone(),
@@ -231,6 +364,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         ssim: eval.ssim,
         peak_resident_mib: super::peak_resident_mib(),
         object_loss,
+        deformation,
     };
     if args.json {
         println!("{}", serde_json::to_string(&report)?);

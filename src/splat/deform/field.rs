@@ -95,6 +95,11 @@ impl FieldShape {
                 self.depth, self.skip_after
             ));
         }
+        if self.skip_after == 1 {
+            // Layer 1 would read the encoding from the skip buffer and write its output into
+            // the same buffer in one dispatch, which wgpu forbids (read-write aliasing).
+            return Err("skip_after must be 0 (no skip) or at least 2, got 1".into());
+        }
         if self.position_frequencies > 16 || self.time_frequencies > 16 {
             return Err("position_frequencies and time_frequencies must be at most 16".into());
         }
@@ -237,5 +242,10 @@ mod tests {
             ..FieldShape::default()
         };
         assert!(shape.validate().unwrap_err().contains("skip_after"));
+        let aliased = FieldShape {
+            skip_after: 1,
+            ..FieldShape::default()
+        };
+        assert!(aliased.validate().unwrap_err().contains("skip_after"));
     }
 }

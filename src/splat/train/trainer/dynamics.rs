@@ -2,13 +2,16 @@
 //! each view's time before its renders, and its backward pass runs once per step after every
 //! render's gradients are in (so the object loss trains the field too).
 
+use std::time::Instant;
+
 use rand_distr::{Distribution, StandardNormal};
 
 use super::{TrainError, Trainer};
 use crate::gpu::GpuContext;
 use crate::splat::deform::config::time_interval;
 use crate::splat::deform::{
-    DeformationConfig, DeformationField, DeformationHeader, DeformedGeometry, StoredDeformation,
+    DeformationConfig, DeformationField, DeformationHeader, DeformedGeometry, FieldShape,
+    StoredDeformation,
 };
 use crate::splat::model::GaussianView;
 use crate::splat::{GaussianModel, GpuGaussians};
@@ -144,6 +147,74 @@ impl Trainer {
             .field
             .encode_adam(&self.ctx, encoder, &self.adam, rate, field_step)?;
         Ok(())
+    }
+
+    /// The deformation field's shape and parameter count, for a dynamic scene.
+    pub fn deformation_shape(&self) -> Option<(FieldShape, usize)> {
+        self.dynamics
+            .as_ref()
+            .map(|dynamics| (*dynamics.field.shape(), dynamics.field.parameter_count()))
+    }
+
+    /// Times the deformation field alone over every Gaussian, without changing the model: its
+    /// forward pass (deformed geometry written), then its backward pass (weight gradients zeroed
+    /// and recomputed from whatever the Gaussian gradients hold; their values do not change the
+    /// cost), each submitted and waited for (wall clock, like [`Trainer::time_passes`]), at the
+    /// training views' times in turn. Returns (forward ms, backward ms) averaged over `repeats`,
+    /// or `None` for a static trainer. The field's Adam step is not included.
+    pub fn time_deformation(&mut self, repeats: u32) -> Result<Option<(f64, f64)>, TrainError> {
+        let ctx = self.ctx.clone();
+        let Some(dynamics) = self.dynamics.as_mut() else {
+            return Ok(None);
+        };
+        if dynamics.geometry.capacity() < self.gaussians.capacity() {
+            dynamics.geometry = DeformedGeometry::new(&ctx, self.gaussians.capacity())?;
+        }
+        let (mut forward_secs, mut backward_secs) = (0.0, 0.0);
+        for repeat in 0..repeats.max(1) {
+            let time = self.views.train[repeat as usize % self.views.train.len()].time;
+            let started = Instant::now();
+            let mut encoder = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("timing deformation forward"),
+                });
+            dynamics.field.encode_forward(
+                &ctx,
+                &mut encoder,
+                &self.gaussians,
+                &dynamics.geometry,
+                time,
+            )?;
+            ctx.queue.submit([encoder.finish()]);
+            ctx.wait_idle()?;
+            forward_secs += started.elapsed().as_secs_f64();
+            // The backward reuses the activations the forward left resident (as in a step).
+            let started = Instant::now();
+            let mut encoder = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("timing deformation backward"),
+                });
+            dynamics.field.encode_zero_grads(&mut encoder);
+            dynamics.field.encode_backward(
+                &ctx,
+                &mut encoder,
+                &self.gaussians,
+                &self.grads,
+                time,
+            )?;
+            ctx.queue.submit([encoder.finish()]);
+            ctx.wait_idle()?;
+            backward_secs += started.elapsed().as_secs_f64();
+        }
+        // The next step deforms afresh; nothing of this timing may stand for its state.
+        dynamics.deformed_at = None;
+        let repeats = f64::from(repeats.max(1));
+        Ok(Some((
+            forward_secs / repeats * 1e3,
+            backward_secs / repeats * 1e3,
+        )))
     }
 
     /// The field's weights, for a dynamic scene (read back; waits for submitted work).
