@@ -90,9 +90,9 @@ mod tests {
     #[test]
     fn round_trip_and_mismatches_are_named() {
         let field = FieldShape {
-            depth: 2,
+            depth: 4,
             width: 8,
-            skip_after: 1,
+            skip_after: 2,
             ..FieldShape::default()
         };
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
