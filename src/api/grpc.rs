@@ -600,3 +600,34 @@ impl SceneQuery for SceneQueryService {
         }))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stream_messages_carry_their_time_with_and_without_a_pose() {
+        let mut parts = QueryParts::default();
+        parts.update(proto::StreamQueryRequest {
+            scene_id: "scene".into(),
+            text: "mug".into(),
+            view: Some(proto::PoseView::default()),
+            time: Some(0.25),
+            ..Default::default()
+        });
+        assert_eq!(parts.time, Some(0.25));
+        assert_eq!(parts.view.as_ref().and_then(|view| view.time), Some(0.25));
+        // A later message without a pose still moves the answer's time; text and scene stay.
+        parts.update(proto::StreamQueryRequest {
+            time: Some(0.75),
+            ..Default::default()
+        });
+        assert_eq!((parts.time, parts.view.is_none()), (Some(0.75), true));
+        assert_eq!(
+            (parts.scene_id.as_str(), parts.text.as_str()),
+            ("scene", "mug")
+        );
+        assert!(time_from_proto(Some(f64::NAN)).is_err());
+        assert_eq!(time_from_proto(Some(0.5)).ok().flatten(), Some(0.5));
+    }
+}
