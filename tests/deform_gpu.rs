@@ -144,12 +144,15 @@ fn upstream(seed: u64) -> GaussianModel {
     model
 }
 
-fn check_backward(warp_kind: WarpKind) {
-    let Some(ctx) = gpu_context() else { return };
-    let mut s = setup(ctx, warp_kind);
-    let upstream = upstream(9);
+/// Runs the field forward and back with `upstream` as d loss / d deformed geometry; returns the
+/// gradient buffers (now canonical) after the GPU is done. Field gradients are in `s.field`.
+fn forward_and_backward(
+    ctx: &GpuContext,
+    s: &mut Setup,
+    upstream: &GaussianModel,
+) -> GpuGaussianGrads {
     let grads = GpuGaussianGrads::new(ctx, COUNT).expect("grads");
-    grads.parameters.write(ctx, &upstream).expect("write grads");
+    grads.parameters.write(ctx, upstream).expect("write grads");
     let mut encoder = new_encoder(ctx);
     s.field.encode_zero_grads(&mut encoder);
     s.field
@@ -159,6 +162,14 @@ fn check_backward(warp_kind: WarpKind) {
         .encode_backward(ctx, &mut encoder, &s.canonical, &grads, TIME)
         .expect("backward");
     submit(ctx, encoder);
+    grads
+}
+
+fn check_backward(warp_kind: WarpKind) {
+    let Some(ctx) = gpu_context() else { return };
+    let mut s = setup(ctx, warp_kind);
+    let upstream = upstream(9);
+    let grads = forward_and_backward(ctx, &mut s, &upstream);
     let gpu_field_grads = s.field.read(ctx, &s.field.grads).expect("read");
     let (gpu_canonical, _) = grads.download(ctx, COUNT).expect("download");
 
@@ -246,17 +257,7 @@ fn gpu_gradient_matches_central_differences_of_the_gpu_forward() {
     let Some(ctx) = gpu_context() else { return };
     let mut s = setup(ctx, WarpKind::Screw);
     let upstream = upstream(9);
-    let grads = GpuGaussianGrads::new(ctx, COUNT).expect("grads");
-    grads.parameters.write(ctx, &upstream).expect("write grads");
-    let mut encoder = new_encoder(ctx);
-    s.field.encode_zero_grads(&mut encoder);
-    s.field
-        .encode_forward(ctx, &mut encoder, &s.canonical, &s.deformed, TIME)
-        .expect("forward");
-    s.field
-        .encode_backward(ctx, &mut encoder, &s.canonical, &grads, TIME)
-        .expect("backward");
-    submit(ctx, encoder);
+    forward_and_backward(ctx, &mut s, &upstream);
     let analytic = s.field.read(ctx, &s.field.grads).expect("read");
     // The parameters with the largest gradients of each layer: f32 differences resolve them.
     let layers = s.field.shape().layers();

@@ -6,9 +6,11 @@
 //! forward or gradient cannot give (measured: 24.2 dB against 19.2 dB; asserted: 3 dB better
 //! and above 22 dB), and a checkpoint must restore the field bit for bit.
 
+mod gpu_support;
+
 use glam::Vec3;
+use gpu_support::gpu_context;
 use rand::SeedableRng;
-use segsplat::gpu::GpuContext;
 use segsplat::scene::synthetic::SyntheticSpec;
 use segsplat::scene::synthetic_dynamic::write_dynamic_blender;
 use segsplat::scene::{LoadOptions, Scene, load_scene};
@@ -19,17 +21,6 @@ use segsplat::splat::init::random_gaussians;
 use segsplat::splat::train::{TrainConfig, Trainer, TrainerMeta};
 
 const STEPS: u32 = 1000;
-
-fn gpu() -> Option<GpuContext> {
-    match GpuContext::new_default() {
-        Ok(ctx) => Some(ctx),
-        Err(error) if std::env::var("SEGSPLAT_SKIP_GPU_TESTS").is_ok() => {
-            eprintln!("skipping: no GPU adapter ({error})");
-            None
-        }
-        Err(error) => panic!("no GPU adapter: {error}"),
-    }
-}
 
 fn dynamic_scene(dir: &std::path::Path) -> Scene {
     let spec = SyntheticSpec {
@@ -82,18 +73,14 @@ fn config(scene: &Scene, steps: u32, dynamic: bool) -> TrainConfig {
 
 #[test]
 fn deformation_field_beats_a_static_model_on_held_out_times() {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = gpu_context() else { return };
     let dir = tempfile::tempdir().expect("tempdir");
     let scene = dynamic_scene(dir.path());
     let mut reports = Vec::new();
     for dynamic in [false, true] {
-        let mut trainer = Trainer::new(
-            &ctx,
-            &scene,
-            config(&scene, STEPS, dynamic),
-            Some(initial()),
-        )
-        .expect("trainer");
+        let mut trainer =
+            Trainer::new(ctx, &scene, config(&scene, STEPS, dynamic), Some(initial()))
+                .expect("trainer");
         let started = std::time::Instant::now();
         trainer.run(|_| true).expect("train");
         let report = trainer.evaluate().expect("evaluate");
@@ -116,20 +103,20 @@ fn deformation_field_beats_a_static_model_on_held_out_times() {
 
 #[test]
 fn checkpoint_restores_the_field_exactly() {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = gpu_context() else { return };
     let dir = tempfile::tempdir().expect("tempdir");
     let scene = dynamic_scene(dir.path());
     let mut config = config(&scene, 60, true);
     if let Some(deformation) = config.deformation.as_mut() {
         deformation.warm_up_steps = 10;
     }
-    let mut trainer = Trainer::new(&ctx, &scene, config, Some(initial())).expect("trainer");
+    let mut trainer = Trainer::new(ctx, &scene, config, Some(initial())).expect("trainer");
     trainer.run_until(30, |_| true).expect("train");
     let saved = trainer.checkpoint().expect("checkpoint");
     assert!(saved.sections.contains_key("deform.parameters"));
     let bytes = saved.to_bytes().expect("encode");
     let loaded = Checkpoint::<TrainerMeta>::from_bytes(&bytes).expect("decode");
-    let mut resumed = Trainer::resume(&ctx, &scene, &loaded).expect("resume");
+    let mut resumed = Trainer::resume(ctx, &scene, &loaded).expect("resume");
     let again = resumed.checkpoint().expect("checkpoint");
     assert_eq!(again.sections, saved.sections, "state differs after resume");
     assert_eq!(
@@ -152,7 +139,7 @@ fn segsplat(args: &[&str]) -> std::process::Output {
 /// a 2 x 16 field) and reports the field's shape, size, both step rates and their ratio.
 #[test]
 fn bench_reports_the_deformation_field_cost() {
-    if gpu().is_none() {
+    if gpu_context().is_none() {
         return;
     }
     let dir = tempfile::tempdir().expect("temp dir");

@@ -133,17 +133,22 @@ pub fn synthetic_world_from_cameras(spec: &SyntheticSpec) -> Vec<Mat4> {
                 CAMERA_DISTANCE * angle.sin(),
                 CAMERA_HEIGHT,
             );
-            let forward = (-eye).normalize();
-            let right = forward.cross(Vec3::Z).normalize();
-            let down = forward.cross(right);
-            Mat4::from_cols(
-                right.extend(0.0),
-                down.extend(0.0),
-                forward.extend(0.0),
-                eye.extend(1.0),
-            )
+            camera_looking_at_origin(eye)
         })
         .collect()
+}
+
+/// Camera-to-world (OpenCV axes) of a camera at `eye` looking at the origin, world up = +z.
+pub(crate) fn camera_looking_at_origin(eye: Vec3) -> Mat4 {
+    let forward = (-eye).normalize();
+    let right = forward.cross(Vec3::Z).normalize();
+    let down = forward.cross(right);
+    Mat4::from_cols(
+        right.extend(0.0),
+        down.extend(0.0),
+        forward.extend(0.0),
+        eye.extend(1.0),
+    )
 }
 
 /// What a camera sees through one pixel centre: the nearest object hit, with the hit distance

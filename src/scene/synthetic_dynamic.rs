@@ -21,8 +21,8 @@ use serde_json::json;
 
 use super::masks::mask_path;
 use super::synthetic::{
-    SyntheticObject, SyntheticSpec, cast_ray, opengl_matrix_rows, pixel_ray, synthetic_intrinsics,
-    synthetic_objects, write_json,
+    SyntheticObject, SyntheticSpec, camera_looking_at_origin, cast_ray, opengl_matrix_rows,
+    pixel_ray, synthetic_intrinsics, synthetic_objects, write_json,
 };
 use super::{Level, blender};
 
@@ -61,16 +61,11 @@ pub fn dynamic_world_from_cameras(spec: &SyntheticSpec) -> Vec<Mat4> {
             let azimuth = std::f32::consts::TAU * (index as f32 * GOLDEN_TURN).fract();
             let height = [1.5, 0.4, 2.4][index % 3];
             let ring = (CAMERA_DISTANCE * CAMERA_DISTANCE - height * height).sqrt();
-            let eye = Vec3::new(ring * azimuth.cos(), ring * azimuth.sin(), height);
-            let forward = (-eye).normalize();
-            let right = forward.cross(Vec3::Z).normalize();
-            let down = forward.cross(right);
-            Mat4::from_cols(
-                right.extend(0.0),
-                down.extend(0.0),
-                forward.extend(0.0),
-                eye.extend(1.0),
-            )
+            camera_looking_at_origin(Vec3::new(
+                ring * azimuth.cos(),
+                ring * azimuth.sin(),
+                height,
+            ))
         })
         .collect()
 }

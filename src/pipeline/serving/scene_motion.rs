@@ -83,12 +83,10 @@ impl SceneMotion {
         time: f32,
     ) -> Result<GaussianModel, ServingError> {
         self.at(ctx, gaussians, time)?;
-        let read = |buffer: &wgpu::Buffer| ctx.read_vec::<f32>(buffer).map_err(gpu_error);
-        let means = read(&self.geometry.means)?;
         let mut model = self.canonical.clone();
-        for (index, mean) in model.means.iter_mut().enumerate() {
-            *mean = [means[3 * index], means[3 * index + 1], means[3 * index + 2]];
-        }
+        self.geometry
+            .read_into(ctx, &mut model)
+            .map_err(gpu_error)?;
         Ok(model)
     }
 }

@@ -242,6 +242,13 @@ impl DeformationField {
         Ok(())
     }
 
+    /// The chunk workspace ([`Self::ensure_workspace`] runs first in every pass).
+    fn workspace(&self) -> Result<&Workspace, DeformError> {
+        self.workspace.as_ref().ok_or_else(|| {
+            DeformError::Gpu(GpuError::Device("deformation workspace missing".into()))
+        })
+    }
+
     fn skip_stride(&self) -> u32 {
         let skip = if self.shape.skip_after > 0 {
             self.shape.width
@@ -304,9 +311,7 @@ impl DeformationField {
         rows: usize,
         time: f32,
     ) -> Result<(), DeformError> {
-        let workspace = self.workspace.as_ref().ok_or_else(|| {
-            DeformError::Gpu(GpuError::Device("deformation workspace missing".into()))
-        })?;
+        let workspace = self.workspace()?;
         self.kernels.encode(
             ctx,
             encoder,
@@ -394,9 +399,7 @@ impl DeformationField {
         let p = &canonical.parameters;
         for &(first, rows) in &chunks {
             self.encode_chunk_forward(ctx, encoder, &p.means, first, rows, time)?;
-            let workspace = self.workspace.as_ref().ok_or_else(|| {
-                DeformError::Gpu(GpuError::Device("deformation workspace missing".into()))
-            })?;
+            let workspace = self.workspace()?;
             self.kernels.apply_forward(
                 ctx,
                 encoder,
@@ -442,9 +445,7 @@ impl DeformationField {
                 self.encode_chunk_forward(ctx, encoder, &p.means, first, rows, time)?;
                 self.resident_chunk = Some(first);
             }
-            let workspace = self.workspace.as_ref().ok_or_else(|| {
-                DeformError::Gpu(GpuError::Device("deformation workspace missing".into()))
-            })?;
+            let workspace = self.workspace()?;
             self.kernels.apply_backward(
                 ctx,
                 encoder,

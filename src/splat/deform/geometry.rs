@@ -3,8 +3,8 @@
 //! why object ids stay aligned at every time).
 
 use crate::gpu::{GpuContext, GpuError};
-use crate::splat::GpuGaussians;
 use crate::splat::model::GaussianView;
+use crate::splat::{GaussianModel, GpuGaussians};
 
 #[derive(Debug)]
 pub struct DeformedGeometry {
@@ -49,5 +49,18 @@ impl DeformedGeometry {
         view.rotations = &self.rotations;
         view.capacity = view.capacity.min(self.capacity);
         view
+    }
+
+    /// Overwrites the first `model.len()` Gaussians' means, log-scales and rotations with this
+    /// geometry (read back; waits for submitted work).
+    pub fn read_into(&self, ctx: &GpuContext, model: &mut GaussianModel) -> Result<(), GpuError> {
+        let means: Vec<[f32; 3]> = ctx.read_vec(&self.means)?;
+        let log_scales: Vec<[f32; 3]> = ctx.read_vec(&self.log_scales)?;
+        let rotations: Vec<[f32; 4]> = ctx.read_vec(&self.rotations)?;
+        let count = model.len();
+        model.means.copy_from_slice(&means[..count]);
+        model.log_scales.copy_from_slice(&log_scales[..count]);
+        model.rotations.copy_from_slice(&rotations[..count]);
+        Ok(())
     }
 }

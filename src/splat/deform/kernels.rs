@@ -272,12 +272,7 @@ impl DeformKernels {
         params: ApplyParams,
         buffers: &[&wgpu::Buffer; 7],
     ) {
-        let uniforms = uniform(ctx, "deform_apply params", bytemuck::bytes_of(&params));
-        let mut all = vec![&uniforms];
-        all.extend_from_slice(buffers);
-        let bind = self.apply_forward.bind(ctx, &all);
-        self.apply_forward
-            .dispatch(encoder, &bind, per_item_grid(ctx, params.count));
+        dispatch_apply(&self.apply_forward, ctx, encoder, params, buffers);
     }
 
     /// Binding order: head, canonical means, rotations, grad means, grad rotations, grad
@@ -289,27 +284,21 @@ impl DeformKernels {
         params: ApplyParams,
         buffers: &[&wgpu::Buffer; 7],
     ) {
-        let uniforms = uniform(ctx, "deform_apply params", bytemuck::bytes_of(&params));
-        let mut all = vec![&uniforms];
-        all.extend_from_slice(buffers);
-        let bind = self.apply_backward.bind(ctx, &all);
-        self.apply_backward
-            .dispatch(encoder, &bind, per_item_grid(ctx, params.count));
+        dispatch_apply(&self.apply_backward, ctx, encoder, params, buffers);
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn row_splits_cover_the_rows_in_depth_tiles() {
-        for rows in [1u32, 15, 16, 17, 1000, 1025, 65536, 100_003] {
-            let split = RowSplit::for_rows(rows);
-            assert_eq!(split.rows_per_split % GEMM_DEPTH_TILE, 0);
-            assert!(split.splits * split.rows_per_split >= rows);
-            assert!((split.splits - 1) * split.rows_per_split < rows);
-            assert!(split.splits <= MAX_SPLITS);
-        }
-    }
+/// One `deform_apply_*` dispatch: the uniforms, then `buffers` in binding order.
+fn dispatch_apply(
+    kernel: &Kernel,
+    ctx: &GpuContext,
+    encoder: &mut wgpu::CommandEncoder,
+    params: ApplyParams,
+    buffers: &[&wgpu::Buffer; 7],
+) {
+    let uniforms = uniform(ctx, "deform_apply params", bytemuck::bytes_of(&params));
+    let mut all = vec![&uniforms];
+    all.extend_from_slice(buffers);
+    let bind = kernel.bind(ctx, &all);
+    kernel.dispatch(encoder, &bind, per_item_grid(ctx, params.count));
 }

@@ -255,27 +255,7 @@ impl Trainer {
         self.ctx.queue.submit([encoder.finish()]);
         // The next step deforms afresh.
         dynamics.deformed_at = None;
-        let count = model.len();
-        let read = |buffer: &wgpu::Buffer| -> Result<Vec<f32>, TrainError> {
-            Ok(self.ctx.read_vec::<f32>(buffer)?)
-        };
-        let means = read(&dynamics.geometry.means)?;
-        let log_scales = read(&dynamics.geometry.log_scales)?;
-        let rotations = read(&dynamics.geometry.rotations)?;
-        for i in 0..count {
-            model.means[i] = [means[3 * i], means[3 * i + 1], means[3 * i + 2]];
-            model.log_scales[i] = [
-                log_scales[3 * i],
-                log_scales[3 * i + 1],
-                log_scales[3 * i + 2],
-            ];
-            model.rotations[i] = [
-                rotations[4 * i],
-                rotations[4 * i + 1],
-                rotations[4 * i + 2],
-                rotations[4 * i + 3],
-            ];
-        }
+        dynamics.geometry.read_into(&self.ctx, &mut model)?;
         Ok(model)
     }
 
