@@ -17,14 +17,6 @@ async fn start_service(data: &std::path::Path) -> Option<TestService> {
     TestService::start_on_gpu(data, |_| {}).await
 }
 
-/// [`start_service`] with `models.dir` set (CLIP embeddings and text queries).
-async fn start_service_with_models(
-    data: &std::path::Path,
-    models_dir: std::path::PathBuf,
-) -> Option<TestService> {
-    TestService::start_on_gpu(data, |config| config.models.dir = Some(models_dir)).await
-}
-
 /// A 60-step `segment_then_splat` job on `scene_id`, awaited: (job id, finished job record).
 async fn run_short_segment_then_splat(
     client: &TestService,
@@ -216,26 +208,11 @@ async fn segment_then_splat_job_stores_objects_at_three_levels() {
 }
 
 /// The ONNX Runtime library can be loaded, or the test may be skipped (`SEGSPLAT_SKIP_ORT_TESTS=1`).
-fn onnx_runtime_available() -> bool {
-    match segsplat::models::OrtRuntime::load(segsplat::models::RuntimeOptions::default()) {
-        Ok(_) => true,
-        Err(error) if std::env::var("SEGSPLAT_SKIP_ORT_TESTS").as_deref() == Ok("1") => {
-            eprintln!("skipping: {error}");
-            false
-        }
-        Err(error) => panic!("ONNX Runtime is needed (SEGSPLAT_SKIP_ORT_TESTS=1 skips): {error}"),
-    }
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn segment_then_splat_embeds_objects_and_answers_text_queries() {
-    if !onnx_runtime_available() {
-        return;
-    }
     let data = tempfile::tempdir().unwrap();
-    let models =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/models/tiny");
-    let Some(client) = start_service_with_models(data.path(), models.clone()).await else {
+    let models = common::tiny_models_dir();
+    let Some(client) = TestService::start_with_tiny_models(data.path()).await else {
         return;
     };
     // 96 x 72 rather than 48 x 36: the stand-in CLIP quantises a crop's mean colour to the
@@ -462,13 +439,8 @@ async fn stream_query_answers_each_pose(client: &TestService, scene_id: &str) {
 /// Gaussians.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn segment_then_splat_with_propagated_masks() {
-    if !onnx_runtime_available() {
-        return;
-    }
     let data = tempfile::tempdir().unwrap();
-    let models =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/models/tiny");
-    let Some(client) = start_service_with_models(data.path(), models).await else {
+    let Some(client) = TestService::start_with_tiny_models(data.path()).await else {
         return;
     };
     let spec = SyntheticSpec {
@@ -504,6 +476,14 @@ async fn segment_then_splat_with_propagated_masks() {
     assert_eq!(
         metrics["embeddings"], metrics["objects"],
         "one embedding per object with Gaussians: {job}"
+    );
+    let (_, stored) = client
+        .get_json(&format!("/v1/scenes/{scene_id}/trained/metrics.json"))
+        .await;
+    assert_eq!(stored["segment"]["masks"], "propagated", "{stored}");
+    assert_eq!(
+        stored["segment"]["video_sequences"], 1.0,
+        "a static scene is one sequence: {stored}"
     );
     client.shutdown().await;
 }

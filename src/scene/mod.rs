@@ -17,6 +17,7 @@ pub mod nerfstudio;
 pub mod neu3d;
 mod npy;
 pub mod point_ply;
+pub mod sequence;
 pub mod synthetic;
 pub mod synthetic_dynamic;
 pub mod synthetic_dynamic_formats;

@@ -10,7 +10,7 @@
 //! filter left out), `metrics.json`; and the scene's rows in the `objects` and
 //! `object_embeddings` tables.
 
-use std::collections::HashSet;
+use std::collections::{BTreeMap, HashSet};
 use std::sync::Arc;
 
 use futures::future::BoxFuture;
@@ -35,6 +35,7 @@ use crate::pipeline::training_job::{
     fatal, report, report_evaluation, retryable, store_outputs, train_failure,
     train_with_checkpoints,
 };
+use crate::scene::sequence::{video_order, video_sequence_count};
 use crate::scene::{Level, LoadOptions, Scene, SceneFormat, load_frame_rgb, load_scene};
 use crate::segment::propagation::PropagationOptions;
 use crate::segment::{AutomaticConfig, ClassicalConfig, MaskGenerator};
@@ -61,8 +62,8 @@ pub enum MaskSource {
     /// The model-free classical segmenter, associated across views.
     Classical,
     /// SAM-family automatic masks on the first training view, carried through the views in
-    /// dataset order by re-prompting the decoder with each object's previous mask (for
-    /// sequences: needs no sparse points).
+    /// video order (`scene::sequence::video_order`) by re-prompting the decoder with each
+    /// object's previous mask (for sequences: needs no sparse points).
     Propagated,
 }
 
@@ -112,6 +113,8 @@ pub struct SegmentThenSplatMetrics {
     /// Objects per level (small, middle, large).
     pub objects: [usize; 3],
     pub skipped_pairs: usize,
+    /// Stage 1: the mask source used and its figures (as the "segment" stage reported them).
+    pub segment: SegmentReport,
 }
 
 /// A skipped (object, view) pair in frame terms.
@@ -211,7 +214,7 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
     );
     // Stage 1 runs again on a resumed attempt: every mask source is deterministic, and the
     // masks are cheaper to rebuild than to store.
-    let masks = view_masks_for(ctx, &scene, &config, &frames)?;
+    let (masks, segmented) = view_masks_for(ctx, &scene, &config, &frames)?;
     let options = SegmentedTrainingOptions {
         object_floors: config.object_floors,
         background_shell: config.background_shell,
@@ -230,9 +233,21 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
     };
     let train_seconds =
         train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?;
-    let objects = finish(ctx, &scene, &mut trainer, train_seconds)?;
+    let objects = finish(ctx, &scene, &mut trainer, train_seconds, segmented)?;
     let embeddings = embed_objects(ctx, &scene, &trainer, &masks, &objects)?;
     Ok((objects, embeddings))
+}
+
+/// The stage's figures as reported: views, objects per level, merges, and what the source adds.
+type SegmentFigures = BTreeMap<String, f64>;
+
+/// What stage 1 did, kept in `metrics.json` (the job record only holds the latest stage).
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct SegmentReport {
+    /// The mask source used (`auto` resolved).
+    pub masks: MaskSource,
+    #[serde(flatten)]
+    pub figures: SegmentFigures,
 }
 
 /// Stage 1: the training views' masks at three levels from the configured source, with ids
@@ -242,9 +257,19 @@ fn view_masks_for(
     scene: &Scene,
     config: &SegmentThenSplatConfig,
     frames: &[usize],
-) -> Result<ViewMaskSet, JobFailure> {
-    let max_side = config.train.max_resolution;
-    let source = match config.masks {
+) -> Result<(ViewMaskSet, SegmentReport), JobFailure> {
+    let source = resolved_mask_source(ctx, scene, config.masks);
+    let (masks, figures) = masks_from(ctx, scene, config, frames, source)?;
+    let report = SegmentReport {
+        masks: source,
+        figures,
+    };
+    Ok((masks, report))
+}
+
+/// `auto` made concrete for this scene and model directory.
+fn resolved_mask_source(ctx: &JobContext, scene: &Scene, chosen: MaskSource) -> MaskSource {
+    match chosen {
         MaskSource::Auto if scene.masks.is_some() => MaskSource::User,
         // A moving scene has no multi-view geometry to associate masks with: carry them
         // through the sequence instead.
@@ -254,7 +279,17 @@ fn view_masks_for(
         MaskSource::Auto if sam_model(ctx).is_some() => MaskSource::Automatic,
         MaskSource::Auto => MaskSource::Classical,
         chosen => chosen,
-    };
+    }
+}
+
+fn masks_from(
+    ctx: &JobContext,
+    scene: &Scene,
+    config: &SegmentThenSplatConfig,
+    frames: &[usize],
+    source: MaskSource,
+) -> Result<(ViewMaskSet, SegmentFigures), JobFailure> {
+    let max_side = config.train.max_resolution;
     report(ctx, "segment", 0, 1, &[]);
     let mut generator = match source {
         MaskSource::User | MaskSource::Auto => {
@@ -264,8 +299,9 @@ fn view_masks_for(
                 ));
             }
             let masks = ViewMaskSet::from_user_masks(scene, frames, max_side).map_err(fatal)?;
-            report(ctx, "segment", 1, 1, &[("views", masks.views.len() as f64)]);
-            return Ok(masks);
+            let objects = Level::ALL.map(|level| masks.object_count(level));
+            let figures = report_segmented(ctx, &masks, objects, &[]);
+            return Ok((masks, figures));
         }
         MaskSource::Automatic => {
             let model = sam_model(ctx).ok_or_else(|| {
@@ -306,19 +342,35 @@ fn merge_and_report(
     mut masks: ViewMaskSet,
     objects: [usize; 3],
     extra: &[(&str, f64)],
-) -> Result<ViewMaskSet, JobFailure> {
+) -> Result<(ViewMaskSet, SegmentFigures), JobFailure> {
     let merges = merge_lost_tracks(scene, &mut masks, &config.train, TrackMergeRule::default())
         .map_err(fatal)?;
-    let mut metrics = vec![
+    let mut figures = vec![("lost_track_merges", merges.iter().sum::<usize>() as f64)];
+    figures.extend_from_slice(extra);
+    let figures = report_segmented(ctx, &masks, objects, &figures);
+    Ok((masks, figures))
+}
+
+/// Reports the finished "segment" stage: views, objects per level (found, before the lost-track
+/// merge), then `extra`; returns the same figures for `metrics.json`.
+fn report_segmented(
+    ctx: &JobContext,
+    masks: &ViewMaskSet,
+    objects: [usize; 3],
+    extra: &[(&str, f64)],
+) -> SegmentFigures {
+    let mut figures = vec![
         ("views", masks.views.len() as f64),
         ("small_objects", objects[0] as f64),
         ("middle_objects", objects[1] as f64),
         ("large_objects", objects[2] as f64),
-        ("lost_track_merges", merges.iter().sum::<usize>() as f64),
     ];
-    metrics.extend_from_slice(extra);
-    report(ctx, "segment", 1, 1, &metrics);
-    Ok(masks)
+    figures.extend_from_slice(extra);
+    report(ctx, "segment", 1, 1, &figures);
+    figures
+        .into_iter()
+        .map(|(name, value)| (name.to_string(), value))
+        .collect()
 }
 
 /// Stage 1 by re-prompting along the training views, then the lost-track merge.
@@ -328,15 +380,12 @@ fn propagated_masks(
     config: &SegmentThenSplatConfig,
     frames: &[usize],
     model: SamModel,
-) -> Result<ViewMaskSet, JobFailure> {
+) -> Result<(ViewMaskSet, SegmentFigures), JobFailure> {
     tracing::info!(views = frames.len(), "propagating masks");
-    // A sequence is carried in capture-time order (video order); the views go back to the
-    // training order afterwards, which the object targets follow.
-    let mut in_time_order = frames.to_vec();
-    in_time_order.sort_by(|&a, &b| {
-        let time = |index: usize| scene.frames[index].time.unwrap_or(0.0);
-        time(a).total_cmp(&time(b)).then(a.cmp(&b))
-    });
+    // Masks are carried in video order (by time, camera by camera for a rig); the views go back
+    // to the training order afterwards, which the object targets follow.
+    let in_time_order = video_order(scene, frames);
+    let sequences = video_sequence_count(scene, frames);
     let mut segmenter = SamPredictor::new(model.clone());
     let mut generator = MaskGenerator::Automatic {
         segmenter: Box::new(SamPredictor::new(model)),
@@ -366,6 +415,7 @@ fn propagated_masks(
         masks,
         propagation.objects_per_level,
         &[
+            ("video_sequences", sequences as f64),
             ("new_object_checks", propagation.checks.len() as f64),
             (
                 "duplicate_tracks_dropped",
@@ -482,6 +532,7 @@ fn finish(
     scene: &Scene,
     trainer: &mut Trainer,
     train_seconds: f64,
+    segment: SegmentReport,
 ) -> Result<Vec<ObjectRecord>, JobFailure> {
     let held_out = trainer.evaluate().map_err(train_failure)?;
     let model = trainer.model().map_err(train_failure)?;
@@ -511,6 +562,7 @@ fn finish(
         held_out,
         objects: Level::ALL.map(|level| summaries.iter().filter(|s| s.level == level).count()),
         skipped_pairs: skipped.len(),
+        segment,
     };
     let documents = [
         (

@@ -1,0 +1,199 @@
+//! The order in which a dynamic capture's frames form a video, for stages that carry state from
+//! one frame to the next (mask propagation re-prompts each frame with the previous frame's
+//! masks, so consecutive frames must look alike).
+//!
+//! - One moving camera (D-NeRF, Nerfies/HyperNeRF, a phone video): frames by capture time.
+//! - A rig of fixed cameras filming the same instants (Neu3D): sorting by time alone would jump
+//!   between cameras at every step. Each camera's video is walked instead, camera after camera
+//!   by name (rigs name their cameras along the rig), every other one backwards ("serpentine"), so that the only cuts are from
+//!   one camera to the next at the same instant, where nothing in the scene has moved.
+
+use std::collections::{BTreeMap, HashMap, HashSet};
+use std::path::Path;
+
+use super::Scene;
+
+/// `frames` (indices into `scene.frames`) in video order; see the module docs. Frames without a
+/// time count as time 0; ties keep their listing order.
+pub fn video_order(scene: &Scene, frames: &[usize]) -> Vec<usize> {
+    let time = |index: usize| scene.frames[index].time.unwrap_or(0.0);
+    let by_time = |sequence: &mut Vec<usize>| {
+        sequence.sort_by(|&a, &b| time(a).total_cmp(&time(b)).then(a.cmp(&b)));
+    };
+    let mut sequences: BTreeMap<String, Vec<usize>> = BTreeMap::new();
+    let rig = filmed_by_a_rig(scene, frames);
+    for &index in frames {
+        let camera = if rig {
+            camera_of(&scene.frames[index].name)
+        } else {
+            String::new()
+        };
+        sequences.entry(camera).or_default().push(index);
+    }
+    let mut ordered = Vec::with_capacity(frames.len());
+    for (position, mut sequence) in sequences.into_values().enumerate() {
+        by_time(&mut sequence);
+        if position % 2 == 1 {
+            sequence.reverse();
+        }
+        ordered.extend(sequence);
+    }
+    ordered
+}
+
+/// How many camera sequences [`video_order`] walks (1 for a single moving camera).
+pub fn video_sequence_count(scene: &Scene, frames: &[usize]) -> usize {
+    if !filmed_by_a_rig(scene, frames) {
+        return usize::from(!frames.is_empty());
+    }
+    frames
+        .iter()
+        .map(|&index| camera_of(&scene.frames[index].name))
+        .collect::<HashSet<_>>()
+        .len()
+}
+
+/// A rig films one instant from several cameras: some time is shared by frames of different
+/// cameras. (Two frames of one folder at one time, such as HyperNeRF's paired phones, are one
+/// sequence: they alternate with a small baseline. Frames without times are a photo collection
+/// in listing order, never a rig.)
+fn filmed_by_a_rig(scene: &Scene, frames: &[usize]) -> bool {
+    let mut seen: HashSet<(u32, String)> = HashSet::new();
+    let mut cameras_at: HashMap<u32, String> = HashMap::new();
+    for &index in frames {
+        let frame = &scene.frames[index];
+        let Some(time) = frame.time else {
+            return false;
+        };
+        let instant = time.to_bits();
+        let camera = camera_of(&frame.name);
+        if !seen.insert((instant, camera.clone())) {
+            continue;
+        }
+        match cameras_at.get(&instant) {
+            Some(other) if *other != camera => return true,
+            Some(_) => {}
+            None => {
+                cameras_at.insert(instant, camera);
+            }
+        }
+    }
+    false
+}
+
+/// The camera a frame comes from: the folder part of its name (`cam03/0001.png` -> `cam03`).
+fn camera_of(name: &str) -> String {
+    Path::new(name)
+        .parent()
+        .map(|parent| parent.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{Frame, Intrinsics, SceneFormat};
+
+    fn scene(frames: &[(&str, f32)]) -> Scene {
+        Scene {
+            root: "/".into(),
+            format: SceneFormat::Neu3d,
+            frames: frames
+                .iter()
+                .map(|&(name, time)| Frame {
+                    name: name.to_string(),
+                    image_path: name.into(),
+                    intrinsics: Intrinsics {
+                        width: 1,
+                        height: 1,
+                        fx: 1.0,
+                        fy: 1.0,
+                        cx: 0.5,
+                        cy: 0.5,
+                        model: "PINHOLE".into(),
+                        distortion: Vec::new(),
+                    },
+                    world_from_camera: glam::Mat4::IDENTITY,
+                    time: Some(time),
+                    source_id: None,
+                    split: None,
+                })
+                .collect(),
+            points: None,
+            masks: None,
+            background: [1.0; 3],
+        }
+    }
+
+    #[test]
+    fn one_camera_is_walked_by_time_whatever_the_listing() {
+        // D-NeRF lists training frames before test frames; HyperNeRF ids need not follow time.
+        let scene = scene(&[
+            ("train/r_0.png", 0.0),
+            ("train/r_2.png", 0.5),
+            ("test/r_1.png", 0.25),
+            ("train/r_4.png", 1.0),
+            ("test/r_3.png", 0.75),
+        ]);
+        let all: Vec<usize> = (0..5).collect();
+        assert_eq!(video_order(&scene, &all), vec![0, 2, 1, 4, 3]);
+        assert_eq!(video_sequence_count(&scene, &all), 1);
+    }
+
+    #[test]
+    fn a_rig_is_walked_camera_by_camera_in_a_serpentine() {
+        let mut listed = Vec::new();
+        for camera in ["cam01", "cam02", "cam03"] {
+            for (frame, time) in [(0, 0.0), (1, 0.5), (2, 1.0)] {
+                listed.push((format!("{camera}/{frame:04}.png"), time));
+            }
+        }
+        let named: Vec<(&str, f32)> = listed.iter().map(|(n, t)| (n.as_str(), *t)).collect();
+        let scene = scene(&named);
+        // Training views in a shuffled order still come out as three videos.
+        let frames = vec![4, 0, 8, 2, 6, 1, 5, 3, 7];
+        let order = video_order(&scene, &frames);
+        let names: Vec<&str> = order
+            .iter()
+            .map(|&i| scene.frames[i].name.as_str())
+            .collect();
+        assert_eq!(
+            names,
+            [
+                "cam01/0000.png",
+                "cam01/0001.png",
+                "cam01/0002.png",
+                "cam02/0002.png",
+                "cam02/0001.png",
+                "cam02/0000.png",
+                "cam03/0000.png",
+                "cam03/0001.png",
+                "cam03/0002.png",
+            ],
+            "cameras by name, every other one backwards"
+        );
+        assert_eq!(video_sequence_count(&scene, &frames), 3);
+    }
+
+    #[test]
+    fn frames_without_times_keep_their_listing_order() {
+        let mut scene = scene(&[("a/1.png", 0.0), ("b/1.png", 0.0), ("a/2.png", 0.0)]);
+        for frame in &mut scene.frames {
+            frame.time = None;
+        }
+        assert_eq!(video_order(&scene, &[2, 0, 1]), vec![0, 1, 2]);
+        assert_eq!(video_sequence_count(&scene, &[2, 0, 1]), 1);
+    }
+
+    #[test]
+    fn paired_phones_in_one_folder_stay_one_sequence() {
+        let scene = scene(&[
+            ("left_000.png", 0.0),
+            ("right_000.png", 0.0),
+            ("left_001.png", 1.0),
+            ("right_001.png", 1.0),
+        ]);
+        assert_eq!(video_order(&scene, &[3, 2, 1, 0]), vec![0, 1, 2, 3]);
+        assert_eq!(video_sequence_count(&scene, &[0, 1, 2, 3]), 1);
+    }
+}
