@@ -7,6 +7,9 @@
 //! more Gaussians than one chunk (so the backward recomputes chunks).
 //! Tolerances: forward outputs within 2e-5 relative to their scale; weight gradients within 1e-4
 //! of the largest gradient of their layer (f32 sums over 150 Gaussians).
+//!
+//! Both GEMM kernels are checked on whatever adapter runs the tests: the tiled one hardware GPUs
+//! use and the row-per-invocation one software adapters use.
 
 mod gpu_support;
 
@@ -15,7 +18,9 @@ use rand::Rng;
 use segsplat::gpu::GpuContext;
 use segsplat::splat::deform::reference;
 use segsplat::splat::deform::warp::{Pose, warp, warp_backward};
-use segsplat::splat::deform::{DeformationField, DeformedGeometry, FieldShape, WarpKind};
+use segsplat::splat::deform::{
+    DeformationField, DeformedGeometry, FieldShape, GemmKernel, WarpKind,
+};
 use segsplat::splat::{GaussianModel, GpuGaussianGrads, GpuGaussians, OBJECT_NONE};
 
 const COUNT: usize = 150;
@@ -72,12 +77,14 @@ struct Setup {
     params: Vec<f32>,
 }
 
-fn setup(ctx: &GpuContext, warp_kind: WarpKind) -> Setup {
+const BOTH_KERNELS: [GemmKernel; 2] = [GemmKernel::Tiled, GemmKernel::Rows];
+
+fn setup(ctx: &GpuContext, warp_kind: WarpKind, gemm: GemmKernel) -> Setup {
     let shape = shape(warp_kind);
     let params = parameters(&shape, 11);
     let model = random_model(5);
     Setup {
-        field: DeformationField::new(ctx, shape, &params, CHUNK).expect("field"),
+        field: DeformationField::with_gemm(ctx, shape, &params, CHUNK, gemm).expect("field"),
         canonical: GpuGaussians::upload(ctx, &model, COUNT).expect("upload"),
         deformed: DeformedGeometry::new(ctx, COUNT).expect("geometry"),
         model,
@@ -89,9 +96,9 @@ fn read3(ctx: &GpuContext, buffer: &wgpu::Buffer) -> Vec<f32> {
     ctx.read_vec::<f32>(buffer).expect("read")
 }
 
-fn check_forward(warp_kind: WarpKind) {
+fn check_forward(warp_kind: WarpKind, gemm: GemmKernel) {
     let Some(ctx) = gpu_context() else { return };
-    let mut s = setup(ctx, warp_kind);
+    let mut s = setup(ctx, warp_kind, gemm);
     let mut encoder = new_encoder(ctx);
     s.field
         .encode_forward(ctx, &mut encoder, &s.canonical, &s.deformed, TIME)
@@ -117,7 +124,7 @@ fn check_forward(warp_kind: WarpKind) {
             worst = worst.max((f64::from(rotations[4 * i + k]) - expected.rotation[k]).abs());
         }
     }
-    println!("{warp_kind:?}: max abs error {worst:.2e}, largest move {moved:.3}");
+    println!("{warp_kind:?} {gemm:?}: max abs error {worst:.2e}, largest move {moved:.3}");
     assert!(moved > 0.05, "the field barely moves anything ({moved})");
     assert!(
         worst < 5e-5,
@@ -127,12 +134,16 @@ fn check_forward(warp_kind: WarpKind) {
 
 #[test]
 fn forward_matches_reference_with_translation() {
-    check_forward(WarpKind::Translation);
+    for gemm in BOTH_KERNELS {
+        check_forward(WarpKind::Translation, gemm);
+    }
 }
 
 #[test]
 fn forward_matches_reference_with_screw_motion() {
-    check_forward(WarpKind::Screw);
+    for gemm in BOTH_KERNELS {
+        check_forward(WarpKind::Screw, gemm);
+    }
 }
 
 /// Upstream gradients d loss / d deformed geometry, as a render would leave them.
@@ -165,9 +176,9 @@ fn forward_and_backward(
     grads
 }
 
-fn check_backward(warp_kind: WarpKind) {
+fn check_backward(warp_kind: WarpKind, gemm: GemmKernel) {
     let Some(ctx) = gpu_context() else { return };
-    let mut s = setup(ctx, warp_kind);
+    let mut s = setup(ctx, warp_kind, gemm);
     let upstream = upstream(9);
     let grads = forward_and_backward(ctx, &mut s, &upstream);
     let gpu_field_grads = s.field.read(ctx, &s.field.grads).expect("read");
@@ -209,7 +220,9 @@ fn check_backward(warp_kind: WarpKind) {
             .clone()
             .map(|j| (f64::from(gpu_field_grads[j]) - expected_field[j]).abs())
             .fold(0.0, f64::max);
-        println!("{warp_kind:?} layer {index}: max error {worst:.2e} of scale {scale:.2e}");
+        println!(
+            "{warp_kind:?} {gemm:?} layer {index}: max error {worst:.2e} of scale {scale:.2e}"
+        );
         assert!(scale > 0.0, "layer {index} got no gradient");
         assert!(
             worst <= 1e-4 * scale,
@@ -220,12 +233,16 @@ fn check_backward(warp_kind: WarpKind) {
 
 #[test]
 fn backward_matches_reference_with_translation() {
-    check_backward(WarpKind::Translation);
+    for gemm in BOTH_KERNELS {
+        check_backward(WarpKind::Translation, gemm);
+    }
 }
 
 #[test]
 fn backward_matches_reference_with_screw_motion() {
-    check_backward(WarpKind::Screw);
+    for gemm in BOTH_KERNELS {
+        check_backward(WarpKind::Screw, gemm);
+    }
 }
 
 /// The objective `sum_i upstream_i . deformed_i` evaluated on the GPU.
@@ -255,7 +272,7 @@ fn gpu_objective(ctx: &GpuContext, s: &mut Setup, params: &[f32], upstream: &Gau
 #[test]
 fn gpu_gradient_matches_central_differences_of_the_gpu_forward() {
     let Some(ctx) = gpu_context() else { return };
-    let mut s = setup(ctx, WarpKind::Screw);
+    let mut s = setup(ctx, WarpKind::Screw, GemmKernel::for_adapter(ctx));
     let upstream = upstream(9);
     forward_and_backward(ctx, &mut s, &upstream);
     let analytic = s.field.read(ctx, &s.field.grads).expect("read");

@@ -13,7 +13,7 @@ use super::field::{FieldShape, LinearLayer, WarpKind};
 use super::geometry::DeformedGeometry;
 use super::kernels::{
     ApplyParams, DeformKernels, EncodeParams, FLAG_BIAS, FLAG_MASK, FLAG_RELU, GemmBuffers,
-    GemmParams, MAX_SPLITS, RowSplit,
+    GemmKernel, GemmParams, MAX_SPLITS, RowSplit,
 };
 
 #[derive(Debug, thiserror::Error)]
@@ -97,6 +97,18 @@ impl DeformationField {
         parameters: &[f32],
         max_chunk_rows: usize,
     ) -> Result<Self, DeformError> {
+        let gemm = GemmKernel::for_adapter(ctx);
+        Self::with_gemm(ctx, shape, parameters, max_chunk_rows, gemm)
+    }
+
+    /// [`Self::new`] with a chosen GEMM kernel rather than the adapter's (tests check both).
+    pub fn with_gemm(
+        ctx: &GpuContext,
+        shape: FieldShape,
+        parameters: &[f32],
+        max_chunk_rows: usize,
+        gemm: GemmKernel,
+    ) -> Result<Self, DeformError> {
         shape.validate().map_err(DeformError::Shape)?;
         let expected = shape.parameter_count();
         if parameters.len() != expected {
@@ -110,7 +122,7 @@ impl DeformationField {
         let binding_rows = (ctx.limits.max_storage_buffer_binding_size as usize / widest).max(1);
         let field = Self {
             layers: shape.layers(),
-            kernels: DeformKernels::new(ctx)?,
+            kernels: DeformKernels::with_gemm(ctx, gemm)?,
             parameters: storage_buffer(ctx, "deform.parameters", expected)?,
             grads: storage_buffer(ctx, "deform.grads", expected)?,
             first_moment: storage_buffer(ctx, "deform.first_moment", expected)?,

@@ -6,7 +6,9 @@ use crate::gpu::kernel::{workgroups_2d, workgroups_for};
 use crate::gpu::validation::validated;
 use crate::gpu::{GpuContext, GpuError, Kernel};
 
+const GEMM_COMMON: &str = include_str!("../../../shaders/mlp_gemm_common.wgsl");
 const GEMM: &str = include_str!("../../../shaders/mlp_gemm.wgsl");
+const GEMM_ROWS: &str = include_str!("../../../shaders/mlp_gemm_rows.wgsl");
 const COLUMN_SUMS: &str = include_str!("../../../shaders/mlp_column_sums.wgsl");
 const SPLIT_REDUCE: &str = include_str!("../../../shaders/mlp_split_reduce.wgsl");
 const ENCODE: &str = include_str!("../../../shaders/deform_encode.wgsl");
@@ -18,11 +20,14 @@ const APPLY_BACKWARD: &str = include_str!("../../../shaders/deform_apply_backwar
 const GEMM_TILE: u32 = 64;
 /// Depth tile of `mlp_gemm.wgsl`: split ranges are multiples of it.
 const GEMM_DEPTH_TILE: u32 = 16;
+/// Rows and columns of a `mlp_gemm_rows.wgsl` workgroup (64 invocations of 4 x 8 outputs).
+const GEMM_ROWS_ROWS: u32 = 256;
+const GEMM_ROWS_COLS: u32 = 8;
 pub const FLAG_BIAS: u32 = 1;
 pub const FLAG_RELU: u32 = 2;
 pub const FLAG_MASK: u32 = 4;
 
-/// Uniform block of `mlp_gemm.wgsl` (see its header for the three products it serves).
+/// Uniform block of the GEMM kernels (`mlp_gemm_common.wgsl` lists the three products).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct GemmParams {
@@ -118,9 +123,45 @@ impl RowSplit {
     }
 }
 
+/// Which GEMM kernel the field runs: both compute the same products.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GemmKernel {
+    /// `mlp_gemm.wgsl`: 64x64 output tiles staged through workgroup memory (hardware GPUs).
+    Tiled,
+    /// `mlp_gemm_rows.wgsl`: a 4 x 8 output block per invocation, no workgroup memory or
+    /// barriers (software adapters, where a workgroup is a loop over SIMD lanes on a CPU core).
+    Rows,
+}
+
+/// Environment variable that overrides the adapter's GEMM kernel (`tiled` or `rows`), for
+/// comparing the two on one machine (docs/benchmarks.md).
+pub const GEMM_KERNEL_ENV: &str = "SEGSPLAT_GEMM_KERNEL";
+
+impl GemmKernel {
+    /// The kernel that suits the adapter, unless [`GEMM_KERNEL_ENV`] names one.
+    pub fn for_adapter(ctx: &GpuContext) -> Self {
+        if let Some(value) = std::env::var_os(GEMM_KERNEL_ENV) {
+            match value.to_str() {
+                Some("tiled") => return Self::Tiled,
+                Some("rows") => return Self::Rows,
+                _ => tracing::warn!(
+                    ?value,
+                    "{GEMM_KERNEL_ENV} is neither \"tiled\" nor \"rows\": ignored"
+                ),
+            }
+        }
+        if ctx.report.is_software {
+            Self::Rows
+        } else {
+            Self::Tiled
+        }
+    }
+}
+
 #[derive(Debug)]
 pub struct DeformKernels {
     gemm: Kernel,
+    gemm_kind: GemmKernel,
     column_sums: Kernel,
     split_reduce: Kernel,
     encode: Kernel,
@@ -145,12 +186,17 @@ fn per_item_grid(ctx: &GpuContext, items: u32) -> [u32; 3] {
 }
 
 impl DeformKernels {
-    pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
+    pub fn with_gemm(ctx: &GpuContext, gemm_kind: GemmKernel) -> Result<Self, GpuError> {
         let build = |label: &'static str, sources: &[&str], entry: &str| {
             validated(ctx, label, || Kernel::new(ctx, label, sources, entry, &[]))
         };
+        let gemm = match gemm_kind {
+            GemmKernel::Tiled => build("mlp_gemm", &[GEMM_COMMON, GEMM], "gemm")?,
+            GemmKernel::Rows => build("mlp_gemm_rows", &[GEMM_COMMON, GEMM_ROWS], "gemm_rows")?,
+        };
         Ok(Self {
-            gemm: build("mlp_gemm", &[GEMM], "gemm")?,
+            gemm,
+            gemm_kind,
             column_sums: build("mlp_column_sums", &[COLUMN_SUMS], "column_sums")?,
             split_reduce: build("mlp_split_reduce", &[SPLIT_REDUCE], "split_reduce")?,
             encode: build("deform_encode", &[ENCODE], "deform_encode")?,
@@ -188,9 +234,13 @@ impl DeformKernels {
                 buffers.c,
             ],
         );
+        let (col_block, row_block) = match self.gemm_kind {
+            GemmKernel::Tiled => (GEMM_TILE, GEMM_TILE),
+            GemmKernel::Rows => (GEMM_ROWS_COLS, GEMM_ROWS_ROWS),
+        };
         let grid = [
-            params.cols.div_ceil(GEMM_TILE).max(1),
-            params.rows.div_ceil(GEMM_TILE).max(1),
+            params.cols.div_ceil(col_block).max(1),
+            params.rows.div_ceil(row_block).max(1),
             splits.max(1),
         ];
         self.gemm.dispatch(encoder, &bind, grid);

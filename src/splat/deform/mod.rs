@@ -24,3 +24,4 @@ pub use field::{FieldShape, WarpKind};
 pub use field_gpu::{DeformError, DeformationField};
 pub use file::{DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE, DeformationHeader, StoredDeformation};
 pub use geometry::DeformedGeometry;
+pub use kernels::GemmKernel;
