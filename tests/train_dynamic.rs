@@ -9,7 +9,7 @@
 mod gpu_support;
 
 use glam::Vec3;
-use gpu_support::gpu_context;
+use gpu_support::{gpu_context, segsplat};
 use rand::SeedableRng;
 use segsplat::scene::synthetic::SyntheticSpec;
 use segsplat::scene::synthetic_dynamic::write_dynamic_blender;
@@ -125,13 +125,6 @@ fn checkpoint_restores_the_field_exactly() {
     );
     let progress = resumed.run(|_| true).expect("train");
     assert_eq!(progress.step, 60);
-}
-
-fn segsplat(args: &[&str]) -> std::process::Output {
-    std::process::Command::new(env!("CARGO_BIN_EXE_segsplat"))
-        .args(args)
-        .output()
-        .expect("run segsplat")
 }
 
 /// `segsplat synthetic-scene --dynamic` writes a D-NeRF scene and `segsplat bench

@@ -3,6 +3,9 @@
 //! training must clear a bar that a broken gradient cannot reach, and checkpoints must restore
 //! the trainer's state exactly.
 
+mod gpu_support;
+
+use gpu_support::segsplat;
 use segsplat::gpu::GpuContext;
 use segsplat::scene::colmap::ColmapEncoding;
 use segsplat::scene::synthetic::{SYNTHETIC_BACKGROUND, SyntheticSpec, write_colmap};
@@ -113,4 +116,67 @@ fn checkpoint_restores_state_exactly() {
     let mut resumed = resumed;
     let progress = resumed.run(|_| true).unwrap();
     assert_eq!(progress.step, 150);
+}
+
+/// `segsplat train` writes a trained scene and `segsplat bench --init-ply` times steps starting
+/// from its Gaussians (the trained-density benchmark of docs/benchmarks.md).
+#[test]
+fn bench_starts_from_a_trained_ply() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().expect("temp dir");
+    let scene = dir.path().join("scene");
+    let scene = scene.to_str().expect("utf-8 path");
+    let out = dir.path().join("trained");
+    let out = out.to_str().expect("utf-8 path");
+    let written = segsplat(&[
+        "synthetic-scene",
+        scene,
+        "--frames",
+        "6",
+        "--width",
+        "32",
+        "--height",
+        "24",
+    ]);
+    assert!(written.status.success(), "{written:?}");
+    let trained = segsplat(&["train", scene, "--steps", "5", "--out", out]);
+    assert!(trained.status.success(), "{trained:?}");
+    let ply = format!("{out}/scene.ply");
+    let count = segsplat::splat::ply::read_ply_file(std::path::Path::new(&ply))
+        .expect("trained ply")
+        .model
+        .len();
+    let output = segsplat(&[
+        "bench",
+        scene,
+        "--steps",
+        "2",
+        "--max-resolution",
+        "32",
+        "--no-densify",
+        "--init-ply",
+        &ply,
+        "--timing-repeats",
+        "1",
+        "--json",
+    ]);
+    assert!(output.status.success(), "{output:?}");
+    let report: serde_json::Value =
+        serde_json::from_slice(&output.stdout).expect("bench prints one JSON object");
+    assert_eq!(report["gaussians_start"], count, "{report}");
+    let missing = segsplat(&[
+        "bench",
+        scene,
+        "--steps",
+        "1",
+        "--init-ply",
+        "/nonexistent.ply",
+    ]);
+    assert!(!missing.status.success());
+    assert!(
+        String::from_utf8_lossy(&missing.stderr).contains("/nonexistent.ply"),
+        "{missing:?}"
+    );
 }

@@ -6,6 +6,7 @@
 
 use std::path::PathBuf;
 
+use anyhow::Context;
 use clap::Args;
 use glam::Vec3;
 use rand::SeedableRng;
@@ -14,6 +15,7 @@ use segsplat::scene::Scene;
 use segsplat::splat::GaussianModel;
 use segsplat::splat::deform::{DeformationConfig, FieldShape};
 use segsplat::splat::init::random_gaussians;
+use segsplat::splat::ply::read_ply_file;
 use segsplat::splat::train::trainer::initial_model;
 use segsplat::splat::train::{TrainConfig, Trainer};
 use serde::Serialize;
@@ -35,8 +37,12 @@ pub struct BenchArgs {
     /// Start from this many random Gaussians inside the sparse points' bounding box (the
     /// cameras' bounds when the dataset has no points) instead of the points themselves, to
     /// measure how step time scales with the Gaussian count at a realistic splat density.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "init_ply")]
     pub init_random: Option<usize>,
+    /// Start from the Gaussians of a splat PLY (a trained scene of this dataset, e.g. the
+    /// `scene.ply` of `segsplat train`), to time steps at a trained scene's density.
+    #[arg(long)]
+    pub init_ply: Option<PathBuf>,
     /// Keep the Gaussian count fixed (no densification, pruning or opacity reset).
     #[arg(long)]
     pub no_densify: bool,
@@ -292,9 +298,15 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         seed: args.seed,
         ..Default::default()
     };
-    let initial = args
-        .init_random
-        .map(|count| random_model_in_points_bounds(&mut scene, count, args.seed));
+    let initial = match (&args.init_ply, args.init_random) {
+        (Some(path), _) => Some(
+            read_ply_file(path)
+                .with_context(|| format!("cannot read {}", path.display()))?
+                .model,
+        ),
+        (None, Some(count)) => Some(random_model_in_points_bounds(&mut scene, count, args.seed)),
+        (None, None) => None,
+    };
     if args.no_densify {
         config.densify_until = 0;
     }

@@ -59,3 +59,11 @@ pub fn seeded_rng(seed: u64) -> rand_chacha::ChaCha8Rng {
     use rand::SeedableRng;
     rand_chacha::ChaCha8Rng::seed_from_u64(seed)
 }
+
+/// Runs the `segsplat` binary with `args` (CLI tests of `train`, `bench`, `synthetic-scene`).
+pub fn segsplat(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_segsplat"))
+        .args(args)
+        .output()
+        .expect("run segsplat")
+}
