@@ -86,3 +86,9 @@ fn perspective_jacobian(u: RenderUniforms, p: vec3<f32>) -> Jacobian {
     j.tan_clamped = clamped;
     return j;
 }
+
+// The exponent of a splat's Gaussian at offset `d` from its mean (conic = inverse covariance
+// as (a, b, c)); negative only through rounding, which the kernels skip.
+fn splat_sigma(conic: vec3<f32>, d: vec2<f32>) -> f32 {
+    return 0.5 * (conic.x * d.x * d.x + conic.z * d.y * d.y) + conic.y * d.x * d.y;
+}

@@ -4,25 +4,8 @@
 // into grad_projected with float atomics (native or CAS: rasterize_grad_atomics_*.wgsl), summed
 // over the subgroup first on hardware with subgroups (rasterize_grad_emit_*.wgsl). The loop
 // over a batch's splats stays uniform (no early `continue`) so the subgroup sums are legal.
-
-@group(0) @binding(0) var<uniform> uniforms: RenderUniforms;
-@group(0) @binding(1) var<storage, read> tile_ranges: array<u32>;
-@group(0) @binding(2) var<storage, read> intersection_gaussians: array<u32>;
-@group(0) @binding(3) var<storage, read> projected: array<vec4<f32>>;
-@group(0) @binding(4) var<storage, read> final_transmittance: array<f32>;
-@group(0) @binding(5) var<storage, read> last_contributor: array<u32>;
-@group(0) @binding(6) var<storage, read> grad_image: array<vec4<f32>>;
-@group(0) @binding(7) var<storage, read_write> grad_projected: array<AtomicF32>;
-
-const BATCH: u32 = 256u;
-
-var<workgroup> batch_gaussian: array<u32, 256>;
-var<workgroup> batch_mean_opacity: array<vec4<f32>, 256>;
-var<workgroup> batch_conic: array<vec4<f32>, 256>;
-var<workgroup> batch_colour: array<vec4<f32>, 256>;
-var<workgroup> range_start: u32;
-var<workgroup> longest: atomic<u32>;
-var<workgroup> longest_snapshot: u32;
+// Bindings, batch staging and the fragment's gradients: rasterize_backward_common.wgsl and
+// rasterize_grad_fragment.wgsl.
 
 @compute @workgroup_size(16, 16)
 fn rasterize_backward(
@@ -44,18 +27,9 @@ fn rasterize_backward(
         contributed = last_contributor[pixel_index];
         v_out = grad_image[pixel_index];
     }
-    if local_index == 0u {
-        range_start = tile_ranges[2u * tile];
-        atomicStore(&longest, 0u);
-    }
-    workgroupBarrier();
-    atomicMax(&longest, contributed);
-    workgroupBarrier();
-    if local_index == 0u {
-        longest_snapshot = atomicLoad(&longest);
-    }
-    let start = workgroupUniformLoad(&range_start);
-    let count = workgroupUniformLoad(&longest_snapshot);
+    let walk = tile_walk(tile, local_index, contributed);
+    let start = walk.x;
+    let count = walk.y;
     let batches = (count + BATCH - 1u) / BATCH;
     let background_term = dot(uniforms.background.xyz, v_out.xyz);
 
@@ -66,11 +40,7 @@ fn rasterize_backward(
         let batch_end = count - b * BATCH;
         let batch_size = min(BATCH, batch_end);
         if local_index < batch_size {
-            let gaussian = intersection_gaussians[start + batch_end - 1u - local_index];
-            batch_gaussian[local_index] = gaussian;
-            batch_mean_opacity[local_index] = projected[3u * gaussian];
-            batch_conic[local_index] = projected[3u * gaussian + 1u];
-            batch_colour[local_index] = projected[3u * gaussian + 2u];
+            stage_splat_backwards(start, batch_end, local_index);
         }
         workgroupBarrier();
         for (var t = 0u; t < batch_size; t++) {
@@ -78,7 +48,7 @@ fn rasterize_backward(
             let mean_opacity = batch_mean_opacity[t];
             let conic = batch_conic[t].xyz;
             let d = mean_opacity.xy - centre;
-            let sigma = 0.5 * (conic.x * d.x * d.x + conic.z * d.y * d.y) + conic.y * d.x * d.y;
+            let sigma = splat_sigma(conic, d);
             let value = exp(-max(sigma, 0.0));
             let alpha = min(ALPHA_MAX, mean_opacity.z * value);
             let contributes = position < contributed && sigma >= 0.0 && alpha >= ALPHA_MIN;
@@ -86,20 +56,12 @@ fn rasterize_backward(
             if contributes {
                 let one_over_rest = 1.0 / (1.0 - alpha);
                 transmittance *= one_over_rest;
-                let weight = alpha * transmittance;
                 let colour = batch_colour[t].xyz;
-                var v_alpha = dot(colour * transmittance - behind * one_over_rest, v_out.xyz);
-                v_alpha += t_final * one_over_rest * (v_out.w - background_term);
-                grads.colour = weight * v_out.xyz;
-                if mean_opacity.z * value <= ALPHA_MAX {
-                    let v_sigma = -mean_opacity.z * value * v_alpha;
-                    let v_mean = v_sigma * vec2<f32>(conic.x * d.x + conic.y * d.y, conic.y * d.x + conic.z * d.y);
-                    grads.mean = v_mean;
-                    grads.conic = vec3<f32>(0.5 * v_sigma * d.x * d.x, v_sigma * d.x * d.y, 0.5 * v_sigma * d.y * d.y);
-                    grads.opacity = value * v_alpha;
-                    grads.mean_abs = abs(v_mean);
-                }
-                behind += colour * weight;
+                grads = fragment_grads(
+                    mean_opacity, conic, colour, d, value, alpha, transmittance, one_over_rest,
+                    behind, t_final, v_out, background_term,
+                );
+                behind += colour * (alpha * transmittance);
             }
             emit_fragment_grads(batch_gaussian[t], grads, contributes);
         }

@@ -29,3 +29,38 @@ fn add_fragment_grads(gaussian: u32, grads: FragmentGrads) {
     add_grad(gaussian, 9u, grads.mean_abs.x);
     add_grad(gaussian, 10u, grads.mean_abs.y);
 }
+
+// A contributing fragment's gradients at one pixel. `transmittance` is the transmittance in
+// front of the fragment (already divided back by 1 - alpha), `behind` the colour composited
+// behind it, `value` the Gaussian falloff exp(-sigma) at offset `d`, `v_out` d loss / d (rgb,
+// alpha) of the pixel and `background_term` = dot(background, v_out.rgb).
+fn fragment_grads(
+    mean_opacity: vec4<f32>,
+    conic: vec3<f32>,
+    colour: vec3<f32>,
+    d: vec2<f32>,
+    value: f32,
+    alpha: f32,
+    transmittance: f32,
+    one_over_rest: f32,
+    behind: vec3<f32>,
+    t_final: f32,
+    v_out: vec4<f32>,
+    background_term: f32,
+) -> FragmentGrads {
+    var grads = FragmentGrads(vec2<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0.0, vec2<f32>(0.0));
+    let weight = alpha * transmittance;
+    var v_alpha = dot(colour * transmittance - behind * one_over_rest, v_out.xyz);
+    v_alpha += t_final * one_over_rest * (v_out.w - background_term);
+    grads.colour = weight * v_out.xyz;
+    // Where the opacity clamp at ALPHA_MAX binds, alpha does not depend on the geometry.
+    if mean_opacity.z * value <= ALPHA_MAX {
+        let v_sigma = -mean_opacity.z * value * v_alpha;
+        let v_mean = v_sigma * vec2<f32>(conic.x * d.x + conic.y * d.y, conic.y * d.x + conic.z * d.y);
+        grads.mean = v_mean;
+        grads.conic = vec3<f32>(0.5 * v_sigma * d.x * d.x, v_sigma * d.x * d.y, 0.5 * v_sigma * d.y * d.y);
+        grads.opacity = value * v_alpha;
+        grads.mean_abs = abs(v_mean);
+    }
+    return grads;
+}

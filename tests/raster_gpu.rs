@@ -11,7 +11,7 @@ use segsplat::splat::reference::scenes::{
 use segsplat::splat::reference::{
     ReferenceGaussians, ReferenceGrads, parameter_name, render_backward, render_forward,
 };
-use segsplat::splat::render::Renderer;
+use segsplat::splat::render::{RasterVariant, Renderer};
 use segsplat::splat::{
     GaussianModel, GpuGaussianGrads, GpuGaussians, ObjectFilter, RenderCamera, RenderSettings,
 };
@@ -66,7 +66,21 @@ fn gpu_gradients(
     weights: &[[f32; 4]],
     renders: usize,
 ) -> (GaussianModel, Vec<[f32; 2]>) {
-    let mut renderer = Renderer::new(ctx).unwrap();
+    let variant = RasterVariant::for_adapter(ctx);
+    gpu_gradients_with(ctx, variant, model, camera, settings, weights, renders)
+}
+
+/// [`gpu_gradients`] through the given rasterize kernels.
+fn gpu_gradients_with(
+    ctx: &GpuContext,
+    variant: RasterVariant,
+    model: &GaussianModel,
+    camera: &RenderCamera,
+    settings: &RenderSettings,
+    weights: &[[f32; 4]],
+    renders: usize,
+) -> (GaussianModel, Vec<[f32; 2]>) {
+    let mut renderer = Renderer::with_variant(ctx, variant).unwrap();
     let gaussians = GpuGaussians::upload(ctx, model, model.len()).unwrap();
     let mut grads = GpuGaussianGrads::new(ctx, model.len()).unwrap();
     let grad_image = ctx
@@ -398,4 +412,44 @@ fn gpu_gradients_summed_over_subgroups_match_reference() {
     let cpu = reference_gradients(&model, &camera, &settings, &weights);
     let gpu = gpu_gradients(&ctx, &model, &camera, &settings, &weights, 1);
     compare_gradients(&gpu, &cpu, 2e-3);
+}
+
+/// Every rasterize variant, whatever the adapter picks for itself: one pixel per invocation
+/// (GPUs; with and without subgroup sums) and columns of pixels (software adapters) give the
+/// reference's images and gradients.
+#[test]
+fn every_raster_variant_matches_reference() {
+    let Some(ctx) = context() else { return };
+    let mut variants = vec![
+        RasterVariant {
+            columns: true,
+            subgroup_sums: false,
+        },
+        RasterVariant {
+            columns: false,
+            subgroup_sums: false,
+        },
+    ];
+    if ctx.has_subgroups() {
+        variants.push(RasterVariant {
+            columns: false,
+            subgroup_sums: true,
+        });
+    }
+    // 40 x 36: partial tiles on both edges.
+    let camera = test_camera(40, 36);
+    let model = edge_case_scene(75, 24, &camera);
+    let settings = settings_with_background();
+    let weights = random_weights(76, camera.pixel_count());
+    let cpu_image = render_forward(&ReferenceGaussians::from_model(&model), &camera, &settings);
+    let cpu = reference_gradients(&model, &camera, &settings, &weights);
+    for variant in variants {
+        let mut renderer = Renderer::with_variant(&ctx, variant).unwrap();
+        let image = render_gpu(&ctx, &mut renderer, &model, &camera, &settings);
+        let error = max_image_error(&image, &cpu_image.image);
+        assert!(error < 2e-4, "{variant:?}: max abs image error {error}");
+        let gpu = gpu_gradients_with(&ctx, variant, &model, &camera, &settings, &weights, 1);
+        let worst = compare_gradients(&gpu, &cpu, 2e-3);
+        println!("{variant:?}: image error {error:.1e}, gradient error {worst:.1e}");
+    }
 }

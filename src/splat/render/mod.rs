@@ -14,6 +14,11 @@
 //! | 8    | `tile_ranges.wgsl` (indirect)                 | each tile's [start, end)                     |
 //! | 9    | `rasterize_forward.wgsl`                      | 16x16 workgroup per tile, batches of 256     |
 //!
+//! Software adapters (lavapipe) run `rasterize_forward_columns.wgsl` for step 9 and
+//! `rasterize_backward_columns.wgsl` for the backward: the same arithmetic per pixel, with a column
+//! of pixels per invocation so that each splat read from workgroup memory, and each set of
+//! gradient atomics, serves several pixels ([`RasterVariant`]).
+//!
 //! Backward: `rasterize_backward.wgsl` (per pixel, back to front, float atomics into per-Gaussian
 //! screen-space gradients), then `project_backward.wgsl` (geometry) and `sh_backward.wgsl`
 //! (colour), which ADD into [`GpuGaussianGrads`](crate::splat::GpuGaussianGrads).
@@ -26,6 +31,7 @@ mod renderer;
 mod uniforms;
 mod workspace;
 
+pub use kernels::{RASTER_KERNEL_ENV, RasterVariant};
 pub use renderer::{CapacityReport, RenderError, RenderOutput, Renderer};
 pub use uniforms::RenderUniforms;
 pub use workspace::GRAD_STRIDE;

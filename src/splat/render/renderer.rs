@@ -4,7 +4,7 @@ use std::sync::Arc;
 
 use wgpu::util::DeviceExt;
 
-use super::kernels::RenderKernels;
+use super::kernels::{RasterVariant, RenderKernels};
 use super::uniforms::RenderUniforms;
 use super::workspace::{
     COUNT_SLOTS, INTERSECTION_COUNT_OFFSET, INTERSECTION_DISPATCH_OFFSET, RenderWorkspace,
@@ -166,8 +166,13 @@ impl std::fmt::Debug for Renderer {
 
 impl Renderer {
     pub fn new(ctx: &GpuContext) -> Result<Self, RenderError> {
+        Self::with_variant(ctx, RasterVariant::for_adapter(ctx))
+    }
+
+    /// [`Self::new`] with chosen rasterize kernels rather than the adapter's (tests check each).
+    pub fn with_variant(ctx: &GpuContext, variant: RasterVariant) -> Result<Self, RenderError> {
         Ok(Self {
-            kernels: RenderKernels::new(ctx)?,
+            kernels: RenderKernels::new(ctx, variant)?,
             scan: ExclusiveScan::new(ctx)?,
             sort: RadixSort::new(ctx)?,
             pool: Arc::new(WorkspacePool::default()),
