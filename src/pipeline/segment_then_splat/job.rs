@@ -282,6 +282,7 @@ fn resolved_mask_source(ctx: &JobContext, scene: &Scene, chosen: MaskSource) -> 
     }
 }
 
+/// Stage 1 from a resolved `source`: the views' masks and the stage's figures (reported).
 fn masks_from(
     ctx: &JobContext,
     scene: &Scene,
