@@ -52,7 +52,7 @@ fn rasterize_backward(
             let value = exp(-max(sigma, 0.0));
             let alpha = min(ALPHA_MAX, mean_opacity.z * value);
             let contributes = position < contributed && sigma >= 0.0 && alpha >= ALPHA_MIN;
-            var grads = FragmentGrads(vec2<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0.0, vec2<f32>(0.0));
+            var grads = no_fragment_grads();
             if contributes {
                 let one_over_rest = 1.0 / (1.0 - alpha);
                 transmittance *= one_over_rest;

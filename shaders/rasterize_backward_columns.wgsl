@@ -65,7 +65,7 @@ fn rasterize_backward(
             let mean_opacity = batch_mean_opacity[t];
             let conic = batch_conic[t].xyz;
             let colour = batch_colour[t].xyz;
-            var sum = FragmentGrads(vec2<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0.0, vec2<f32>(0.0));
+            var sum = no_fragment_grads();
             var any = false;
             for (var p = 0u; p < PIXELS; p++) {
                 let d = mean_opacity.xy - centre[p];
@@ -80,11 +80,7 @@ fn rasterize_backward(
                         mean_opacity, conic, colour, d, value, alpha, transmittance[p],
                         one_over_rest, behind[p], t_final[p], v_out[p], background_term[p],
                     );
-                    sum.mean += grads.mean;
-                    sum.conic += grads.conic;
-                    sum.colour += grads.colour;
-                    sum.opacity += grads.opacity;
-                    sum.mean_abs += grads.mean_abs;
+                    sum = sum_fragment_grads(sum, grads);
                     behind[p] += colour * (alpha * transmittance[p]);
                 }
             }

@@ -10,6 +10,14 @@ struct FragmentGrads {
     mean_abs: vec2<f32>,
 }
 
+fn no_fragment_grads() -> FragmentGrads {
+    return FragmentGrads(vec2<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0.0, vec2<f32>(0.0));
+}
+
+fn sum_fragment_grads(a: FragmentGrads, b: FragmentGrads) -> FragmentGrads {
+    return FragmentGrads(a.mean + b.mean, a.conic + b.conic, a.colour + b.colour, a.opacity + b.opacity, a.mean_abs + b.mean_abs);
+}
+
 fn add_grad(gaussian: u32, slot: u32, value: f32) {
     if value != 0.0 {
         grad_projected_add(gaussian * GRAD_STRIDE + slot, value);
@@ -48,7 +56,7 @@ fn fragment_grads(
     v_out: vec4<f32>,
     background_term: f32,
 ) -> FragmentGrads {
-    var grads = FragmentGrads(vec2<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0.0, vec2<f32>(0.0));
+    var grads = no_fragment_grads();
     let weight = alpha * transmittance;
     var v_alpha = dot(colour * transmittance - behind * one_over_rest, v_out.xyz);
     v_alpha += t_final * one_over_rest * (v_out.w - background_term);

@@ -8,20 +8,26 @@
 //!   by name (rigs name their cameras along the rig), every other one backwards ("serpentine"), so that the only cuts are from
 //!   one camera to the next at the same instant, where nothing in the scene has moved.
 
-use std::collections::{BTreeMap, HashMap, HashSet};
+use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
 use super::Scene;
 
+/// A capture's frames in video order, and how many camera sequences that order walks.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct VideoOrder {
+    /// Indices into `scene.frames`.
+    pub frames: Vec<usize>,
+    /// Camera sequences walked (1 for a single moving camera).
+    pub sequences: usize,
+}
+
 /// `frames` (indices into `scene.frames`) in video order; see the module docs. Frames without a
 /// time count as time 0; ties keep their listing order.
-pub fn video_order(scene: &Scene, frames: &[usize]) -> Vec<usize> {
+pub fn video_order(scene: &Scene, frames: &[usize]) -> VideoOrder {
     let time = |index: usize| scene.frames[index].time.unwrap_or(0.0);
-    let by_time = |sequence: &mut Vec<usize>| {
-        sequence.sort_by(|&a, &b| time(a).total_cmp(&time(b)).then(a.cmp(&b)));
-    };
-    let mut sequences: BTreeMap<String, Vec<usize>> = BTreeMap::new();
     let rig = filmed_by_a_rig(scene, frames);
+    let mut sequences: BTreeMap<String, Vec<usize>> = BTreeMap::new();
     for &index in frames {
         let camera = if rig {
             camera_of(&scene.frames[index].name)
@@ -30,27 +36,19 @@ pub fn video_order(scene: &Scene, frames: &[usize]) -> Vec<usize> {
         };
         sequences.entry(camera).or_default().push(index);
     }
+    let count = sequences.len();
     let mut ordered = Vec::with_capacity(frames.len());
     for (position, mut sequence) in sequences.into_values().enumerate() {
-        by_time(&mut sequence);
+        sequence.sort_by(|&a, &b| time(a).total_cmp(&time(b)).then(a.cmp(&b)));
         if position % 2 == 1 {
             sequence.reverse();
         }
         ordered.extend(sequence);
     }
-    ordered
-}
-
-/// How many camera sequences [`video_order`] walks (1 for a single moving camera).
-pub fn video_sequence_count(scene: &Scene, frames: &[usize]) -> usize {
-    if !filmed_by_a_rig(scene, frames) {
-        return usize::from(!frames.is_empty());
+    VideoOrder {
+        frames: ordered,
+        sequences: count,
     }
-    frames
-        .iter()
-        .map(|&index| camera_of(&scene.frames[index].name))
-        .collect::<HashSet<_>>()
-        .len()
 }
 
 /// A rig films one instant from several cameras: some time is shared by frames of different
@@ -58,23 +56,18 @@ pub fn video_sequence_count(scene: &Scene, frames: &[usize]) -> usize {
 /// sequence: they alternate with a small baseline. Frames without times are a photo collection
 /// in listing order, never a rig.)
 fn filmed_by_a_rig(scene: &Scene, frames: &[usize]) -> bool {
-    let mut seen: HashSet<(u32, String)> = HashSet::new();
-    let mut cameras_at: HashMap<u32, String> = HashMap::new();
+    let mut camera_at: HashMap<u32, String> = HashMap::new();
     for &index in frames {
         let frame = &scene.frames[index];
         let Some(time) = frame.time else {
             return false;
         };
-        let instant = time.to_bits();
         let camera = camera_of(&frame.name);
-        if !seen.insert((instant, camera.clone())) {
-            continue;
-        }
-        match cameras_at.get(&instant) {
+        match camera_at.get(&time.to_bits()) {
             Some(other) if *other != camera => return true,
             Some(_) => {}
             None => {
-                cameras_at.insert(instant, camera);
+                camera_at.insert(time.to_bits(), camera);
             }
         }
     }
@@ -136,8 +129,9 @@ mod tests {
             ("test/r_3.png", 0.75),
         ]);
         let all: Vec<usize> = (0..5).collect();
-        assert_eq!(video_order(&scene, &all), vec![0, 2, 1, 4, 3]);
-        assert_eq!(video_sequence_count(&scene, &all), 1);
+        let order = video_order(&scene, &all);
+        assert_eq!(order.frames, vec![0, 2, 1, 4, 3]);
+        assert_eq!(order.sequences, 1);
     }
 
     #[test]
@@ -154,6 +148,7 @@ mod tests {
         let frames = vec![4, 0, 8, 2, 6, 1, 5, 3, 7];
         let order = video_order(&scene, &frames);
         let names: Vec<&str> = order
+            .frames
             .iter()
             .map(|&i| scene.frames[i].name.as_str())
             .collect();
@@ -172,7 +167,7 @@ mod tests {
             ],
             "cameras by name, every other one backwards"
         );
-        assert_eq!(video_sequence_count(&scene, &frames), 3);
+        assert_eq!(order.sequences, 3);
     }
 
     #[test]
@@ -181,8 +176,9 @@ mod tests {
         for frame in &mut scene.frames {
             frame.time = None;
         }
-        assert_eq!(video_order(&scene, &[2, 0, 1]), vec![0, 1, 2]);
-        assert_eq!(video_sequence_count(&scene, &[2, 0, 1]), 1);
+        let order = video_order(&scene, &[2, 0, 1]);
+        assert_eq!(order.frames, vec![0, 1, 2]);
+        assert_eq!(order.sequences, 1);
     }
 
     #[test]
@@ -193,7 +189,8 @@ mod tests {
             ("left_001.png", 1.0),
             ("right_001.png", 1.0),
         ]);
-        assert_eq!(video_order(&scene, &[3, 2, 1, 0]), vec![0, 1, 2, 3]);
-        assert_eq!(video_sequence_count(&scene, &[0, 1, 2, 3]), 1);
+        let order = video_order(&scene, &[3, 2, 1, 0]);
+        assert_eq!(order.frames, vec![0, 1, 2, 3]);
+        assert_eq!(order.sequences, 1);
     }
 }

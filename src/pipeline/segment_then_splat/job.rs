@@ -35,7 +35,7 @@ use crate::pipeline::training_job::{
     fatal, report, report_evaluation, retryable, store_outputs, train_failure,
     train_with_checkpoints,
 };
-use crate::scene::sequence::{video_order, video_sequence_count};
+use crate::scene::sequence::video_order;
 use crate::scene::{Level, LoadOptions, Scene, SceneFormat, load_frame_rgb, load_scene};
 use crate::segment::propagation::PropagationOptions;
 use crate::segment::{AutomaticConfig, ClassicalConfig, MaskGenerator};
@@ -385,8 +385,7 @@ fn propagated_masks(
     tracing::info!(views = frames.len(), "propagating masks");
     // Masks are carried in video order (by time, camera by camera for a rig); the views go back
     // to the training order afterwards, which the object targets follow.
-    let in_time_order = video_order(scene, frames);
-    let sequences = video_sequence_count(scene, frames);
+    let order = video_order(scene, frames);
     let mut segmenter = SamPredictor::new(model.clone());
     let mut generator = MaskGenerator::Automatic {
         segmenter: Box::new(SamPredictor::new(model)),
@@ -394,7 +393,7 @@ fn propagated_masks(
     };
     let (mut masks, propagation) = propagated_view_masks(
         scene,
-        &in_time_order,
+        &order.frames,
         &mut segmenter,
         &mut generator,
         config.train.max_resolution,
@@ -416,7 +415,7 @@ fn propagated_masks(
         masks,
         propagation.objects_per_level,
         &[
-            ("video_sequences", sequences as f64),
+            ("video_sequences", order.sequences as f64),
             ("new_object_checks", propagation.checks.len() as f64),
             (
                 "duplicate_tracks_dropped",

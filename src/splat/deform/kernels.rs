@@ -2,7 +2,7 @@
 
 use wgpu::util::DeviceExt;
 
-use crate::gpu::kernel::{workgroups_2d, workgroups_for};
+use crate::gpu::kernel::{kernel_choice_from_env, workgroups_2d, workgroups_for};
 use crate::gpu::validation::validated;
 use crate::gpu::{GpuContext, GpuError, Kernel};
 
@@ -140,21 +140,12 @@ pub const GEMM_KERNEL_ENV: &str = "SEGSPLAT_GEMM_KERNEL";
 impl GemmKernel {
     /// The kernel that suits the adapter, unless [`GEMM_KERNEL_ENV`] names one.
     pub fn for_adapter(ctx: &GpuContext) -> Self {
-        if let Some(value) = std::env::var_os(GEMM_KERNEL_ENV) {
-            match value.to_str() {
-                Some("tiled") => return Self::Tiled,
-                Some("rows") => return Self::Rows,
-                _ => tracing::warn!(
-                    ?value,
-                    "{GEMM_KERNEL_ENV} is neither \"tiled\" nor \"rows\": ignored"
-                ),
-            }
-        }
-        if ctx.report.is_software {
+        let named = [("tiled", Self::Tiled), ("rows", Self::Rows)];
+        kernel_choice_from_env(GEMM_KERNEL_ENV, &named).unwrap_or(if ctx.report.is_software {
             Self::Rows
         } else {
             Self::Tiled
-        }
+        })
     }
 }
 

@@ -1,5 +1,6 @@
 //! The render pipelines, compiled once per device.
 
+use crate::gpu::kernel::kernel_choice_from_env;
 use crate::gpu::validation::validated;
 use crate::gpu::{GpuContext, GpuError, Kernel};
 
@@ -66,17 +67,9 @@ pub struct RasterVariant {
 impl RasterVariant {
     /// The kernels that suit the adapter, unless [`RASTER_KERNEL_ENV`] names a layout.
     pub fn for_adapter(ctx: &GpuContext) -> Self {
-        let mut columns = ctx.report.is_software;
-        if let Some(value) = std::env::var_os(RASTER_KERNEL_ENV) {
-            match value.to_str() {
-                Some("pixels") => columns = false,
-                Some("columns") => columns = true,
-                _ => tracing::warn!(
-                    ?value,
-                    "{RASTER_KERNEL_ENV} is neither \"pixels\" nor \"columns\": ignored"
-                ),
-            }
-        }
+        let named = [("pixels", false), ("columns", true)];
+        let columns =
+            kernel_choice_from_env(RASTER_KERNEL_ENV, &named).unwrap_or(ctx.report.is_software);
         Self {
             columns,
             subgroup_sums: !columns && ctx.has_subgroups() && !ctx.report.is_software,
@@ -95,10 +88,23 @@ impl RenderKernels {
         } else {
             GRAD_ATOMICS_CAS
         };
-        let grad_emit = if variant.subgroup_sums && ctx.has_subgroups() {
+        // The column backward sums its pixels itself and emits through `add_fragment_grads`;
+        // the emission file only serves the per-pixel one.
+        let grad_emit = if variant.subgroup_sums && !variant.columns && ctx.has_subgroups() {
             GRAD_EMIT_SUBGROUP
         } else {
             GRAD_EMIT_DIRECT
+        };
+        let ((forward_label, forward_body), (backward_label, backward_body)) = if variant.columns {
+            (
+                ("rasterize_forward_columns", RASTERIZE_FORWARD_COLUMNS),
+                ("rasterize_backward_columns", RASTERIZE_BACKWARD_COLUMNS),
+            )
+        } else {
+            (
+                ("rasterize_forward", RASTERIZE_FORWARD),
+                ("rasterize_backward", RASTERIZE_BACKWARD),
+            )
         };
         Ok(Self {
             project_forward: build(
@@ -118,45 +124,23 @@ impl RenderKernels {
                 &[COMMON, TILE_RANGES],
                 "tile_ranges_from_sorted",
             )?,
-            rasterize_forward: if variant.columns {
-                build(
-                    "rasterize_forward_columns",
-                    &[COMMON, RASTERIZE_FORWARD_COMMON, RASTERIZE_FORWARD_COLUMNS],
-                    "rasterize_forward",
-                )?
-            } else {
-                build(
-                    "rasterize_forward",
-                    &[COMMON, RASTERIZE_FORWARD_COMMON, RASTERIZE_FORWARD],
-                    "rasterize_forward",
-                )?
-            },
-            rasterize_backward: if variant.columns {
-                build(
-                    "rasterize_backward_columns",
-                    &[
-                        atomics,
-                        COMMON,
-                        RASTERIZE_BACKWARD_COMMON,
-                        GRAD_FRAGMENT,
-                        RASTERIZE_BACKWARD_COLUMNS,
-                    ],
-                    "rasterize_backward",
-                )?
-            } else {
-                build(
-                    "rasterize_backward",
-                    &[
-                        atomics,
-                        COMMON,
-                        RASTERIZE_BACKWARD_COMMON,
-                        GRAD_FRAGMENT,
-                        grad_emit,
-                        RASTERIZE_BACKWARD,
-                    ],
-                    "rasterize_backward",
-                )?
-            },
+            rasterize_forward: build(
+                forward_label,
+                &[COMMON, RASTERIZE_FORWARD_COMMON, forward_body],
+                "rasterize_forward",
+            )?,
+            rasterize_backward: build(
+                backward_label,
+                &[
+                    atomics,
+                    COMMON,
+                    RASTERIZE_BACKWARD_COMMON,
+                    GRAD_FRAGMENT,
+                    grad_emit,
+                    backward_body,
+                ],
+                "rasterize_backward",
+            )?,
             project_backward: build(
                 "project_backward",
                 &[COMMON, PROJECT_BACKWARD],
