@@ -1,6 +1,7 @@
-// Projection: one invocation per Gaussian. Writes the screen-space splat, its tile count and its
-// depth sort key; culled Gaussians (filtered out, outside near/far, degenerate, off screen) get
-// radius 0, tile count 0 and the largest key so they sort last.
+// Projection: one invocation per Gaussian. Writes the screen-space splat, its tile count (tiles
+// its footprint touches, tile_footprint.wgsl) and its depth sort key; culled Gaussians (filtered
+// out, outside near/far, degenerate, too transparent to show, touching no tile) get radius 0,
+// tile count 0 and the largest key so they sort last.
 
 @group(0) @binding(0) var<uniform> uniforms: RenderUniforms;
 @group(0) @binding(1) var<storage, read> means: array<f32>;
@@ -66,25 +67,33 @@ fn project_forward(
         return;
     }
     let conic = vec3<f32>(c / det, -b / det, a / det);
-    let mid = 0.5 * (a + c);
-    let lambda = mid + sqrt(max(0.1, mid * mid - det));
-    let radius = ceil(RADIUS_SIGMAS * sqrt(lambda));
-    let mean2d = uniforms.focal * p.xy / p.z + uniforms.principal;
-    let grid = vec2<f32>(uniforms.tile_grid);
-    let tile_min = clamp(floor((mean2d - radius) / f32(TILE_SIZE)), vec2<f32>(0.0), grid);
-    let tile_max = clamp(ceil((mean2d + radius) / f32(TILE_SIZE)), vec2<f32>(0.0), grid);
-    let extent = tile_max - tile_min;
-    if extent.x <= 0.0 || extent.y <= 0.0 {
+    let opacity = 1.0 / (1.0 + exp(-opacity_logits[i]));
+    let sigma_max = footprint_sigma(opacity);
+    if !(sigma_max > 0.0) {
         cull(i);
         return;
     }
+    let mean2d = uniforms.focal * p.xy / p.z + uniforms.principal;
+    let rows = footprint_tile_rows(mean2d, conic, sigma_max, uniforms.tile_grid);
+    var tiles = 0u;
+    for (var row = rows.x; row < rows.y; row++) {
+        let columns = footprint_tile_columns(mean2d, conic, sigma_max, row, uniforms.tile_grid.x);
+        tiles += columns.y - min(columns.x, columns.y);
+    }
+    if tiles == 0u {
+        cull(i);
+        return;
+    }
+    // 3DGS's screen radius, which densification's size statistics read.
+    let mid = 0.5 * (a + c);
+    let lambda = mid + sqrt(max(0.1, mid * mid - det));
+    let radius = ceil(RADIUS_SIGMAS * sqrt(lambda));
     let direction = normalize(mean - uniforms.camera_position.xyz);
     let colour = max(sh_colour(i, uniforms.sh_degree, direction), vec3<f32>(0.0));
-    let opacity = 1.0 / (1.0 + exp(-opacity_logits[i]));
     projected[3u * i] = vec4<f32>(mean2d, opacity, p.z);
     projected[3u * i + 1u] = vec4<f32>(conic, radius);
     projected[3u * i + 2u] = vec4<f32>(colour, 0.0);
-    tile_counts[i] = u32(extent.x) * u32(extent.y);
+    tile_counts[i] = tiles;
     depth_keys[i] = bitcast<u32>(p.z);
     depth_values[i] = i;
 }

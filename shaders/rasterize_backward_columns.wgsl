@@ -2,10 +2,11 @@
 // walking a column of 4 pixels of the 16x16 tile (a 16x4 workgroup). A CPU adapter runs a
 // workgroup's invocations as SIMD lanes in a loop and reads workgroup memory lane by lane, and its
 // float atomics are compare-and-swap loops: here every splat's data is read once for 4 pixels,
-// and the 4 pixels' gradients are summed in registers before one set of atomics (lavapipe, 512
+// and the 4 pixels' gradients are summed in registers before they are emitted (lavapipe, 512
 // px, 200k random Gaussians: backward pass 2194 ms per pixel, 963 ms with columns of 4; columns
-// of 8 gained nothing more). Bindings, batch staging and the fragment's gradients:
-// rasterize_backward_common.wgsl and rasterize_grad_fragment.wgsl.
+// of 8 gained nothing more). With subgroups, the subgroup's sums are added up by shuffles before
+// the atomics (rasterize_grad_emit_shuffle.wgsl). Bindings, batch staging and the fragment's
+// gradients: rasterize_backward_common.wgsl and rasterize_grad_fragment.wgsl.
 
 const PIXELS: u32 = 4u;
 const INVOCATIONS: u32 = 64u;
@@ -26,6 +27,7 @@ fn rasterize_backward(
     var background_term: array<f32, 4>;
     var transmittance: array<f32, 4>;
     var behind: array<vec3<f32>, 4>;
+    emit_setup();
     var most = 0u;
     for (var p = 0u; p < PIXELS; p++) {
         let pixel = first_pixel + vec2<u32>(0u, p);
@@ -59,34 +61,31 @@ fn rasterize_backward(
         workgroupBarrier();
         for (var t = 0u; t < batch_size; t++) {
             let position = batch_end - 1u - t;
-            if position >= most {
-                continue;
-            }
-            let mean_opacity = batch_mean_opacity[t];
-            let conic = batch_conic[t].xyz;
-            let colour = batch_colour[t].xyz;
             var sum = no_fragment_grads();
             var any = false;
-            for (var p = 0u; p < PIXELS; p++) {
-                let d = mean_opacity.xy - centre[p];
-                let sigma = splat_sigma(conic, d);
-                let value = exp(-max(sigma, 0.0));
-                let alpha = min(ALPHA_MAX, mean_opacity.z * value);
-                if position < contributed[p] && sigma >= 0.0 && alpha >= ALPHA_MIN {
-                    any = true;
-                    let one_over_rest = 1.0 / (1.0 - alpha);
-                    transmittance[p] *= one_over_rest;
-                    let grads = fragment_grads(
-                        mean_opacity, conic, colour, d, value, alpha, transmittance[p],
-                        one_over_rest, behind[p], t_final[p], v_out[p], background_term[p],
-                    );
-                    sum = sum_fragment_grads(sum, grads);
-                    behind[p] += colour * (alpha * transmittance[p]);
+            // Past this invocation's last contributor nothing is left to do, but the subgroup
+            // emission below needs every invocation, so no `continue`.
+            if position < most {
+                let splat = staged_splat(t);
+                for (var p = 0u; p < PIXELS; p++) {
+                    let d = splat.mean_opacity.xy - centre[p];
+                    let sigma = splat_sigma(splat.conic, d);
+                    let value = exp(-max(sigma, 0.0));
+                    let alpha = min(ALPHA_MAX, splat.mean_opacity.z * value);
+                    if position < contributed[p] && sigma >= 0.0 && alpha >= ALPHA_MIN {
+                        any = true;
+                        let one_over_rest = 1.0 / (1.0 - alpha);
+                        transmittance[p] *= one_over_rest;
+                        let grads = fragment_grads(
+                            splat.mean_opacity, splat.conic, splat.colour, d, value, alpha, transmittance[p],
+                            one_over_rest, behind[p], t_final[p], v_out[p], background_term[p],
+                        );
+                        sum = sum_fragment_grads(sum, grads);
+                        behind[p] += splat.colour * (alpha * transmittance[p]);
+                    }
                 }
             }
-            if any {
-                add_fragment_grads(batch_gaussian[t], sum);
-            }
+            emit_fragment_grads(batch_gaussian[t], sum, any);
         }
         workgroupBarrier();
     }

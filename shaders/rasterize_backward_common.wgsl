@@ -1,6 +1,6 @@
 // What both rasterize backward kernels share (rasterize_backward.wgsl, one pixel per invocation;
-// rasterize_backward_columns.wgsl, columns of pixels on software adapters): bindings, the batch
-// of splats staged in workgroup memory (back to front), and the longest walk of the tile.
+// rasterize_backward_columns.wgsl, columns of pixels on software adapters): bindings, staging a
+// batch of splats (rasterize_batch.wgsl) back to front, and the longest walk of the tile.
 
 @group(0) @binding(0) var<uniform> uniforms: RenderUniforms;
 @group(0) @binding(1) var<storage, read> tile_ranges: array<u32>;
@@ -11,12 +11,7 @@
 @group(0) @binding(6) var<storage, read> grad_image: array<vec4<f32>>;
 @group(0) @binding(7) var<storage, read_write> grad_projected: array<AtomicF32>;
 
-const BATCH: u32 = 256u;
-
 var<workgroup> batch_gaussian: array<u32, 256>;
-var<workgroup> batch_mean_opacity: array<vec4<f32>, 256>;
-var<workgroup> batch_conic: array<vec4<f32>, 256>;
-var<workgroup> batch_colour: array<vec4<f32>, 256>;
 var<workgroup> range_start: u32;
 var<workgroup> longest: atomic<u32>;
 var<workgroup> longest_snapshot: u32;
@@ -41,7 +36,5 @@ fn tile_walk(tile: u32, local_index: u32, contributed: u32) -> vec2<u32> {
 fn stage_splat_backwards(start: u32, batch_end: u32, slot: u32) {
     let gaussian = intersection_gaussians[start + batch_end - 1u - slot];
     batch_gaussian[slot] = gaussian;
-    batch_mean_opacity[slot] = projected[3u * gaussian];
-    batch_conic[slot] = projected[3u * gaussian + 1u];
-    batch_colour[slot] = projected[3u * gaussian + 2u];
+    stage_projected(slot, gaussian);
 }

@@ -51,13 +51,11 @@ fn rasterize_forward(
             if live == 0u {
                 break;
             }
-            let mean_opacity = batch_mean_opacity[t];
-            let conic = batch_conic[t].xyz;
-            let colour = batch_colour[t].xyz;
+            let splat = staged_splat(t);
             for (var p = 0u; p < PIXELS; p++) {
-                let d = mean_opacity.xy - centre[p];
-                let sigma = splat_sigma(conic, d);
-                let alpha = min(ALPHA_MAX, mean_opacity.z * exp(-sigma));
+                let d = splat.mean_opacity.xy - centre[p];
+                let sigma = splat_sigma(splat.conic, d);
+                let alpha = min(ALPHA_MAX, splat.mean_opacity.z * exp(-sigma));
                 if done[p] || sigma < 0.0 || alpha < ALPHA_MIN {
                     continue;
                 }
@@ -68,8 +66,8 @@ fn rasterize_forward(
                     continue;
                 }
                 let weight = alpha * transmittance[p];
-                rgb[p] += colour * weight;
-                depth_sum[p] += mean_opacity.w * weight;
+                rgb[p] += splat.colour * weight;
+                depth_sum[p] += splat.mean_opacity.w * weight;
                 transmittance[p] = next;
                 contributed[p] = b * BATCH + t + 1u;
             }

@@ -1,6 +1,6 @@
 // What both rasterize forward kernels share (rasterize_forward.wgsl, one pixel per invocation;
-// rasterize_forward_columns.wgsl, columns of pixels on software adapters): bindings, the batch of
-// splats staged in workgroup memory, and a splat's Gaussian falloff at a pixel.
+// rasterize_forward_columns.wgsl, columns of pixels on software adapters): bindings, staging a
+// batch of splats (rasterize_batch.wgsl) front to back, the tile's range, and the early-out vote.
 
 @group(0) @binding(0) var<uniform> uniforms: RenderUniforms;
 @group(0) @binding(1) var<storage, read> tile_ranges: array<u32>;
@@ -11,11 +11,6 @@
 @group(0) @binding(6) var<storage, read_write> last_contributor: array<u32>;
 @group(0) @binding(7) var<storage, read_write> depth: array<f32>;
 
-const BATCH: u32 = 256u;
-
-var<workgroup> batch_mean_opacity: array<vec4<f32>, 256>;
-var<workgroup> batch_conic: array<vec4<f32>, 256>;
-var<workgroup> batch_colour: array<vec4<f32>, 256>;
 var<workgroup> range_start: u32;
 var<workgroup> range_end: u32;
 // Invocations with a pixel still unsaturated, counted before each batch.
@@ -24,10 +19,7 @@ var<workgroup> active_snapshot: u32;
 
 // Stages splat `slot` of the batch starting at intersection `first`.
 fn stage_splat(first: u32, slot: u32) {
-    let gaussian = intersection_gaussians[first + slot];
-    batch_mean_opacity[slot] = projected[3u * gaussian];
-    batch_conic[slot] = projected[3u * gaussian + 1u];
-    batch_colour[slot] = projected[3u * gaussian + 2u];
+    stage_projected(slot, intersection_gaussians[first + slot]);
 }
 
 // The tile's [start, end) in the sorted intersections, the same in every invocation.

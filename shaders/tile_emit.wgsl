@@ -1,5 +1,5 @@
 // One invocation per Gaussian in depth order: writes its (tile id, Gaussian) intersections at its
-// scanned offset, tiles in row-major order. Entries past the capacity are dropped (the host sees
+// scanned offset, for the tiles its footprint touches (tile_footprint.wgsl) in row-major order. Entries past the capacity are dropped (the host sees
 // the unclamped total and grows the buffers).
 
 @group(0) @binding(0) var<uniform> uniforms: RenderUniforms;
@@ -26,19 +26,39 @@ fn tile_emit(
         return;
     }
     let gaussian = depth_values[j];
-    let mean2d = projected[3u * gaussian].xy;
-    let radius = projected[3u * gaussian + 1u].w;
-    let grid = vec2<f32>(uniforms.tile_grid);
-    let tile_min = vec2<u32>(clamp(floor((mean2d - radius) / f32(TILE_SIZE)), vec2<f32>(0.0), grid));
-    let tile_max = vec2<u32>(clamp(ceil((mean2d + radius) / f32(TILE_SIZE)), vec2<f32>(0.0), grid));
-    for (var y = tile_min.y; y < tile_max.y; y++) {
-        for (var x = tile_min.x; x < tile_max.x; x++) {
+    let mean_opacity = projected[3u * gaussian];
+    let conic = projected[3u * gaussian + 1u].xyz;
+    let sigma_max = footprint_sigma(mean_opacity.z);
+    let rows = footprint_tile_rows(mean_opacity.xy, conic, sigma_max, uniforms.tile_grid);
+    // A tile the footprint misses, for the padding below (none only when it covers the grid).
+    var missed = 0u;
+    if rows.x > 0u {
+        missed = (rows.x - 1u) * uniforms.tile_grid.x;
+    } else if rows.y < uniforms.tile_grid.y {
+        missed = rows.y * uniforms.tile_grid.x;
+    }
+    for (var row = rows.x; row < rows.y; row++) {
+        let columns = footprint_tile_columns(mean_opacity.xy, conic, sigma_max, row, uniforms.tile_grid.x);
+        if columns.x > 0u {
+            missed = row * uniforms.tile_grid.x;
+        } else if columns.y < uniforms.tile_grid.x {
+            missed = row * uniforms.tile_grid.x + uniforms.tile_grid.x - 1u;
+        }
+        for (var x = columns.x; x < columns.y; x++) {
             if offset >= end {
                 return;
             }
-            intersection_tiles[offset] = y * uniforms.tile_grid.x + x;
+            intersection_tiles[offset] = row * uniforms.tile_grid.x + x;
             intersection_gaussians[offset] = gaussian;
             offset += 1u;
         }
+    }
+    // Should the compiler have rounded the footprint differently in project_forward, so that it
+    // counted a tile this loop left out, the slot gets a tile the footprint misses: its pixels
+    // all fail the alpha threshold, so the rasterizer passes over it (rather than over a stale
+    // entry). Tiles found here but not counted there are dropped above, as unseen.
+    for (; offset < end; offset++) {
+        intersection_tiles[offset] = missed;
+        intersection_gaussians[offset] = gaussian;
     }
 }

@@ -415,8 +415,8 @@ fn gpu_gradients_summed_over_subgroups_match_reference() {
 }
 
 /// Every rasterize variant, whatever the adapter picks for itself: one pixel per invocation
-/// (GPUs; with and without subgroup sums) and columns of pixels (software adapters) give the
-/// reference's images and gradients.
+/// (GPUs) and columns of pixels (software adapters), each with and without subgroup sums, give
+/// the reference's images and gradients.
 #[test]
 fn every_raster_variant_matches_reference() {
     let Some(ctx) = context() else { return };
@@ -431,10 +431,12 @@ fn every_raster_variant_matches_reference() {
         },
     ];
     if ctx.has_subgroups() {
-        variants.push(RasterVariant {
-            columns: false,
-            subgroup_sums: true,
-        });
+        for columns in [true, false] {
+            variants.push(RasterVariant {
+                columns,
+                subgroup_sums: true,
+            });
+        }
     }
     // 40 x 36: partial tiles on both edges.
     let camera = test_camera(40, 36);
@@ -452,4 +454,88 @@ fn every_raster_variant_matches_reference() {
         let worst = compare_gradients(&gpu, &cpu, 2e-3);
         println!("{variant:?}: image error {error:.1e}, gradient error {worst:.1e}");
     }
+}
+
+/// Tiles whose 16 x 16 square the footprint ellipse `sigma <= sigma_max` reaches into, found per
+/// tile from the least sigma over the square (an independent route to the GPU's row-by-row one).
+fn footprint_tile_count(
+    mean2d: [f64; 2],
+    conic: [f64; 3],
+    sigma_max: f64,
+    tiles: [u32; 2],
+) -> usize {
+    let sigma =
+        |dx: f64, dy: f64| 0.5 * (conic[0] * dx * dx + conic[2] * dy * dy) + conic[1] * dx * dy;
+    let tile = segsplat::splat::TILE_SIZE as f64;
+    let mut count = 0;
+    for ty in 0..tiles[1] {
+        for tx in 0..tiles[0] {
+            let lo = [tx as f64 * tile - mean2d[0], ty as f64 * tile - mean2d[1]];
+            let hi = [lo[0] + tile, lo[1] + tile];
+            let inside = lo[0] <= 0.0 && hi[0] >= 0.0 && lo[1] <= 0.0 && hi[1] >= 0.0;
+            let least = [lo[0], hi[0]]
+                .map(|x| sigma(x, (-conic[1] * x / conic[2]).clamp(lo[1], hi[1])))
+                .into_iter()
+                .chain(
+                    [lo[1], hi[1]]
+                        .map(|y| sigma((-conic[1] * y / conic[0]).clamp(lo[0], hi[0]), y)),
+                )
+                .fold(f64::INFINITY, f64::min);
+            if inside || least <= sigma_max {
+                count += 1;
+            }
+        }
+    }
+    count
+}
+
+#[test]
+fn gpu_tile_lists_hold_the_tiles_each_footprint_touches() {
+    let Some(ctx) = context() else { return };
+    let mut renderer = Renderer::new(&ctx).unwrap();
+    let camera = test_camera(96, 80);
+    let settings = RenderSettings::default();
+    // Faint, thin and opaque splats: a fixed 3-sigma square would list many more tiles.
+    let mut model = edge_case_scene(91, 150, &camera);
+    let mut rng = ChaCha8Rng::seed_from_u64(92);
+    for logit in model.opacity_logits.iter_mut() {
+        *logit = rng.random_range(-5.0..4.0);
+    }
+    let reference = render_forward(&ReferenceGaussians::from_model(&model), &camera, &settings);
+    // The kernels widen sigma_max by 0.01 so no passing fragment falls outside the lists.
+    let expected: usize = reference
+        .projected
+        .iter()
+        .flatten()
+        .map(|p| {
+            let sigma_max = (p.opacity / segsplat::splat::ALPHA_MIN as f64).ln() + 0.01;
+            footprint_tile_count(p.mean2d.to_array(), p.conic, sigma_max, camera.tile_grid())
+        })
+        .sum();
+    let square: usize = reference
+        .projected
+        .iter()
+        .flatten()
+        .map(|p| {
+            let tile = segsplat::splat::TILE_SIZE as f64;
+            let span = |centre: f64, tiles: u32| {
+                let lo = ((centre - p.radius) / tile)
+                    .floor()
+                    .clamp(0.0, tiles as f64);
+                let hi = ((centre + p.radius) / tile).ceil().clamp(0.0, tiles as f64);
+                (hi - lo) as usize
+            };
+            span(p.mean2d.x, camera.tile_grid()[0]) * span(p.mean2d.y, camera.tile_grid()[1])
+        })
+        .sum();
+    let gaussians = GpuGaussians::upload(&ctx, &model, model.len()).unwrap();
+    let output = renderer
+        .render_checked(&ctx, &gaussians, &camera, &settings)
+        .unwrap();
+    let (listed, _) = output.read_intersection_count(&ctx).unwrap();
+    let image = output.read_image(&ctx).unwrap();
+    println!("intersections: {listed} listed, {expected} expected, {square} with 3-sigma squares");
+    assert_eq!(listed as usize, expected);
+    assert!((listed as usize) * 4 < square * 3, "{listed} vs {square}");
+    assert!(max_image_error(&image, &reference.image) < 2e-4);
 }

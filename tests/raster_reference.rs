@@ -8,7 +8,7 @@ use segsplat::splat::reference::scenes::{edge_case_scene, test_camera, two_objec
 use segsplat::splat::reference::{
     ReferenceForward, ReferenceGaussians, parameter_name, render_backward, render_forward,
 };
-use segsplat::splat::{ObjectFilter, RenderCamera, RenderSettings};
+use segsplat::splat::{ObjectFilter, RenderCamera, RenderSettings, TILE_SIZE};
 
 fn weighted_loss(forward: &ReferenceForward, weights: &[[f64; 4]]) -> f64 {
     forward
@@ -159,8 +159,20 @@ fn edge_case_scene_exercises_every_case() {
         forward.projected[n - 6].is_none(),
         "behind the camera is culled"
     );
-    let corner = forward.projected[n - 5].expect("corner splat visible");
-    assert!(corner.tile_min == [0, 0] && corner.tile_max[0] >= 2 && corner.tile_max[1] >= 2);
+    forward.projected[n - 5].expect("corner splat visible");
+    let tile = TILE_SIZE;
+    for (x, y) in [
+        (tile - 1, tile - 1),
+        (tile, tile - 1),
+        (tile - 1, tile),
+        (tile, tile),
+    ] {
+        let pixel = (y * camera.width + x) as usize;
+        assert!(
+            forward.contributors[pixel].contains(&((n - 5) as u32)),
+            "the corner splat reaches pixel ({x}, {y}) of each tile around the corner"
+        );
+    }
     let thin = forward.projected[n - 4].expect("thin splat visible");
     let [a, b, c] = thin.conic;
     let (trace, det) = (a + c, a * c - b * b);

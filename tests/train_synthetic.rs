@@ -119,7 +119,8 @@ fn checkpoint_restores_state_exactly() {
 }
 
 /// `segsplat train` writes a trained scene and `segsplat bench --init-ply` times steps starting
-/// from its Gaussians (the trained-density benchmark of docs/benchmarks.md).
+/// from its Gaussians (the trained-density benchmark of docs/benchmarks.md), and
+/// `--profile-kernels` breaks a step's GPU time down by kernel.
 #[test]
 fn bench_starts_from_a_trained_ply() {
     if gpu().is_none() {
@@ -160,12 +161,41 @@ fn bench_starts_from_a_trained_ply() {
         &ply,
         "--timing-repeats",
         "1",
+        "--profile-kernels",
+        "2",
         "--json",
     ]);
     assert!(output.status.success(), "{output:?}");
     let report: serde_json::Value =
         serde_json::from_slice(&output.stdout).expect("bench prints one JSON object");
     assert_eq!(report["gaussians_start"], count, "{report}");
+    // The kernel profile times every pass of the two profiled steps, by kernel.
+    let profile = &report["kernel_profile"];
+    assert_eq!(profile["steps"], 2, "{report}");
+    let kernels = profile["kernels"].as_array().expect("kernels by time");
+    let timed = |name: &str| {
+        kernels
+            .iter()
+            .find(|k| k["kernel"].as_str().is_some_and(|k| k.starts_with(name)))
+            .and_then(|k| k["ms"].as_f64())
+    };
+    for kernel in [
+        "project_forward",
+        "rasterize_forward",
+        "rasterize_backward",
+        "adam_step",
+    ] {
+        assert!(
+            timed(kernel).is_some_and(|ms| ms >= 0.0),
+            "{kernel}: {report}"
+        );
+    }
+    let total: f64 = kernels.iter().filter_map(|k| k["ms"].as_f64()).sum();
+    let reported = profile["gpu_ms_per_step"].as_f64().expect("gpu ms");
+    assert!(
+        (total - reported).abs() < 1e-6 * reported.max(1.0),
+        "{report}"
+    );
     let missing = segsplat(&[
         "bench",
         scene,

@@ -11,6 +11,8 @@ use clap::Args;
 use glam::Vec3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use segsplat::gpu::GpuContext;
+use segsplat::gpu::profiler::KernelTime;
 use segsplat::scene::Scene;
 use segsplat::splat::GaussianModel;
 use segsplat::splat::deform::{DeformationConfig, FieldShape};
@@ -66,6 +68,10 @@ pub struct BenchArgs {
     /// Width of the deformation field's hidden layers (default 256).
     #[arg(long, requires = "deformation")]
     pub field_width: Option<u32>,
+    /// After training and evaluation, time every kernel over this many more training steps
+    /// with GPU timestamps (`kernel_profile` in the report: ms per step by kernel).
+    #[arg(long)]
+    pub profile_kernels: Option<u32>,
     /// Print one JSON object (otherwise a readable summary).
     #[arg(long)]
     pub json: bool,
@@ -227,6 +233,59 @@ struct BenchReport {
     object_loss: Option<ObjectLossReport>,
     #[serde(skip_serializing_if = "Option::is_none")]
     deformation: Option<DeformationReport>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    kernel_profile: Option<KernelProfileReport>,
+}
+
+/// `--profile-kernels`: GPU time per training step by kernel, averaged over `steps`.
+#[derive(Serialize)]
+struct KernelProfileReport {
+    steps: u32,
+    gpu_ms_per_step: f64,
+    /// Wall time per step over the same steps (submission and waits included).
+    wall_ms_per_step: f64,
+    kernels: Vec<KernelTime>,
+}
+
+/// Runs `steps` more training steps with every pass timed, and averages per step.
+fn profile_kernels(
+    ctx: &GpuContext,
+    trainer: &mut Trainer,
+    steps: u32,
+) -> anyhow::Result<KernelProfileReport> {
+    let profiler = ctx
+        .profiler
+        .as_ref()
+        .context("kernel profiling is not enabled on this GPU context")?;
+    let steps = steps.max(1);
+    ctx.wait_idle()?;
+    profiler.start();
+    let started = std::time::Instant::now();
+    for _ in 0..steps {
+        trainer.train_step()?;
+    }
+    let profile = profiler.take(ctx)?;
+    let wall_ms_per_step = started.elapsed().as_secs_f64() * 1e3 / f64::from(steps);
+    if profile.untimed_passes > 0 {
+        tracing::warn!(
+            untimed = profile.untimed_passes,
+            "more passes than the profiler holds: use fewer --profile-kernels steps"
+        );
+    }
+    let per_step = |ms: f64| ms / f64::from(steps);
+    Ok(KernelProfileReport {
+        steps,
+        gpu_ms_per_step: per_step(profile.total_ms),
+        wall_ms_per_step,
+        kernels: profile
+            .kernels
+            .into_iter()
+            .map(|time| KernelTime {
+                ms: per_step(time.ms),
+                ..time
+            })
+            .collect(),
+    })
 }
 
 /// The field `--deformation` trains: the default shape, resized by the flags.
@@ -290,7 +349,10 @@ fn static_baseline(
 
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     let mut scene = super::open_scene(&args.dataset)?;
-    let ctx = super::open_gpu()?;
+    let mut ctx = super::open_gpu()?;
+    if args.profile_kernels.is_some() {
+        ctx.enable_kernel_profiling()?;
+    }
     let mut config = TrainConfig {
         steps: args.steps,
         max_resolution: Some(args.max_resolution),
@@ -330,6 +392,10 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     let (forward_ms_end, backward_ms_end) = trainer.time_passes(args.timing_repeats)?;
     let field_timing = trainer.time_deformation(args.timing_repeats)?;
     let eval = trainer.evaluate()?;
+    let kernel_profile = match args.profile_kernels {
+        Some(steps) => Some(profile_kernels(&ctx, &mut trainer, steps)?),
+        None => None,
+    };
     let deformation = match (baseline, trainer.deformation_shape(), field_timing) {
         (
             Some((static_steps_per_sec, static_train_seconds, static_psnr)),
@@ -377,6 +443,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         peak_resident_mib: super::peak_resident_mib(),
         object_loss,
         deformation,
+        kernel_profile,
     };
     if args.json {
         println!("{}", serde_json::to_string(&report)?);

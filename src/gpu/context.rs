@@ -6,7 +6,11 @@
 //! bindings) and with the optional features the kernels exploit when present: native f32 atomics and
 //! subgroups. Kernels fall back to CAS loops / shared memory when they are absent.
 
+use std::sync::Arc;
+
 use serde::Serialize;
+
+use super::profiler::KernelProfiler;
 
 #[derive(Debug, thiserror::Error)]
 pub enum GpuError {
@@ -163,6 +167,8 @@ pub struct GpuContext {
     pub report: AdapterReport,
     pub limits: wgpu::Limits,
     pub features: wgpu::Features,
+    /// Per-kernel timestamps, when turned on by [`GpuContext::enable_kernel_profiling`].
+    pub profiler: Option<Arc<KernelProfiler>>,
 }
 
 impl GpuContext {
@@ -219,7 +225,15 @@ impl GpuContext {
             report,
             limits,
             features,
+            profiler: None,
         })
+    }
+
+    /// Times every pass of the kernels built on this context from now on (see
+    /// [`KernelProfiler`]); fails when the adapter has no timestamp queries.
+    pub fn enable_kernel_profiling(&mut self) -> Result<(), GpuError> {
+        self.profiler = Some(Arc::new(KernelProfiler::new(self)?));
+        Ok(())
     }
 
     pub fn has_float32_atomics(&self) -> bool {

@@ -4,7 +4,10 @@
 //! Convention for every kernel: all bindings in `@group(0)`, numbered from 0 in the order the
 //! caller passes buffers to [`Kernel::bind`].
 
+use std::sync::Arc;
+
 use crate::gpu::GpuContext;
+use crate::gpu::profiler::KernelProfiler;
 
 /// WGSL that gives every kernel `atomic_add_f32(buffer_index, value)`-style accumulation on the
 /// adapter at hand: native `atomic<f32>` where the device has `SHADER_FLOAT32_ATOMIC`, a
@@ -53,6 +56,7 @@ fn atomic_f32_load(p: ptr<storage, AtomicF32, read_write>) -> f32 {
 pub struct Kernel {
     pub pipeline: wgpu::ComputePipeline,
     label: &'static str,
+    profiler: Option<Arc<KernelProfiler>>,
 }
 
 impl Kernel {
@@ -85,7 +89,11 @@ impl Kernel {
                 },
                 cache: None,
             });
-        Self { pipeline, label }
+        Self {
+            pipeline,
+            label,
+            profiler: ctx.profiler.clone(),
+        }
     }
 
     /// A bind group with `buffers[i]` (whole buffer) at `@group(0) @binding(i)`.
@@ -105,6 +113,12 @@ impl Kernel {
         })
     }
 
+    fn timestamp_writes(&self) -> Option<wgpu::ComputePassTimestampWrites<'_>> {
+        self.profiler
+            .as_ref()
+            .and_then(|profiler| profiler.pass_writes(self.label))
+    }
+
     /// Records one dispatch of `workgroups` groups.
     pub fn dispatch(
         &self,
@@ -114,7 +128,7 @@ impl Kernel {
     ) {
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some(self.label),
-            timestamp_writes: None,
+            timestamp_writes: self.timestamp_writes(),
         });
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, bind_group, &[]);
@@ -132,7 +146,7 @@ impl Kernel {
     ) {
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some(self.label),
-            timestamp_writes: None,
+            timestamp_writes: self.timestamp_writes(),
         });
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, bind_group, &[]);

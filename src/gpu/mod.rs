@@ -3,11 +3,13 @@
 
 pub mod context;
 pub mod kernel;
+pub mod profiler;
 pub mod scan;
 pub mod sort;
 pub mod validation;
 
 pub use context::{AdapterFilter, AdapterReport, GpuContext, GpuError};
 pub use kernel::Kernel;
+pub use profiler::{KernelProfile, KernelProfiler};
 pub use scan::ExclusiveScan;
 pub use sort::RadixSort;

@@ -1,10 +1,10 @@
 //! CPU reference renderer in f64: the ground truth the GPU kernels are tested against, and the
-//! gradients the finite-difference tests check. Plain loops, no tiles-as-lists or sorting tricks:
-//! every pixel walks all Gaussians in depth order and takes those whose tile rectangle covers it,
-//! which is exactly the set the GPU's tile lists hold.
+//! gradients the finite-difference tests check. Plain loops, no tiles or sorting tricks: every
+//! pixel walks all Gaussians in depth order and takes every fragment whose alpha reaches 1/255, so
+//! the GPU matches it only if its tile lists hold every such fragment.
 //!
 //! Semantics (shared with the GPU; constants in [`crate::splat`]): EWA projection with the 3DGS
-//! frustum clamp and 0.3 px^2 dilation, 3-sigma radius, 16x16 tiles, front-to-back compositing with
+//! frustum clamp and 0.3 px^2 dilation, front-to-back compositing with
 //! `alpha = min(0.99, o * exp(-sigma))`, fragments with `alpha < 1/255` (or `sigma < 0`) skipped,
 //! and a pixel stops before the fragment that would take its transmittance to `<= 1e-4`.
 

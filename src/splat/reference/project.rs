@@ -7,7 +7,7 @@ use glam::{DMat2, DMat3, DVec2, DVec3};
 
 use super::sh;
 use super::{ReferenceCamera, ReferenceGaussians};
-use crate::splat::{COVARIANCE_DILATION, FRUSTUM_SLACK, RADIUS_SIGMAS, RenderSettings, TILE_SIZE};
+use crate::splat::{ALPHA_MIN, COVARIANCE_DILATION, FRUSTUM_SLACK, RADIUS_SIGMAS, RenderSettings};
 
 /// A Gaussian as the rasteriser sees it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -23,10 +23,10 @@ pub struct ProjectedGaussian {
     pub colour_clamped: [bool; 3],
     /// Camera-space z.
     pub depth: f64,
+    /// 3DGS's screen radius: three standard deviations along the major axis, rounded up.
     pub radius: f64,
-    /// Tile rectangle [min, max) in tile units.
-    pub tile_min: [u32; 2],
-    pub tile_max: [u32; 2],
+    /// How far the footprint (where alpha can reach 1/255) extends from the mean along x and y.
+    pub footprint_reach: DVec2,
 }
 
 /// Gradients of a loss with respect to one projected Gaussian.
@@ -156,7 +156,8 @@ fn geometry(gaussians: &ReferenceGaussians, index: usize, camera: &ReferenceCame
 }
 
 /// Projects Gaussian `index`, or `None` when it is culled (filtered out, at or before the near
-/// plane, at or beyond the far plane, degenerate, or covering no tile).
+/// plane, at or beyond the far plane, degenerate, too transparent to reach alpha 1/255 anywhere,
+/// or with that footprint off screen).
 pub fn project_gaussian(
     gaussians: &ReferenceGaussians,
     index: usize,
@@ -187,29 +188,25 @@ pub fn project_gaussian(
         camera.fx * mean_camera.x / z + camera.cx,
         camera.fy * mean_camera.y / z + camera.cy,
     );
-    let tiles = camera.tiles();
-    let tile = TILE_SIZE as f64;
-    let tile_min = [
-        ((mean2d.x - radius) / tile)
-            .floor()
-            .clamp(0.0, tiles[0] as f64) as u32,
-        ((mean2d.y - radius) / tile)
-            .floor()
-            .clamp(0.0, tiles[1] as f64) as u32,
-    ];
-    let tile_max = [
-        ((mean2d.x + radius) / tile)
-            .ceil()
-            .clamp(0.0, tiles[0] as f64) as u32,
-        ((mean2d.y + radius) / tile)
-            .ceil()
-            .clamp(0.0, tiles[1] as f64) as u32,
-    ];
-    if tile_max[0] <= tile_min[0] || tile_max[1] <= tile_min[1] {
+    let opacity = 1.0 / (1.0 + (-gaussians.opacity_logits[index]).exp());
+    // Where alpha = opacity * exp(-sigma) can reach ALPHA_MIN: sigma <= ln(opacity / ALPHA_MIN),
+    // an ellipse reaching sqrt(2 sigma cov_kk) along axis k.
+    let sigma_max = (opacity / ALPHA_MIN as f64).ln();
+    if sigma_max <= 0.0 {
+        return None;
+    }
+    let footprint_reach = DVec2::new((2.0 * sigma_max * a).sqrt(), (2.0 * sigma_max * c).sqrt());
+    let image = DVec2::new(camera.width as f64, camera.height as f64);
+    let footprint_min = mean2d - footprint_reach;
+    let footprint_max = mean2d + footprint_reach;
+    if footprint_max.x <= 0.0
+        || footprint_max.y <= 0.0
+        || footprint_min.x >= image.x
+        || footprint_min.y >= image.y
+    {
         return None;
     }
     let (colour, colour_clamped) = colour(gaussians, index, camera, settings.sh_degree);
-    let opacity = 1.0 / (1.0 + (-gaussians.opacity_logits[index]).exp());
     Some(ProjectedGaussian {
         mean2d,
         conic,
@@ -218,8 +215,7 @@ pub fn project_gaussian(
         colour_clamped,
         depth: z,
         radius,
-        tile_min,
-        tile_max,
+        footprint_reach,
     })
 }
 

@@ -9,9 +9,7 @@ use super::project::{ProjectedGrad, project_backward};
 use super::{
     ProjectedGaussian, ReferenceCamera, ReferenceGaussians, ReferenceGrads, project_gaussian,
 };
-use crate::splat::{
-    ALPHA_MAX, ALPHA_MIN, RenderCamera, RenderSettings, TILE_SIZE, TRANSMITTANCE_MIN,
-};
+use crate::splat::{ALPHA_MAX, ALPHA_MIN, RenderCamera, RenderSettings, TRANSMITTANCE_MIN};
 
 /// A reference render and what its backward pass needs.
 #[derive(Debug, Clone)]
@@ -61,11 +59,6 @@ fn fragment(p: &ProjectedGaussian, pixel: DVec2) -> Option<(f64, f64, DVec2, f64
     Some((alpha, sigma, d, gaussian))
 }
 
-fn covers(p: &ProjectedGaussian, tile: [u32; 2]) -> bool {
-    (p.tile_min[0]..p.tile_max[0]).contains(&tile[0])
-        && (p.tile_min[1]..p.tile_max[1]).contains(&tile[1])
-}
-
 /// Renders `gaussians` through `camera`.
 pub fn render_forward(
     gaussians: &ReferenceGaussians,
@@ -86,7 +79,6 @@ pub fn render_forward(
     for y in 0..camera.height {
         for x in 0..camera.width {
             let pixel_index = (y * camera.width + x) as usize;
-            let tile = [x / TILE_SIZE, y / TILE_SIZE];
             let centre = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
             let mut transmittance = 1.0;
             let mut rgb = [0.0; 3];
@@ -94,9 +86,6 @@ pub fn render_forward(
                 let Some(p) = projected[gaussian as usize].as_ref() else {
                     continue;
                 };
-                if !covers(p, tile) {
-                    continue;
-                }
                 let Some((alpha, ..)) = fragment(p, centre) else {
                     continue;
                 };

@@ -11,7 +11,9 @@ const TILE_COUNT_IN_DEPTH_ORDER: &str =
     include_str!("../../../shaders/tile_count_in_depth_order.wgsl");
 const TILE_BUDGET: &str = include_str!("../../../shaders/tile_budget.wgsl");
 const TILE_EMIT: &str = include_str!("../../../shaders/tile_emit.wgsl");
+const TILE_FOOTPRINT: &str = include_str!("../../../shaders/tile_footprint.wgsl");
 const TILE_RANGES: &str = include_str!("../../../shaders/tile_ranges.wgsl");
+const RASTERIZE_BATCH: &str = include_str!("../../../shaders/rasterize_batch.wgsl");
 const RASTERIZE_FORWARD_COMMON: &str =
     include_str!("../../../shaders/rasterize_forward_common.wgsl");
 const RASTERIZE_FORWARD: &str = include_str!("../../../shaders/rasterize_forward.wgsl");
@@ -28,6 +30,7 @@ const GRAD_ATOMICS_CAS: &str = include_str!("../../../shaders/rasterize_grad_ato
 const GRAD_FRAGMENT: &str = include_str!("../../../shaders/rasterize_grad_fragment.wgsl");
 const GRAD_EMIT_DIRECT: &str = include_str!("../../../shaders/rasterize_grad_emit_direct.wgsl");
 const GRAD_EMIT_SUBGROUP: &str = include_str!("../../../shaders/rasterize_grad_emit_subgroup.wgsl");
+const GRAD_EMIT_SHUFFLE: &str = include_str!("../../../shaders/rasterize_grad_emit_shuffle.wgsl");
 const PROJECT_BACKWARD: &str = include_str!("../../../shaders/project_backward.wgsl");
 const SH_BACKWARD: &str = include_str!("../../../shaders/sh_backward.wgsl");
 
@@ -57,10 +60,12 @@ pub struct RasterVariant {
     /// so each splat read and each atomic serves several pixels) instead of one pixel per
     /// invocation (GPUs).
     pub columns: bool,
-    /// Per-pixel backward only: each fragment's gradients are summed over the subgroup before
-    /// the atomics (hardware with subgroups, where same-address atomics from a warp serialise;
-    /// on lavapipe's 8-lane subgroups the sums cost more than the atomics they save: 512 px,
-    /// 200k random Gaussians, backward 8.6-10.5 s with sums vs 3.6-4.7 s without).
+    /// Each splat's gradients are summed over the subgroup before the atomics. Per pixel by
+    /// `subgroupAdd` (hardware with subgroups, where same-address atomics from a warp
+    /// serialise; on lavapipe it walks the lanes one by one and costs more than the atomics it
+    /// saves: 512 px, 200k random Gaussians, backward 8.6-10.5 s with sums vs 3.6-4.7 s
+    /// without); in columns by shuffles, which lavapipe turns into vector permutes (column
+    /// backward 812 ms with them, 1041 ms without).
     pub subgroup_sums: bool,
 }
 
@@ -72,7 +77,7 @@ impl RasterVariant {
             kernel_choice_from_env(RASTER_KERNEL_ENV, &named).unwrap_or(ctx.report.is_software);
         Self {
             columns,
-            subgroup_sums: !columns && ctx.has_subgroups() && !ctx.report.is_software,
+            subgroup_sums: ctx.has_subgroups() && (columns || !ctx.report.is_software),
         }
     }
 }
@@ -88,12 +93,13 @@ impl RenderKernels {
         } else {
             GRAD_ATOMICS_CAS
         };
-        // The column backward sums its pixels itself and emits through `add_fragment_grads`;
-        // the emission file only serves the per-pixel one.
-        let grad_emit = if variant.subgroup_sums && !variant.columns && ctx.has_subgroups() {
-            GRAD_EMIT_SUBGROUP
-        } else {
-            GRAD_EMIT_DIRECT
+        let grad_emit = match (
+            variant.subgroup_sums && ctx.has_subgroups(),
+            variant.columns,
+        ) {
+            (false, _) => GRAD_EMIT_DIRECT,
+            (true, false) => GRAD_EMIT_SUBGROUP,
+            (true, true) => GRAD_EMIT_SHUFFLE,
         };
         let ((forward_label, forward_body), (backward_label, backward_body)) = if variant.columns {
             (
@@ -109,7 +115,7 @@ impl RenderKernels {
         Ok(Self {
             project_forward: build(
                 "project_forward",
-                &[COMMON, SH, PROJECT_FORWARD],
+                &[COMMON, SH, TILE_FOOTPRINT, PROJECT_FORWARD],
                 "project_forward",
             )?,
             tile_count_in_depth_order: build(
@@ -118,7 +124,11 @@ impl RenderKernels {
                 "tile_count_in_depth_order",
             )?,
             tile_budget: build("tile_budget", &[COMMON, TILE_BUDGET], "tile_budget")?,
-            tile_emit: build("tile_emit", &[COMMON, TILE_EMIT], "tile_emit")?,
+            tile_emit: build(
+                "tile_emit",
+                &[COMMON, TILE_FOOTPRINT, TILE_EMIT],
+                "tile_emit",
+            )?,
             tile_ranges: build(
                 "tile_ranges",
                 &[COMMON, TILE_RANGES],
@@ -126,7 +136,12 @@ impl RenderKernels {
             )?,
             rasterize_forward: build(
                 forward_label,
-                &[COMMON, RASTERIZE_FORWARD_COMMON, forward_body],
+                &[
+                    COMMON,
+                    RASTERIZE_BATCH,
+                    RASTERIZE_FORWARD_COMMON,
+                    forward_body,
+                ],
                 "rasterize_forward",
             )?,
             rasterize_backward: build(
@@ -134,6 +149,7 @@ impl RenderKernels {
                 &[
                     atomics,
                     COMMON,
+                    RASTERIZE_BATCH,
                     RASTERIZE_BACKWARD_COMMON,
                     GRAD_FRAGMENT,
                     grad_emit,

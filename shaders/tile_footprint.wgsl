@@ -1,0 +1,57 @@
+// Which tiles a splat is listed in (project_forward counts them, tile_emit writes them; both
+// call these functions on the same stored values).
+//
+// A splat's footprint is where its alpha can reach ALPHA_MIN: sigma <= ln(opacity / ALPHA_MIN),
+// an ellipse (plus FOOTPRINT_MARGIN, far above f32 rounding, so the rasterizer never meets a
+// passing fragment outside it). Only tiles the ellipse touches are listed. A square of three
+// standard deviations along the major axis (3DGS) lists many tiles in which no pixel can pass
+// the alpha threshold: its corners, thin splats' long sides, and every low-opacity splat's rim.
+// Listing only those tiles leaves every image and gradient unchanged and the intersections fewer,
+// so the sort and both rasterize passes do less.
+
+const FOOTPRINT_MARGIN: f32 = 0.01;
+
+// The largest sigma at which the splat still passes the alpha threshold (<= 0: nowhere).
+fn footprint_sigma(opacity: f32) -> f32 {
+    return log(opacity / ALPHA_MIN) + FOOTPRINT_MARGIN;
+}
+
+// How far the footprint reaches from the mean along x and y: the ellipse (1/2) d^T C d <= s
+// reaches sqrt(2 s (C^-1)_kk) along axis k.
+fn footprint_reach(conic: vec3<f32>, sigma_max: f32) -> vec2<f32> {
+    let det = conic.x * conic.z - conic.y * conic.y;
+    return sqrt(2.0 * sigma_max * vec2<f32>(conic.z, conic.x) / det);
+}
+
+// Tile rows [x, y) the footprint spans, clamped to the grid (empty when off screen).
+fn footprint_tile_rows(mean2d: vec2<f32>, conic: vec3<f32>, sigma_max: f32, grid: vec2<u32>) -> vec2<u32> {
+    let reach = footprint_reach(conic, sigma_max).y;
+    let rows = f32(grid.y);
+    let first = clamp(floor((mean2d.y - reach) / f32(TILE_SIZE)), 0.0, rows);
+    let end = clamp(ceil((mean2d.y + reach) / f32(TILE_SIZE)), 0.0, rows);
+    return vec2<u32>(u32(first), u32(end));
+}
+
+// Tile columns [x, y) the footprint touches in tile row `row` (x >= y: none). The footprint's
+// slice through the row's band is convex, so it touches exactly the tiles its x extent over the
+// band overlaps. Its right edge, x(dy) = (-b dy + sqrt(2 s a - det dy^2)) / a in offsets from the
+// mean, is concave in dy and peaks at dy = -b reach_x / c, so over the band it peaks at that dy
+// clamped into the band; the left edge likewise bottoms out at dy = b reach_x / c.
+fn footprint_tile_columns(mean2d: vec2<f32>, conic: vec3<f32>, sigma_max: f32, row: u32, grid_x: u32) -> vec2<u32> {
+    let reach = footprint_reach(conic, sigma_max);
+    let band_top = max(f32(row * TILE_SIZE) - mean2d.y, -reach.y);
+    let band_bottom = min(f32((row + 1u) * TILE_SIZE) - mean2d.y, reach.y);
+    if band_top > band_bottom {
+        return vec2<u32>(0u);
+    }
+    let det = conic.x * conic.z - conic.y * conic.y;
+    let room = 2.0 * sigma_max * conic.x;
+    let y_right = clamp(-conic.y * reach.x / conic.z, band_top, band_bottom);
+    let y_left = clamp(conic.y * reach.x / conic.z, band_top, band_bottom);
+    let right = (-conic.y * y_right + sqrt(max(room - det * y_right * y_right, 0.0))) / conic.x;
+    let left = (-conic.y * y_left - sqrt(max(room - det * y_left * y_left, 0.0))) / conic.x;
+    let columns = f32(grid_x);
+    let first = clamp(floor((mean2d.x + left) / f32(TILE_SIZE)), 0.0, columns);
+    let end = clamp(ceil((mean2d.x + right) / f32(TILE_SIZE)), 0.0, columns);
+    return vec2<u32>(u32(first), u32(end));
+}
