@@ -31,7 +31,7 @@ fn rasterize_backward(
     let start = walk.x;
     let count = walk.y;
     let batches = (count + BATCH - 1u) / BATCH;
-    let background_term = dot(uniforms.background.xyz, v_out.xyz);
+    let final_term = final_alpha_term(t_final, v_out, uniforms.background.xyz);
 
     var transmittance = t_final;
     var behind = vec3<f32>(0.0);
@@ -59,7 +59,7 @@ fn rasterize_backward(
                 let colour = batch_colour[t].xyz;
                 grads = fragment_grads(
                     mean_opacity, conic, colour, d, value, alpha, transmittance, one_over_rest,
-                    behind, t_final, v_out, background_term,
+                    behind, v_out.xyz, final_term,
                 );
                 behind += colour * (alpha * transmittance);
             }

@@ -20,29 +20,32 @@ fn rasterize_backward(
     let tile = group.y * uniforms.tile_grid.x + group.x;
     let first_pixel = group.xy * TILE_SIZE + vec2<u32>(local.x, local.y * PIXELS);
 
-    var centre: array<vec2<f32>, 4>;
-    var t_final: array<f32, 4>;
+    // Per pixel, only what the walk needs (a CPU adapter spills what does not fit its vector
+    // registers): the column's pixels share x, so their centres differ in y only.
+    let centre_x = f32(first_pixel.x) + 0.5;
+    var centre_y: array<f32, 4>;
     var contributed: array<u32, 4>;
-    var v_out: array<vec4<f32>, 4>;
-    var background_term: array<f32, 4>;
+    var v_rgb: array<vec3<f32>, 4>;
+    var final_term: array<f32, 4>;
     var transmittance: array<f32, 4>;
     var behind: array<vec3<f32>, 4>;
     emit_setup();
     var most = 0u;
     for (var p = 0u; p < PIXELS; p++) {
         let pixel = first_pixel + vec2<u32>(0u, p);
-        centre[p] = vec2<f32>(pixel) + 0.5;
-        t_final[p] = 1.0;
+        centre_y[p] = f32(pixel.y) + 0.5;
+        var t_final = 1.0;
         contributed[p] = 0u;
-        v_out[p] = vec4<f32>(0.0);
+        var v_out = vec4<f32>(0.0);
         if pixel.x < uniforms.image_size.x && pixel.y < uniforms.image_size.y {
             let index = pixel.y * uniforms.image_size.x + pixel.x;
-            t_final[p] = final_transmittance[index];
+            t_final = final_transmittance[index];
             contributed[p] = last_contributor[index];
-            v_out[p] = grad_image[index];
+            v_out = grad_image[index];
         }
-        background_term[p] = dot(uniforms.background.xyz, v_out[p].xyz);
-        transmittance[p] = t_final[p];
+        v_rgb[p] = v_out.xyz;
+        final_term[p] = final_alpha_term(t_final, v_out, uniforms.background.xyz);
+        transmittance[p] = t_final;
         behind[p] = vec3<f32>(0.0);
         most = max(most, contributed[p]);
     }
@@ -68,7 +71,7 @@ fn rasterize_backward(
             if position < most {
                 let splat = staged_splat(t);
                 for (var p = 0u; p < PIXELS; p++) {
-                    let d = splat.mean_opacity.xy - centre[p];
+                    let d = splat.mean_opacity.xy - vec2<f32>(centre_x, centre_y[p]);
                     let sigma = splat_sigma(splat.conic, d);
                     let value = exp(-max(sigma, 0.0));
                     let alpha = min(ALPHA_MAX, splat.mean_opacity.z * value);
@@ -78,7 +81,7 @@ fn rasterize_backward(
                         transmittance[p] *= one_over_rest;
                         let grads = fragment_grads(
                             splat.mean_opacity, splat.conic, splat.colour, d, value, alpha, transmittance[p],
-                            one_over_rest, behind[p], t_final[p], v_out[p], background_term[p],
+                            one_over_rest, behind[p], v_rgb[p], final_term[p],
                         );
                         sum = sum_fragment_grads(sum, grads);
                         behind[p] += splat.colour * (alpha * transmittance[p]);

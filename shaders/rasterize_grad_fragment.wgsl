@@ -40,8 +40,16 @@ fn add_fragment_grads(gaussian: u32, grads: FragmentGrads) {
 
 // A contributing fragment's gradients at one pixel. `transmittance` is the transmittance in
 // front of the fragment (already divided back by 1 - alpha), `behind` the colour composited
-// behind it, `value` the Gaussian falloff exp(-sigma) at offset `d`, `v_out` d loss / d (rgb,
-// alpha) of the pixel and `background_term` = dot(background, v_out.rgb).
+// behind it, `value` the Gaussian falloff exp(-sigma) at offset `d`, `v_rgb` d loss / d rgb of
+// the pixel and `final_term` its `final_alpha_term` (what the pixel's final transmittance and
+// d loss / d alpha contribute).
+
+// T_final (d loss / d alpha - dot(background, d loss / d rgb)): alpha = 1 - T_final and the
+// background shows through T_final, so this is the same for every fragment of the pixel.
+fn final_alpha_term(t_final: f32, v_out: vec4<f32>, background: vec3<f32>) -> f32 {
+    return t_final * (v_out.w - dot(background, v_out.xyz));
+}
+
 fn fragment_grads(
     mean_opacity: vec4<f32>,
     conic: vec3<f32>,
@@ -52,15 +60,14 @@ fn fragment_grads(
     transmittance: f32,
     one_over_rest: f32,
     behind: vec3<f32>,
-    t_final: f32,
-    v_out: vec4<f32>,
-    background_term: f32,
+    v_rgb: vec3<f32>,
+    final_term: f32,
 ) -> FragmentGrads {
     var grads = no_fragment_grads();
     let weight = alpha * transmittance;
-    var v_alpha = dot(colour * transmittance - behind * one_over_rest, v_out.xyz);
-    v_alpha += t_final * one_over_rest * (v_out.w - background_term);
-    grads.colour = weight * v_out.xyz;
+    var v_alpha = dot(colour * transmittance - behind * one_over_rest, v_rgb);
+    v_alpha += final_term * one_over_rest;
+    grads.colour = weight * v_rgb;
     // Where the opacity clamp at ALPHA_MAX binds, alpha does not depend on the geometry.
     if mean_opacity.z * value <= ALPHA_MAX {
         let v_sigma = -mean_opacity.z * value * v_alpha;

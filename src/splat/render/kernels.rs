@@ -64,8 +64,8 @@ pub struct RasterVariant {
     /// `subgroupAdd` (hardware with subgroups, where same-address atomics from a warp
     /// serialise; on lavapipe it walks the lanes one by one and costs more than the atomics it
     /// saves: 512 px, 200k random Gaussians, backward 8.6-10.5 s with sums vs 3.6-4.7 s
-    /// without); in columns by shuffles, which lavapipe turns into vector permutes (column
-    /// backward 812 ms with them, 1041 ms without).
+    /// without); in columns by xor shuffles, which lavapipe runs faster than the per-lane
+    /// atomics they replace (column backward 812 ms with them, 1041 ms without).
     pub subgroup_sums: bool,
 }
 

@@ -616,7 +616,9 @@ impl Trainer {
 
     /// Times the render passes on the training views without changing the model: forward alone,
     /// and forward + loss + backward, each submitted and waited for (wall clock, so it includes
-    /// submission overhead). Returns (forward ms, backward-with-loss ms) averaged over `repeats`.
+    /// submission overhead). Returns (forward ms, backward-with-loss ms) averaged over `repeats`,
+    /// after one untimed round (the first render of a trainer pays first-use costs, such as
+    /// growing the intersection buffers, which would otherwise land in the forward figure).
     pub fn time_passes(&mut self, repeats: u32) -> Result<(f64, f64), TrainError> {
         let settings = RenderSettings {
             filter: ObjectFilter::All,
@@ -629,7 +631,7 @@ impl Trainer {
         };
         let ctx = self.ctx.clone();
         let (mut forward_secs, mut full_secs) = (0.0, 0.0);
-        for repeat in 0..repeats.max(1) {
+        for repeat in 0..=repeats.max(1) {
             let view = &self.views.train[repeat as usize % self.views.train.len()];
             let camera = view.camera;
             for with_backward in [false, true] {
@@ -677,7 +679,9 @@ impl Trainer {
                 ctx.queue.submit([encoder.finish()]);
                 ctx.wait_idle()?;
                 let secs = started.elapsed().as_secs_f64();
-                if with_backward {
+                if repeat == 0 {
+                    continue;
+                } else if with_backward {
                     full_secs += secs;
                 } else {
                     forward_secs += secs;
