@@ -18,10 +18,10 @@ fn sum_fragment_grads(a: FragmentGrads, b: FragmentGrads) -> FragmentGrads {
     return FragmentGrads(a.mean + b.mean, a.conic + b.conic, a.colour + b.colour, a.opacity + b.opacity, a.mean_abs + b.mean_abs);
 }
 
+// No test for zero: the branch costs a CPU adapter more than the atomic it would save (lavapipe,
+// 512 px, 200k random Gaussians: column backward 613 ms without it, 650-670 ms with it).
 fn add_grad(gaussian: u32, slot: u32, value: f32) {
-    if value != 0.0 {
-        grad_projected_add(gaussian * GRAD_STRIDE + slot, value);
-    }
+    grad_projected_add(gaussian * GRAD_STRIDE + slot, value);
 }
 
 fn add_fragment_grads(gaussian: u32, grads: FragmentGrads) {
