@@ -74,10 +74,11 @@ fn project_forward(
         return;
     }
     let mean2d = uniforms.focal * p.xy / p.z + uniforms.principal;
-    let rows = footprint_tile_rows(mean2d, conic, sigma_max, uniforms.tile_grid);
+    let footprint = splat_footprint(mean2d, conic, sigma_max);
+    let rows = footprint_tile_rows(footprint, uniforms.tile_grid);
     var tiles = 0u;
     for (var row = rows.x; row < rows.y; row++) {
-        let columns = footprint_tile_columns(mean2d, conic, sigma_max, row, uniforms.tile_grid.x);
+        let columns = footprint_tile_columns(footprint, row, uniforms.tile_grid.x);
         tiles += columns.y - min(columns.x, columns.y);
     }
     if tiles == 0u {

@@ -14,7 +14,8 @@ fn emit_setup() {
     subgroup_lanes = subgroupAdd(1u);
 }
 
-fn shuffle_sum(grads: FragmentGrads, mask: u32) -> FragmentGrads {
+// The partner invocation's gradients (lane index xor `mask`).
+fn shuffled(grads: FragmentGrads, mask: u32) -> FragmentGrads {
     return FragmentGrads(
         subgroupShuffleXor(grads.mean, mask),
         subgroupShuffleXor(grads.conic, mask),
@@ -32,7 +33,7 @@ fn emit_fragment_grads(gaussian: u32, grads: FragmentGrads, contributes: bool) {
     }
     var total = grads;
     for (var mask = 1u; mask < subgroup_lanes; mask <<= 1u) {
-        total = sum_fragment_grads(total, shuffle_sum(total, mask));
+        total = sum_fragment_grads(total, shuffled(total, mask));
     }
     if subgroup_lane == 0u {
         add_fragment_grads(gaussian, total);

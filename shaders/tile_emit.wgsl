@@ -1,6 +1,7 @@
 // One invocation per Gaussian in depth order: writes its (tile id, Gaussian) intersections at its
-// scanned offset, for the tiles its footprint touches (tile_footprint.wgsl) in row-major order. Entries past the capacity are dropped (the host sees
-// the unclamped total and grows the buffers).
+// scanned offset, for the tiles its footprint touches (tile_footprint.wgsl) in row-major order.
+// Entries past the capacity are dropped (the host sees the unclamped total and grows the
+// buffers).
 
 @group(0) @binding(0) var<uniform> uniforms: RenderUniforms;
 @group(0) @binding(1) var<storage, read> depth_values: array<u32>;
@@ -28,8 +29,8 @@ fn tile_emit(
     let gaussian = depth_values[j];
     let mean_opacity = projected[3u * gaussian];
     let conic = projected[3u * gaussian + 1u].xyz;
-    let sigma_max = footprint_sigma(mean_opacity.z);
-    let rows = footprint_tile_rows(mean_opacity.xy, conic, sigma_max, uniforms.tile_grid);
+    let footprint = splat_footprint(mean_opacity.xy, conic, footprint_sigma(mean_opacity.z));
+    let rows = footprint_tile_rows(footprint, uniforms.tile_grid);
     // A tile the footprint misses, for the padding below (none only when it covers the grid).
     var missed = 0u;
     if rows.x > 0u {
@@ -38,7 +39,7 @@ fn tile_emit(
         missed = rows.y * uniforms.tile_grid.x;
     }
     for (var row = rows.x; row < rows.y; row++) {
-        let columns = footprint_tile_columns(mean_opacity.xy, conic, sigma_max, row, uniforms.tile_grid.x);
+        let columns = footprint_tile_columns(footprint, row, uniforms.tile_grid.x);
         if columns.x > 0u {
             missed = row * uniforms.tile_grid.x;
         } else if columns.y < uniforms.tile_grid.x {

@@ -16,19 +16,29 @@ fn footprint_sigma(opacity: f32) -> f32 {
     return log(opacity / ALPHA_MIN) + FOOTPRINT_MARGIN;
 }
 
-// How far the footprint reaches from the mean along x and y: the ellipse (1/2) d^T C d <= s
-// reaches sqrt(2 s (C^-1)_kk) along axis k.
-fn footprint_reach(conic: vec3<f32>, sigma_max: f32) -> vec2<f32> {
+// A splat's footprint, (1/2) d^T C d <= sigma_max around `mean`, with what every row needs
+// computed once.
+struct Footprint {
+    mean: vec2<f32>,
+    conic: vec3<f32>,
+    sigma_max: f32,
+    // det C.
+    det: f32,
+    // How far the ellipse reaches from the mean along x and y: sqrt(2 s (C^-1)_kk).
+    reach: vec2<f32>,
+}
+
+fn splat_footprint(mean: vec2<f32>, conic: vec3<f32>, sigma_max: f32) -> Footprint {
     let det = conic.x * conic.z - conic.y * conic.y;
-    return sqrt(2.0 * sigma_max * vec2<f32>(conic.z, conic.x) / det);
+    let reach = sqrt(2.0 * sigma_max * vec2<f32>(conic.z, conic.x) / det);
+    return Footprint(mean, conic, sigma_max, det, reach);
 }
 
 // Tile rows [x, y) the footprint spans, clamped to the grid (empty when off screen).
-fn footprint_tile_rows(mean2d: vec2<f32>, conic: vec3<f32>, sigma_max: f32, grid: vec2<u32>) -> vec2<u32> {
-    let reach = footprint_reach(conic, sigma_max).y;
+fn footprint_tile_rows(footprint: Footprint, grid: vec2<u32>) -> vec2<u32> {
     let rows = f32(grid.y);
-    let first = clamp(floor((mean2d.y - reach) / f32(TILE_SIZE)), 0.0, rows);
-    let end = clamp(ceil((mean2d.y + reach) / f32(TILE_SIZE)), 0.0, rows);
+    let first = clamp(floor((footprint.mean.y - footprint.reach.y) / f32(TILE_SIZE)), 0.0, rows);
+    let end = clamp(ceil((footprint.mean.y + footprint.reach.y) / f32(TILE_SIZE)), 0.0, rows);
     return vec2<u32>(u32(first), u32(end));
 }
 
@@ -37,21 +47,21 @@ fn footprint_tile_rows(mean2d: vec2<f32>, conic: vec3<f32>, sigma_max: f32, grid
 // band overlaps. Its right edge, x(dy) = (-b dy + sqrt(2 s a - det dy^2)) / a in offsets from the
 // mean, is concave in dy and peaks at dy = -b reach_x / c, so over the band it peaks at that dy
 // clamped into the band; the left edge likewise bottoms out at dy = b reach_x / c.
-fn footprint_tile_columns(mean2d: vec2<f32>, conic: vec3<f32>, sigma_max: f32, row: u32, grid_x: u32) -> vec2<u32> {
-    let reach = footprint_reach(conic, sigma_max);
-    let band_top = max(f32(row * TILE_SIZE) - mean2d.y, -reach.y);
-    let band_bottom = min(f32((row + 1u) * TILE_SIZE) - mean2d.y, reach.y);
+fn footprint_tile_columns(footprint: Footprint, row: u32, grid_x: u32) -> vec2<u32> {
+    let conic = footprint.conic;
+    let reach = footprint.reach;
+    let band_top = max(f32(row * TILE_SIZE) - footprint.mean.y, -reach.y);
+    let band_bottom = min(f32((row + 1u) * TILE_SIZE) - footprint.mean.y, reach.y);
     if band_top > band_bottom {
         return vec2<u32>(0u);
     }
-    let det = conic.x * conic.z - conic.y * conic.y;
-    let room = 2.0 * sigma_max * conic.x;
+    let room = 2.0 * footprint.sigma_max * conic.x;
     let y_right = clamp(-conic.y * reach.x / conic.z, band_top, band_bottom);
     let y_left = clamp(conic.y * reach.x / conic.z, band_top, band_bottom);
-    let right = (-conic.y * y_right + sqrt(max(room - det * y_right * y_right, 0.0))) / conic.x;
-    let left = (-conic.y * y_left - sqrt(max(room - det * y_left * y_left, 0.0))) / conic.x;
+    let right = (-conic.y * y_right + sqrt(max(room - footprint.det * y_right * y_right, 0.0))) / conic.x;
+    let left = (-conic.y * y_left - sqrt(max(room - footprint.det * y_left * y_left, 0.0))) / conic.x;
     let columns = f32(grid_x);
-    let first = clamp(floor((mean2d.x + left) / f32(TILE_SIZE)), 0.0, columns);
-    let end = clamp(ceil((mean2d.x + right) / f32(TILE_SIZE)), 0.0, columns);
+    let first = clamp(floor((footprint.mean.x + left) / f32(TILE_SIZE)), 0.0, columns);
+    let end = clamp(ceil((footprint.mean.x + right) / f32(TILE_SIZE)), 0.0, columns);
     return vec2<u32>(u32(first), u32(end));
 }

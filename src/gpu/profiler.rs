@@ -1,9 +1,10 @@
 //! Per-kernel GPU timing from timestamp queries, for benchmarks (`segsplat bench --profile-kernels`).
 //!
 //! While a profile runs, every [`Kernel`](super::Kernel) built on a context with profiling on
-//! writes a timestamp at the start and end of each of its passes. Wall-clock timing around a submission cannot say which of
-//! a step's ~100 passes the time went to; these timestamps can, without changing what is recorded
-//! (no extra submissions or waits). Off by default, and idle outside a profile.
+//! writes a timestamp at the start and end of each of its passes. Wall-clock timing around a
+//! submission cannot say which of a step's ~100 passes the time went to; these timestamps can,
+//! without changing what is recorded (no extra submissions or waits). Off by default, and idle
+//! outside a profile.
 
 use std::collections::BTreeMap;
 use std::sync::Mutex;

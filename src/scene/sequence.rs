@@ -5,8 +5,9 @@
 //! - One moving camera (D-NeRF, Nerfies/HyperNeRF, a phone video): frames by capture time.
 //! - A rig of fixed cameras filming the same instants (Neu3D): sorting by time alone would jump
 //!   between cameras at every step. Each camera's video is walked instead, camera after camera
-//!   by name (rigs name their cameras along the rig), every other one backwards ("serpentine"), so that the only cuts are from
-//!   one camera to the next at the same instant, where nothing in the scene has moved.
+//!   by name (rigs name their cameras along the rig), every other one backwards ("serpentine"),
+//!   so that the only cuts are from one camera to the next at the same instant, where nothing in
+//!   the scene has moved.
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
@@ -26,15 +27,15 @@ pub struct VideoOrder {
 /// time count as time 0; ties keep their listing order.
 pub fn video_order(scene: &Scene, frames: &[usize]) -> VideoOrder {
     let time = |index: usize| scene.frames[index].time.unwrap_or(0.0);
-    let rig = filmed_by_a_rig(scene, frames);
+    let cameras: Vec<String> = frames
+        .iter()
+        .map(|&index| camera_of(&scene.frames[index].name))
+        .collect();
+    let rig = filmed_by_a_rig(scene, frames, &cameras);
     let mut sequences: BTreeMap<String, Vec<usize>> = BTreeMap::new();
-    for &index in frames {
-        let camera = if rig {
-            camera_of(&scene.frames[index].name)
-        } else {
-            String::new()
-        };
-        sequences.entry(camera).or_default().push(index);
+    for (&index, camera) in frames.iter().zip(cameras) {
+        let sequence = if rig { camera } else { String::new() };
+        sequences.entry(sequence).or_default().push(index);
     }
     let count = sequences.len();
     let mut ordered = Vec::with_capacity(frames.len());
@@ -55,14 +56,13 @@ pub fn video_order(scene: &Scene, frames: &[usize]) -> VideoOrder {
 /// cameras. (Two frames of one folder at one time, such as HyperNeRF's paired phones, are one
 /// sequence: they alternate with a small baseline. Frames without times are a photo collection
 /// in listing order, never a rig.)
-fn filmed_by_a_rig(scene: &Scene, frames: &[usize]) -> bool {
-    let mut camera_at: HashMap<u32, String> = HashMap::new();
-    for &index in frames {
-        let frame = &scene.frames[index];
-        let Some(time) = frame.time else {
+/// `cameras[i]` is the camera of `frames[i]`.
+fn filmed_by_a_rig(scene: &Scene, frames: &[usize], cameras: &[String]) -> bool {
+    let mut camera_at: HashMap<u32, &str> = HashMap::new();
+    for (&index, camera) in frames.iter().zip(cameras) {
+        let Some(time) = scene.frames[index].time else {
             return false;
         };
-        let camera = camera_of(&frame.name);
         match camera_at.get(&time.to_bits()) {
             Some(other) if *other != camera => return true,
             Some(_) => {}

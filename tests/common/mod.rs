@@ -4,6 +4,8 @@
 
 pub mod archives;
 pub mod handlers;
+#[path = "../models_support/mod.rs"]
+pub mod models_support;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -13,10 +15,7 @@ use segsplat::api::{RunningService, ServiceBuilder};
 use segsplat::config::Config;
 use segsplat::jobs::JobHandler;
 
-/// The tiny stand-in models made by scripts/make_tiny_models.py (tests/fixtures/models/tiny).
-pub fn tiny_models_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/models/tiny")
-}
+pub use models_support::tiny_models_dir;
 
 /// A test config: ephemeral ports, fast leases and polling, one CPU worker slot, no GPU.
 pub fn test_config(data_dir: &Path) -> Config {
@@ -94,17 +93,7 @@ impl TestService {
     /// embeddings, text queries, SAM masks). `None` (skip) also when ONNX Runtime is missing and
     /// `SEGSPLAT_SKIP_ORT_TESTS=1`; without that variable a missing library fails.
     pub async fn start_with_tiny_models(data_dir: &Path) -> Option<TestService> {
-        let options = segsplat::models::RuntimeOptions::default();
-        match segsplat::models::OrtRuntime::load(options) {
-            Ok(_) => {}
-            Err(error) if std::env::var("SEGSPLAT_SKIP_ORT_TESTS").as_deref() == Ok("1") => {
-                eprintln!("skipping: {error}");
-                return None;
-            }
-            Err(error) => {
-                panic!("ONNX Runtime is needed (SEGSPLAT_SKIP_ORT_TESTS=1 skips): {error}")
-            }
-        }
+        models_support::runtime()?;
         Self::start_on_gpu(data_dir, |config| {
             config.models.dir = Some(tiny_models_dir())
         })

@@ -25,8 +25,6 @@ pub struct ProjectedGaussian {
     pub depth: f64,
     /// 3DGS's screen radius: three standard deviations along the major axis, rounded up.
     pub radius: f64,
-    /// How far the footprint (where alpha can reach 1/255) extends from the mean along x and y.
-    pub footprint_reach: DVec2,
 }
 
 /// Gradients of a loss with respect to one projected Gaussian.
@@ -195,10 +193,10 @@ pub fn project_gaussian(
     if sigma_max <= 0.0 {
         return None;
     }
-    let footprint_reach = DVec2::new((2.0 * sigma_max * a).sqrt(), (2.0 * sigma_max * c).sqrt());
+    let reach = DVec2::new((2.0 * sigma_max * a).sqrt(), (2.0 * sigma_max * c).sqrt());
     let image = DVec2::new(camera.width as f64, camera.height as f64);
-    let footprint_min = mean2d - footprint_reach;
-    let footprint_max = mean2d + footprint_reach;
+    let footprint_min = mean2d - reach;
+    let footprint_max = mean2d + reach;
     if footprint_max.x <= 0.0
         || footprint_max.y <= 0.0
         || footprint_min.x >= image.x
@@ -215,7 +213,6 @@ pub fn project_gaussian(
         colour_clamped,
         depth: z,
         radius,
-        footprint_reach,
     })
 }
 

@@ -452,16 +452,12 @@ impl Trainer {
                 rest,
             ),
         ];
-        // sh_rest[g] holds coefficients 1 + 5g ..= 5 + 5g: its first is in band 1, 2 and 3.
-        let first_band = [1, 2, 3];
-        for (group, (params, grads, first_moment, second_moment, width, rate)) in
-            groups.into_iter().enumerate()
+        // sh_rest[g] (the last three groups) holds coefficients 1 + 5g ..= 5 + 5g, which start
+        // in band g + 1: the first `sh_degree` of them have been reached.
+        let reached = groups.len() - 3 + sh_degree.min(3) as usize;
+        for (params, grads, first_moment, second_moment, width, rate) in
+            groups.into_iter().take(reached)
         {
-            if let Some(band) = group.checked_sub(5).map(|rest| first_band[rest])
-                && band > sh_degree
-            {
-                continue;
-            }
             self.adam.encode_step(
                 &self.ctx,
                 encoder,
