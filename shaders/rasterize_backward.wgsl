@@ -4,8 +4,36 @@
 // into grad_projected with float atomics (native or CAS: rasterize_grad_atomics_*.wgsl), summed
 // over the subgroup first on hardware with subgroups (rasterize_grad_emit_*.wgsl). The loop
 // over a batch's splats stays uniform (no early `continue`) so the subgroup sums are legal.
-// Bindings, batch staging and the fragment's gradients: rasterize_backward_common.wgsl and
-// rasterize_grad_fragment.wgsl.
+// Bindings: rasterize_backward_common.wgsl; batch staging: rasterize_batch.wgsl; the fragment's
+// gradients: rasterize_grad_fragment.wgsl.
+
+var<workgroup> batch_gaussian: array<u32, 256>;
+var<workgroup> range_start: u32;
+var<workgroup> longest: atomic<u32>;
+var<workgroup> longest_snapshot: u32;
+
+// The tile's first intersection and the most intersections any of its pixels walks (each
+// invocation passes the most of its own pixels), the same in every invocation.
+fn tile_walk(tile: u32, local_index: u32, contributed: u32) -> vec2<u32> {
+    if local_index == 0u {
+        range_start = tile_ranges[2u * tile];
+        atomicStore(&longest, 0u);
+    }
+    workgroupBarrier();
+    atomicMax(&longest, contributed);
+    workgroupBarrier();
+    if local_index == 0u {
+        longest_snapshot = atomicLoad(&longest);
+    }
+    return vec2<u32>(workgroupUniformLoad(&range_start), workgroupUniformLoad(&longest_snapshot));
+}
+
+// Stages splat `slot` of a back-to-front batch whose last range position is `batch_end - 1`.
+fn stage_splat_backwards(start: u32, batch_end: u32, slot: u32) {
+    let gaussian = intersection_gaussians[start + batch_end - 1u - slot];
+    batch_gaussian[slot] = gaussian;
+    stage_projected(slot, gaussian);
+}
 
 @compute @workgroup_size(16, 16)
 fn rasterize_backward(

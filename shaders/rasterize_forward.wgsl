@@ -4,7 +4,43 @@
 //
 // Per pixel outputs: image (rgb with background, alpha), final transmittance, and the number of
 // the tile's intersections processed up to the last one that contributed (backward starts there).
-// Bindings and batch staging: rasterize_forward_common.wgsl.
+// Bindings: rasterize_forward_common.wgsl; batch staging: rasterize_batch.wgsl.
+
+var<workgroup> range_start: u32;
+var<workgroup> range_end: u32;
+// Invocations with a pixel still unsaturated, counted before each batch.
+var<workgroup> active_invocations: atomic<u32>;
+var<workgroup> active_snapshot: u32;
+
+// Stages splat `slot` of the batch starting at intersection `first`.
+fn stage_splat(first: u32, slot: u32) {
+    stage_projected(slot, intersection_gaussians[first + slot]);
+}
+
+// The tile's [start, end) in the sorted intersections, the same in every invocation.
+fn load_tile_range(tile: u32, local_index: u32) -> vec2<u32> {
+    if local_index == 0u {
+        range_start = tile_ranges[2u * tile];
+        range_end = tile_ranges[2u * tile + 1u];
+    }
+    return vec2<u32>(workgroupUniformLoad(&range_start), workgroupUniformLoad(&range_end));
+}
+
+// Whether any invocation of the workgroup is `still_working` (called by all, between batches).
+fn any_invocation_active(still_working: bool, local_index: u32) -> bool {
+    if local_index == 0u {
+        atomicStore(&active_invocations, 0u);
+    }
+    workgroupBarrier();
+    if still_working {
+        atomicAdd(&active_invocations, 1u);
+    }
+    workgroupBarrier();
+    if local_index == 0u {
+        active_snapshot = atomicLoad(&active_invocations);
+    }
+    return workgroupUniformLoad(&active_snapshot) != 0u;
+}
 
 @compute @workgroup_size(16, 16)
 fn rasterize_forward(

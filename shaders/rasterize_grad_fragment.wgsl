@@ -1,6 +1,8 @@
 // One fragment's gradients and the atomic add both emission variants share
-// (rasterize_grad_emit_direct.wgsl, rasterize_grad_emit_subgroup.wgsl). Slots in grad_projected:
+// (rasterize_grad_emit_*.wgsl). Slots in grad_projected:
 // 0-1 mean2d, 2-4 conic, 5-7 colour, 8 opacity, 9-10 |d loss / d mean2d|.
+
+const GRAD_SLOTS: u32 = 11u;
 
 struct FragmentGrads {
     mean: vec2<f32>,

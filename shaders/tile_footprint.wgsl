@@ -42,26 +42,40 @@ fn footprint_tile_rows(footprint: Footprint, grid: vec2<u32>) -> vec2<u32> {
     return vec2<u32>(u32(first), u32(end));
 }
 
-// Tile columns [x, y) the footprint touches in tile row `row` (x >= y: none). The footprint's
-// slice through the row's band is convex, so it touches exactly the tiles its x extent over the
-// band overlaps. Its right edge, x(dy) = (-b dy + sqrt(2 s a - det dy^2)) / a in offsets from the
-// mean, is concave in dy and peaks at dy = -b reach_x / c, so over the band it peaks at that dy
-// clamped into the band; the left edge likewise bottoms out at dy = b reach_x / c.
-fn footprint_tile_columns(footprint: Footprint, row: u32, grid_x: u32) -> vec2<u32> {
+// The footprint's x extent (left, right), in offsets from its mean, over the horizontal band
+// of offsets [top, bottom] from its mean (left > right: the footprint misses the band). The
+// footprint's slice through a band is convex, so this is exactly the x range it covers there.
+// Its right edge, x(dy) = (-b dy + sqrt(2 s a - det dy^2)) / a, is concave in dy and peaks at
+// dy = -b reach_x / c, so over the band it peaks at that dy clamped into the band; the left edge
+// likewise bottoms out at dy = b reach_x / c.
+fn footprint_band_extent(footprint: Footprint, top: f32, bottom: f32) -> vec2<f32> {
     let conic = footprint.conic;
     let reach = footprint.reach;
-    let band_top = max(f32(row * TILE_SIZE) - footprint.mean.y, -reach.y);
-    let band_bottom = min(f32((row + 1u) * TILE_SIZE) - footprint.mean.y, reach.y);
+    let band_top = max(top, -reach.y);
+    let band_bottom = min(bottom, reach.y);
     if band_top > band_bottom {
-        return vec2<u32>(0u);
+        return vec2<f32>(1.0, -1.0);
     }
     let room = 2.0 * footprint.sigma_max * conic.x;
     let y_right = clamp(-conic.y * reach.x / conic.z, band_top, band_bottom);
     let y_left = clamp(conic.y * reach.x / conic.z, band_top, band_bottom);
     let right = (-conic.y * y_right + sqrt(max(room - footprint.det * y_right * y_right, 0.0))) / conic.x;
     let left = (-conic.y * y_left - sqrt(max(room - footprint.det * y_left * y_left, 0.0))) / conic.x;
+    return vec2<f32>(left, right);
+}
+
+// Tile columns [x, y) the footprint touches in tile row `row` (x >= y: none).
+fn footprint_tile_columns(footprint: Footprint, row: u32, grid_x: u32) -> vec2<u32> {
+    let extent = footprint_band_extent(
+        footprint,
+        f32(row * TILE_SIZE) - footprint.mean.y,
+        f32((row + 1u) * TILE_SIZE) - footprint.mean.y,
+    );
+    if extent.x > extent.y {
+        return vec2<u32>(0u);
+    }
     let columns = f32(grid_x);
-    let first = clamp(floor((footprint.mean.x + left) / f32(TILE_SIZE)), 0.0, columns);
-    let end = clamp(ceil((footprint.mean.x + right) / f32(TILE_SIZE)), 0.0, columns);
+    let first = clamp(floor((footprint.mean.x + extent.x) / f32(TILE_SIZE)), 0.0, columns);
+    let end = clamp(ceil((footprint.mean.x + extent.y) / f32(TILE_SIZE)), 0.0, columns);
     return vec2<u32>(u32(first), u32(end));
 }

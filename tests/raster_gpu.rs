@@ -402,8 +402,9 @@ fn gpu_gradients_summed_over_subgroups_match_reference() {
         eprintln!("skipping: the adapter has no subgroups");
         return;
     }
-    // Hardware adapters sum gradients over the subgroup before the atomics; software ones add
-    // each pixel's directly (what the other tests check on lavapipe). Pretend to be hardware.
+    // Hardware adapters sum each pixel's gradients over the subgroup by subgroupAdd before the
+    // atomics; software ones walk columns (what the other tests check on lavapipe). Pretend to be
+    // hardware.
     ctx.report.is_software = false;
     let camera = test_camera(40, 36);
     let model = edge_case_scene(73, 12, &camera);
@@ -414,30 +415,13 @@ fn gpu_gradients_summed_over_subgroups_match_reference() {
     compare_gradients(&gpu, &cpu, 2e-3);
 }
 
-/// Every rasterize variant, whatever the adapter picks for itself: one pixel per invocation
-/// (GPUs) and columns of pixels (software adapters), each with and without subgroup sums, give
-/// the reference's images and gradients.
+/// Every rasterize variant the adapter can run, whatever it picks for itself: one pixel per
+/// invocation (GPUs) with and without subgroup sums, and columns walked a splat per lane (software
+/// adapters), give the reference's images and gradients.
 #[test]
 fn every_raster_variant_matches_reference() {
     let Some(ctx) = context() else { return };
-    let mut variants = vec![
-        RasterVariant {
-            columns: true,
-            subgroup_sums: false,
-        },
-        RasterVariant {
-            columns: false,
-            subgroup_sums: false,
-        },
-    ];
-    if ctx.has_subgroups() {
-        for columns in [true, false] {
-            variants.push(RasterVariant {
-                columns,
-                subgroup_sums: true,
-            });
-        }
-    }
+    let variants = RasterVariant::supported(&ctx);
     // 40 x 36: partial tiles on both edges.
     let camera = test_camera(40, 36);
     let model = edge_case_scene(75, 24, &camera);
@@ -446,6 +430,34 @@ fn every_raster_variant_matches_reference() {
     let cpu_image = render_forward(&ReferenceGaussians::from_model(&model), &camera, &settings);
     let cpu = reference_gradients(&model, &camera, &settings, &weights);
     for variant in variants {
+        let mut renderer = Renderer::with_variant(&ctx, variant).unwrap();
+        let image = render_gpu(&ctx, &mut renderer, &model, &camera, &settings);
+        let error = max_image_error(&image, &cpu_image.image);
+        assert!(error < 2e-4, "{variant:?}: max abs image error {error}");
+        let gpu = gpu_gradients_with(&ctx, variant, &model, &camera, &settings, &weights, 1);
+        let worst = compare_gradients(&gpu, &cpu, 2e-3);
+        println!("{variant:?}: image error {error:.1e}, gradient error {worst:.1e}");
+    }
+}
+
+/// Tiles listing hundreds of splats, most pixels saturating before the end of their list: every
+/// variant walks many batches or lane chunks, stops early, and culls splats per block, and still
+/// gives the reference's images and gradients.
+#[test]
+fn every_raster_variant_matches_reference_on_dense_tiles() {
+    let Some(ctx) = context() else { return };
+    let camera = test_camera(48, 40);
+    let model = random_scene(77, 400, &camera);
+    let settings = settings_with_background();
+    let weights = random_weights(78, camera.pixel_count());
+    let cpu_image = render_forward(&ReferenceGaussians::from_model(&model), &camera, &settings);
+    let saturated = cpu_image.image.iter().filter(|p| p[3] > 0.999).count();
+    assert!(
+        saturated * 2 > cpu_image.image.len(),
+        "test scene must saturate most pixels: {saturated}"
+    );
+    let cpu = reference_gradients(&model, &camera, &settings, &weights);
+    for variant in RasterVariant::supported(&ctx) {
         let mut renderer = Renderer::with_variant(&ctx, variant).unwrap();
         let image = render_gpu(&ctx, &mut renderer, &model, &camera, &settings);
         let error = max_image_error(&image, &cpu_image.image);

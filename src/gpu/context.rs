@@ -36,6 +36,8 @@ pub enum GpuError {
         needed_bytes: u64,
         limit_bytes: u64,
     },
+    #[error("the adapter cannot run this: {0}")]
+    Unsupported(String),
 }
 
 /// Which adapters a worker may use. Empty fields match everything.

@@ -14,6 +14,7 @@ const TILE_EMIT: &str = include_str!("../../../shaders/tile_emit.wgsl");
 const TILE_FOOTPRINT: &str = include_str!("../../../shaders/tile_footprint.wgsl");
 const TILE_RANGES: &str = include_str!("../../../shaders/tile_ranges.wgsl");
 const RASTERIZE_BATCH: &str = include_str!("../../../shaders/rasterize_batch.wgsl");
+const RASTERIZE_LANE_CHUNK: &str = include_str!("../../../shaders/rasterize_lane_chunk.wgsl");
 const RASTERIZE_FORWARD_COMMON: &str =
     include_str!("../../../shaders/rasterize_forward_common.wgsl");
 const RASTERIZE_FORWARD: &str = include_str!("../../../shaders/rasterize_forward.wgsl");
@@ -52,32 +53,53 @@ pub struct RenderKernels {
 /// for comparing the two on one machine (docs/benchmarks.md).
 pub const RASTER_KERNEL_ENV: &str = "SEGSPLAT_RASTER_KERNEL";
 
-/// Which rasterize kernels run: both give the same images and gradients.
+/// Which rasterize kernels run: all give the same images and gradients.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct RasterVariant {
-    /// A column of pixels per invocation (`rasterize_*_columns.wgsl`, software adapters: a
-    /// CPU reads workgroup memory lane by lane and its float atomics are compare-and-swap loops,
-    /// so each splat read and each atomic serves several pixels) instead of one pixel per
-    /// invocation (GPUs).
-    pub columns: bool,
-    /// Each splat's gradients are summed over the subgroup before the atomics. Per pixel by
-    /// `subgroupAdd` (hardware with subgroups, where same-address atomics from a warp
+pub enum RasterVariant {
+    /// One pixel per invocation, each adding its own gradients (adapters without subgroups).
+    Pixels,
+    /// One pixel per invocation, each splat's gradients summed over the subgroup by
+    /// `subgroupAdd` before the atomics (hardware, where same-address atomics from a warp
     /// serialise; on lavapipe it walks the lanes one by one and costs more than the atomics it
     /// saves: 512 px, 200k random Gaussians, backward 8.6-10.5 s with sums vs 3.6-4.7 s
-    /// without); in columns by xor shuffles, which lavapipe runs faster than the per-lane
-    /// atomics they replace (column backward 812 ms with them, 1041 ms without).
-    pub subgroup_sums: bool,
+    /// without).
+    PixelsSubgroupSums,
+    /// A column of pixels per invocation and each subgroup walking its tile's splats on its own,
+    /// a splat per lane at a time (`rasterize_*_columns.wgsl`, `rasterize_lane_chunk.wgsl`):
+    /// software adapters with subgroups. A CPU adapter reads memory lane by lane and its float
+    /// atomics are compare-and-swap loops, so every splat read and every atomic serves many
+    /// pixels.
+    Columns,
 }
 
 impl RasterVariant {
-    /// The kernels that suit the adapter, unless [`RASTER_KERNEL_ENV`] names a layout.
+    /// The kernels that suit the adapter, unless [`RASTER_KERNEL_ENV`] names a layout. Columns
+    /// need subgroups: without them a request for columns gets pixels.
     pub fn for_adapter(ctx: &GpuContext) -> Self {
         let named = [("pixels", false), ("columns", true)];
         let columns =
             kernel_choice_from_env(RASTER_KERNEL_ENV, &named).unwrap_or(ctx.report.is_software);
-        Self {
-            columns,
-            subgroup_sums: ctx.has_subgroups() && (columns || !ctx.report.is_software),
+        match (columns, ctx.has_subgroups()) {
+            (true, true) => Self::Columns,
+            (true, false) => {
+                if ctx.report.is_software {
+                    tracing::warn!(
+                        "the software adapter has no subgroups: rasterizing a pixel per invocation"
+                    );
+                }
+                Self::Pixels
+            }
+            (false, true) if !ctx.report.is_software => Self::PixelsSubgroupSums,
+            (false, _) => Self::Pixels,
+        }
+    }
+
+    /// Every variant the adapter can run.
+    pub fn supported(ctx: &GpuContext) -> Vec<Self> {
+        if ctx.has_subgroups() {
+            vec![Self::Pixels, Self::PixelsSubgroupSums, Self::Columns]
+        } else {
+            vec![Self::Pixels]
         }
     }
 }
@@ -93,25 +115,40 @@ impl RenderKernels {
         } else {
             GRAD_ATOMICS_CAS
         };
-        let grad_emit = match (
-            variant.subgroup_sums && ctx.has_subgroups(),
-            variant.columns,
-        ) {
-            (false, _) => GRAD_EMIT_DIRECT,
-            (true, false) => GRAD_EMIT_SUBGROUP,
-            (true, true) => GRAD_EMIT_SHUFFLE,
-        };
-        let ((forward_label, forward_body), (backward_label, backward_body)) = if variant.columns {
-            (
-                ("rasterize_forward_columns", RASTERIZE_FORWARD_COLUMNS),
-                ("rasterize_backward_columns", RASTERIZE_BACKWARD_COLUMNS),
-            )
-        } else {
-            (
-                ("rasterize_forward", RASTERIZE_FORWARD),
-                ("rasterize_backward", RASTERIZE_BACKWARD),
-            )
-        };
+        // Pixel kernels stage batches of splats in workgroup memory; column kernels walk them a
+        // splat per subgroup lane, culled by footprint.
+        let (forward_label, forward_body, backward_label, backward_body, walk, grad_emit) =
+            match variant {
+                RasterVariant::Pixels => (
+                    "rasterize_forward",
+                    RASTERIZE_FORWARD,
+                    "rasterize_backward",
+                    RASTERIZE_BACKWARD,
+                    RASTERIZE_BATCH,
+                    GRAD_EMIT_DIRECT,
+                ),
+                RasterVariant::PixelsSubgroupSums => (
+                    "rasterize_forward",
+                    RASTERIZE_FORWARD,
+                    "rasterize_backward",
+                    RASTERIZE_BACKWARD,
+                    RASTERIZE_BATCH,
+                    GRAD_EMIT_SUBGROUP,
+                ),
+                RasterVariant::Columns => (
+                    "rasterize_forward_columns",
+                    RASTERIZE_FORWARD_COLUMNS,
+                    "rasterize_backward_columns",
+                    RASTERIZE_BACKWARD_COLUMNS,
+                    RASTERIZE_LANE_CHUNK,
+                    GRAD_EMIT_SHUFFLE,
+                ),
+            };
+        if variant != RasterVariant::Pixels && !ctx.has_subgroups() {
+            return Err(GpuError::Unsupported(format!(
+                "{variant:?} rasterization needs subgroups, which this adapter lacks"
+            )));
+        }
         Ok(Self {
             project_forward: build(
                 "project_forward",
@@ -138,8 +175,9 @@ impl RenderKernels {
                 forward_label,
                 &[
                     COMMON,
-                    RASTERIZE_BATCH,
+                    TILE_FOOTPRINT,
                     RASTERIZE_FORWARD_COMMON,
+                    walk,
                     forward_body,
                 ],
                 "rasterize_forward",
@@ -149,8 +187,9 @@ impl RenderKernels {
                 &[
                     atomics,
                     COMMON,
-                    RASTERIZE_BATCH,
+                    TILE_FOOTPRINT,
                     RASTERIZE_BACKWARD_COMMON,
+                    walk,
                     GRAD_FRAGMENT,
                     grad_emit,
                     backward_body,

@@ -16,8 +16,10 @@
 //!
 //! Software adapters (lavapipe) run `rasterize_forward_columns.wgsl` for step 9 and
 //! `rasterize_backward_columns.wgsl` for the backward: the same arithmetic per pixel, with a column
-//! of pixels per invocation so that each splat read from workgroup memory, and each set of
-//! gradient atomics, serves several pixels ([`RasterVariant`]).
+//! of pixels per invocation, and each subgroup walking its tile's splats on its own, a splat per
+//! lane at a time, only those whose footprint reaches its block of pixels
+//! (`rasterize_lane_chunk.wgsl`), so that each splat read and each set of gradient atomics serves
+//! many pixels ([`RasterVariant`]).
 //!
 //! Backward: `rasterize_backward.wgsl` (per pixel, back to front, float atomics into per-Gaussian
 //! screen-space gradients), then `project_backward.wgsl` (geometry) and `sh_backward.wgsl`
