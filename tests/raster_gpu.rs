@@ -415,57 +415,58 @@ fn gpu_gradients_summed_over_subgroups_match_reference() {
     compare_gradients(&gpu, &cpu, 2e-3);
 }
 
-/// Every rasterize variant the adapter can run, whatever it picks for itself: one pixel per
-/// invocation (GPUs) with and without subgroup sums, and columns walked a splat per lane (software
-/// adapters), give the reference's images and gradients.
-#[test]
-fn every_raster_variant_matches_reference() {
-    let Some(ctx) = context() else { return };
-    let variants = RasterVariant::supported(&ctx);
-    // 40 x 36: partial tiles on both edges.
-    let camera = test_camera(40, 36);
-    let model = edge_case_scene(75, 24, &camera);
+/// Checks every rasterize variant the adapter can run, whatever it picks for itself (one pixel
+/// per invocation with and without subgroup sums, columns walked a splat per lane), against the
+/// reference's image and gradients of `model`.
+fn assert_every_variant_matches_reference(
+    ctx: &GpuContext,
+    model: &GaussianModel,
+    camera: &RenderCamera,
+    seed: u64,
+) {
     let settings = settings_with_background();
-    let weights = random_weights(76, camera.pixel_count());
-    let cpu_image = render_forward(&ReferenceGaussians::from_model(&model), &camera, &settings);
-    let cpu = reference_gradients(&model, &camera, &settings, &weights);
-    for variant in variants {
-        let mut renderer = Renderer::with_variant(&ctx, variant).unwrap();
-        let image = render_gpu(&ctx, &mut renderer, &model, &camera, &settings);
+    let weights = random_weights(seed, camera.pixel_count());
+    let cpu_image = render_forward(&ReferenceGaussians::from_model(model), camera, &settings);
+    let cpu = reference_gradients(model, camera, &settings, &weights);
+    for variant in RasterVariant::supported(ctx) {
+        let mut renderer = Renderer::with_variant(ctx, variant).unwrap();
+        let image = render_gpu(ctx, &mut renderer, model, camera, &settings);
         let error = max_image_error(&image, &cpu_image.image);
         assert!(error < 2e-4, "{variant:?}: max abs image error {error}");
-        let gpu = gpu_gradients_with(&ctx, variant, &model, &camera, &settings, &weights, 1);
+        let gpu = gpu_gradients_with(ctx, variant, model, camera, &settings, &weights, 1);
         let worst = compare_gradients(&gpu, &cpu, 2e-3);
         println!("{variant:?}: image error {error:.1e}, gradient error {worst:.1e}");
     }
 }
 
+#[test]
+fn every_raster_variant_matches_reference() {
+    let Some(ctx) = context() else { return };
+    // 40 x 36: partial tiles on both edges.
+    let camera = test_camera(40, 36);
+    let model = edge_case_scene(75, 24, &camera);
+    assert_every_variant_matches_reference(&ctx, &model, &camera, 76);
+}
+
 /// Tiles listing hundreds of splats, most pixels saturating before the end of their list: every
-/// variant walks many batches or lane chunks, stops early, and culls splats per block, and still
-/// gives the reference's images and gradients.
+/// variant walks many batches or lane chunks, stops early and culls splats per block.
 #[test]
 fn every_raster_variant_matches_reference_on_dense_tiles() {
     let Some(ctx) = context() else { return };
     let camera = test_camera(48, 40);
     let model = random_scene(77, 400, &camera);
-    let settings = settings_with_background();
-    let weights = random_weights(78, camera.pixel_count());
-    let cpu_image = render_forward(&ReferenceGaussians::from_model(&model), &camera, &settings);
-    let saturated = cpu_image.image.iter().filter(|p| p[3] > 0.999).count();
+    let image = render_forward(
+        &ReferenceGaussians::from_model(&model),
+        &camera,
+        &settings_with_background(),
+    )
+    .image;
+    let saturated = image.iter().filter(|p| p[3] > 0.999).count();
     assert!(
-        saturated * 2 > cpu_image.image.len(),
+        saturated * 2 > image.len(),
         "test scene must saturate most pixels: {saturated}"
     );
-    let cpu = reference_gradients(&model, &camera, &settings, &weights);
-    for variant in RasterVariant::supported(&ctx) {
-        let mut renderer = Renderer::with_variant(&ctx, variant).unwrap();
-        let image = render_gpu(&ctx, &mut renderer, &model, &camera, &settings);
-        let error = max_image_error(&image, &cpu_image.image);
-        assert!(error < 2e-4, "{variant:?}: max abs image error {error}");
-        let gpu = gpu_gradients_with(&ctx, variant, &model, &camera, &settings, &weights, 1);
-        let worst = compare_gradients(&gpu, &cpu, 2e-3);
-        println!("{variant:?}: image error {error:.1e}, gradient error {worst:.1e}");
-    }
+    assert_every_variant_matches_reference(&ctx, &model, &camera, 78);
 }
 
 /// Tiles whose 16 x 16 square the footprint ellipse `sigma <= sigma_max` reaches into, found per
