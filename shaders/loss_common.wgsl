@@ -6,7 +6,15 @@
 // with `SSIM_C1`, `SSIM_C2`, `L1_WEIGHT` and `DSSIM_WEIGHT`.
 
 const WINDOW_RADIUS: i32 = 5;
+// Each workgroup covers a LOSS_TILE x LOSS_TILE square of pixels.
 const LOSS_TILE: u32 = 16u;
+// Each invocation filters a run of LOSS_RUN consecutive pixels along its pass's direction, so
+// each input pixel it reads serves up to LOSS_RUN outputs: LOSS_RUN + 10 reads instead of
+// 11 LOSS_RUN. A CPU adapter reads memory lane by lane, so the reads dominate (lavapipe,
+// 512x339: the four passes took ~52 ms a step one pixel per invocation).
+const LOSS_RUN: u32 = 4u;
+// Inputs a run reads: its pixels and the window's reach on both sides.
+const RUN_INPUTS: i32 = 14;
 
 struct LossParams {
     width: u32,
@@ -28,10 +36,35 @@ struct LossParams {
 
 var<private> window_weights: array<f32, 11> = SSIM_WINDOW;
 
+// The window's weight at `tap` (0..11), zero outside it. A run's output k takes input j with tap
+// j - k.
+fn tap_weight(tap: i32) -> f32 {
+    if tap < 0 || tap > 2 * WINDOW_RADIUS {
+        return 0.0;
+    }
+    return window_weights[tap];
+}
+
 fn pixel_index(x: i32, y: i32) -> u32 {
     return u32(y) * params.width + u32(x);
 }
 
 fn inside(x: i32, y: i32) -> bool {
     return x >= 0 && y >= 0 && x < i32(params.width) && y < i32(params.height);
+}
+
+// Three vec4 per pixel, as the SSIM partials are stored (loss_per_pixel.wgsl), filtered in
+// passes 3 and 4.
+struct Partials {
+    d_mu: vec4<f32>,
+    d_rr: vec4<f32>,
+    d_rt: vec4<f32>,
+}
+
+fn no_partials() -> Partials {
+    return Partials(vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0));
+}
+
+fn add_partials(sum: Partials, weight: f32, value: Partials) -> Partials {
+    return Partials(sum.d_mu + weight * value.d_mu, sum.d_rr + weight * value.d_rr, sum.d_rt + weight * value.d_rt);
 }

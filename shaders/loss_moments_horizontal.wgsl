@@ -1,38 +1,67 @@
 // Pass 1 of 4: horizontal Gaussian filtering of the five SSIM moment images
 // (r, t, r*r, t*t, r*t per channel), packed in four vec4 per pixel:
-// (r.xyz, t.x) (t.yz, rr.xy) (rr.z, tt.xyz) (rt.xyz, 0).
+// (r.xyz, t.x) (t.yz, rr.xy) (rr.z, tt.xyz) (rt.xyz, 0). Each invocation filters a run of
+// LOSS_RUN pixels of a row.
 
 @group(0) @binding(4) var<storage, read_write> row_moments: array<vec4<f32>>;
 
-@compute @workgroup_size(LOSS_TILE, LOSS_TILE)
+struct Moments {
+    r: vec3<f32>,
+    t: vec3<f32>,
+    rr: vec3<f32>,
+    tt: vec3<f32>,
+    rt: vec3<f32>,
+}
+
+fn no_moments() -> Moments {
+    return Moments(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+}
+
+fn add_moments(m: Moments, weight: f32, r: vec3<f32>, t: vec3<f32>) -> Moments {
+    return Moments(
+        m.r + weight * r,
+        m.t + weight * t,
+        m.rr + weight * r * r,
+        m.tt + weight * t * t,
+        m.rt + weight * r * t,
+    );
+}
+
+fn store_moments(x: i32, y: i32, m: Moments) {
+    if x < i32(params.width) {
+        let base = pixel_index(x, y) * 4u;
+        row_moments[base] = vec4<f32>(m.r, m.t.x);
+        row_moments[base + 1u] = vec4<f32>(m.t.yz, m.rr.xy);
+        row_moments[base + 2u] = vec4<f32>(m.rr.z, m.tt);
+        row_moments[base + 3u] = vec4<f32>(m.rt, 0.0);
+    }
+}
+
+@compute @workgroup_size(LOSS_TILE / LOSS_RUN, LOSS_TILE)
 fn filter_moments_horizontal(@builtin(global_invocation_id) id: vec3<u32>) {
-    let x = i32(id.x);
+    let x = i32(id.x * LOSS_RUN);
     let y = i32(id.y);
     if !inside(x, y) {
         return;
     }
-    var r = vec3<f32>(0.0);
-    var t = vec3<f32>(0.0);
-    var rr = vec3<f32>(0.0);
-    var tt = vec3<f32>(0.0);
-    var rt = vec3<f32>(0.0);
-    for (var tap = 0; tap < 11; tap++) {
-        let sx = x + tap - WINDOW_RADIUS;
+    var m0 = no_moments();
+    var m1 = no_moments();
+    var m2 = no_moments();
+    var m3 = no_moments();
+    for (var j = 0; j < RUN_INPUTS; j++) {
+        let sx = x + j - WINDOW_RADIUS;
         if sx >= 0 && sx < i32(params.width) {
             let pixel = pixel_index(sx, y);
-            let weight = window_weights[tap];
-            let rendered_value = rendered_rgb(pixel);
-            let target_value = target_rgb(pixel);
-            r += weight * rendered_value;
-            t += weight * target_value;
-            rr += weight * rendered_value * rendered_value;
-            tt += weight * target_value * target_value;
-            rt += weight * rendered_value * target_value;
+            let r = rendered_rgb(pixel);
+            let t = target_rgb(pixel);
+            m0 = add_moments(m0, tap_weight(j), r, t);
+            m1 = add_moments(m1, tap_weight(j - 1), r, t);
+            m2 = add_moments(m2, tap_weight(j - 2), r, t);
+            m3 = add_moments(m3, tap_weight(j - 3), r, t);
         }
     }
-    let base = pixel_index(x, y) * 4u;
-    row_moments[base] = vec4<f32>(r, t.x);
-    row_moments[base + 1u] = vec4<f32>(t.yz, rr.xy);
-    row_moments[base + 2u] = vec4<f32>(rr.z, tt);
-    row_moments[base + 3u] = vec4<f32>(rt, 0.0);
+    store_moments(x, y, m0);
+    store_moments(x + 1, y, m1);
+    store_moments(x + 2, y, m2);
+    store_moments(x + 3, y, m3);
 }
