@@ -14,6 +14,8 @@ const RADIX_BINS: u32 = 16u;
 const SORT_WORKGROUP: u32 = 128u;
 const SORT_ITEMS_PER_THREAD: u32 = 8u;
 const SORT_BLOCK: u32 = 1024u;
+// Threads of workgroup_exclusive_sum (workgroup_sum_*.wgsl), used by the scatter.
+const SUM_THREADS: u32 = SORT_WORKGROUP;
 
 const INFO_ELEMENT_COUNT: u32 = 0u;
 const INFO_BLOCK_COUNT: u32 = 1u;

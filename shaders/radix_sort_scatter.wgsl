@@ -18,24 +18,6 @@ const NO_DIGIT: u32 = 0xffffffffu;
 const TABLE_ENTRIES_PER_THREAD: u32 = RADIX_BINS;
 
 var<workgroup> bin_thread_table: array<u32, RADIX_BINS * SORT_WORKGROUP>;
-var<workgroup> thread_totals: array<u32, SORT_WORKGROUP>;
-
-// Exclusive prefix sum over the workgroup's threads (Hillis-Steele in shared memory).
-fn workgroup_exclusive_sum(thread: u32, value: u32) -> u32 {
-    thread_totals[thread] = value;
-    workgroupBarrier();
-    for (var offset = 1u; offset < SORT_WORKGROUP; offset = offset << 1u) {
-        var earlier = 0u;
-        if thread >= offset {
-            earlier = thread_totals[thread - offset];
-        }
-        workgroupBarrier();
-        thread_totals[thread] += earlier;
-        workgroupBarrier();
-    }
-    return thread_totals[thread] - value;
-}
-
 @compute @workgroup_size(SORT_WORKGROUP)
 fn radix_scatter(
     @builtin(workgroup_id) workgroup: vec3<u32>,

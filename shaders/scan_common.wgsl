@@ -18,23 +18,8 @@ struct ScanLevelParams {
     _pad2: u32,
 }
 
-var<workgroup> scan_thread_totals: array<u32, SCAN_WORKGROUP>;
-
-// Exclusive prefix sum of `value` over the workgroup's threads (Hillis-Steele in shared memory).
-fn workgroup_exclusive_sum(thread: u32, value: u32) -> u32 {
-    scan_thread_totals[thread] = value;
-    workgroupBarrier();
-    for (var offset = 1u; offset < SCAN_WORKGROUP; offset = offset << 1u) {
-        var earlier = 0u;
-        if thread >= offset {
-            earlier = scan_thread_totals[thread - offset];
-        }
-        workgroupBarrier();
-        scan_thread_totals[thread] += earlier;
-        workgroupBarrier();
-    }
-    return scan_thread_totals[thread] - value;
-}
+// Threads of workgroup_exclusive_sum (workgroup_sum_*.wgsl).
+const SUM_THREADS: u32 = SCAN_WORKGROUP;
 
 fn flat_workgroup_index(workgroup: vec3<u32>, workgroups: vec3<u32>) -> u32 {
     return workgroup.x + workgroup.y * workgroups.x;

@@ -4,7 +4,7 @@ mod gpu_support;
 
 use gpu_support::{gpu_context, new_encoder, seeded_rng, storage_buffer, submit};
 use rand::Rng;
-use segsplat::gpu::ExclusiveScan;
+use segsplat::gpu::{ExclusiveScan, WorkgroupSum};
 
 fn cpu_exclusive_scan(input: &[u32]) -> Vec<u32> {
     let mut output = Vec::with_capacity(input.len() + 1);
@@ -55,13 +55,16 @@ fn check_scan(scan: &ExclusiveScan, input: &[u32]) {
 #[test]
 fn scan_matches_cpu_for_block_boundary_and_large_counts() {
     let Some(ctx) = gpu_context() else { return };
-    let scan = ExclusiveScan::new(ctx).unwrap();
-    let mut rng = seeded_rng(7);
-    for count in [
-        0usize, 1, 255, 256, 257, 1023, 1024, 1025, 100_000, 1_000_000,
-    ] {
-        let input: Vec<u32> = (0..count).map(|_| rng.random_range(0..1000)).collect();
-        check_scan(&scan, &input);
+    // Every way of summing over a workgroup the adapter has, whichever it picks.
+    for sum in WorkgroupSum::supported(ctx) {
+        let scan = ExclusiveScan::with_sum(ctx, sum).unwrap();
+        let mut rng = seeded_rng(7);
+        for count in [
+            0usize, 1, 255, 256, 257, 1023, 1024, 1025, 100_000, 1_000_000,
+        ] {
+            let input: Vec<u32> = (0..count).map(|_| rng.random_range(0..1000)).collect();
+            check_scan(&scan, &input);
+        }
     }
 }
 

@@ -5,7 +5,7 @@ mod gpu_support;
 
 use gpu_support::{gpu_context, new_encoder, seeded_rng, storage_buffer, submit};
 use rand::Rng;
-use segsplat::gpu::{GpuContext, RadixSort};
+use segsplat::gpu::{GpuContext, RadixSort, WorkgroupSum};
 
 const SENTINEL: u32 = 0x5eed_5eed;
 
@@ -109,17 +109,20 @@ fn check_case(ctx: &GpuContext, sort: &mut RadixSort, case: &SortCase, count_off
 #[test]
 fn sort_matches_cpu_stable_sort_across_counts_and_key_bits() {
     let Some(ctx) = gpu_context() else { return };
-    let mut sort = RadixSort::new(ctx).unwrap();
-    let mut rng = seeded_rng(3);
-    for count in [0usize, 1, 1000, 5000] {
-        for key_bits in [4u32, 10, 13, 32] {
-            let case = SortCase {
-                keys: random_keys(&mut rng, count, key_bits, 50),
-                count,
-                capacity: count + 37,
-                key_bits,
-            };
-            check_case(ctx, &mut sort, &case, 0);
+    // Every way of summing over a workgroup the adapter has, whichever it picks.
+    for sum in WorkgroupSum::supported(ctx) {
+        let mut sort = RadixSort::with_sum(ctx, sum).unwrap();
+        let mut rng = seeded_rng(3);
+        for count in [0usize, 1, 1000, 5000] {
+            for key_bits in [4u32, 10, 13, 32] {
+                let case = SortCase {
+                    keys: random_keys(&mut rng, count, key_bits, 50),
+                    count,
+                    capacity: count + 37,
+                    key_bits,
+                };
+                check_case(ctx, &mut sort, &case, 0);
+            }
         }
     }
 }

@@ -11,5 +11,5 @@ pub mod validation;
 pub use context::{AdapterFilter, AdapterReport, GpuContext, GpuError};
 pub use kernel::Kernel;
 pub use profiler::{KernelProfile, KernelProfiler};
-pub use scan::ExclusiveScan;
+pub use scan::{ExclusiveScan, WorkgroupSum};
 pub use sort::RadixSort;

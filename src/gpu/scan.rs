@@ -27,8 +27,47 @@ const FIRST_LEVEL_COUNTS_INDEX: u32 = 2;
 pub(crate) const LEVEL_COUNTS_LEN: usize = FIRST_LEVEL_COUNTS_INDEX as usize + 2 * MAX_SCAN_LEVELS;
 
 const SCAN_COMMON: &str = include_str!("../../shaders/scan_common.wgsl");
+const WORKGROUP_SUM_SHARED: &str = include_str!("../../shaders/workgroup_sum_shared.wgsl");
+const WORKGROUP_SUM_SUBGROUPS: &str = include_str!("../../shaders/workgroup_sum_subgroups.wgsl");
 const SCAN_BLOCKS: &str = include_str!("../../shaders/scan_blocks.wgsl");
 const SCAN_ADD: &str = include_str!("../../shaders/scan_add.wgsl");
+
+/// How the scan and the radix sort add up one value per thread over a workgroup.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WorkgroupSum {
+    /// In workgroup memory, log2(threads) rounds of two barriers (`workgroup_sum_shared.wgsl`).
+    SharedMemory,
+    /// By subgroup scans and two barriers (`workgroup_sum_subgroups.wgsl`): software adapters
+    /// with subgroups, where each barrier switches between every subgroup of the workgroup.
+    Subgroups,
+}
+
+impl WorkgroupSum {
+    pub fn for_adapter(ctx: &GpuContext) -> Self {
+        if ctx.report.is_software && ctx.has_subgroups() {
+            Self::Subgroups
+        } else {
+            Self::SharedMemory
+        }
+    }
+
+    /// Every way the adapter can run.
+    pub fn supported(ctx: &GpuContext) -> Vec<Self> {
+        if ctx.has_subgroups() {
+            vec![Self::SharedMemory, Self::Subgroups]
+        } else {
+            vec![Self::SharedMemory]
+        }
+    }
+
+    /// The WGSL defining `workgroup_exclusive_sum`.
+    pub(crate) fn source(self) -> &'static str {
+        match self {
+            Self::SharedMemory => WORKGROUP_SUM_SHARED,
+            Self::Subgroups => WORKGROUP_SUM_SUBGROUPS,
+        }
+    }
+}
 
 /// Index of level `level`'s `[input count, output count]` pair in a level-counts buffer.
 pub(crate) const fn level_counts_index(level: usize) -> u32 {
@@ -147,12 +186,17 @@ pub struct ExclusiveScan {
 
 impl ExclusiveScan {
     pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
+        Self::with_sum(ctx, WorkgroupSum::for_adapter(ctx))
+    }
+
+    /// A scan whose blocks add up their threads' totals the given way.
+    pub fn with_sum(ctx: &GpuContext, sum: WorkgroupSum) -> Result<Self, GpuError> {
         let (scan_blocks, add_block_offsets) = validated(ctx, "building scan kernels", || {
             (
                 Kernel::new(
                     ctx,
                     "scan_blocks",
-                    &[SCAN_COMMON, SCAN_BLOCKS],
+                    &[SCAN_COMMON, sum.source(), SCAN_BLOCKS],
                     "scan_blocks",
                     &[],
                 ),

@@ -16,7 +16,8 @@ use std::num::NonZeroU64;
 use wgpu::util::DeviceExt;
 
 use crate::gpu::scan::{
-    LEVEL_COUNTS_LEN, MAX_SCAN_LEVELS, ScanDispatch, ScanLevels, ScanScratch, level_output_counts,
+    LEVEL_COUNTS_LEN, MAX_SCAN_LEVELS, ScanDispatch, ScanLevels, ScanScratch, WorkgroupSum,
+    level_output_counts,
 };
 use crate::gpu::validation::validated;
 use crate::gpu::{ExclusiveScan, GpuContext, GpuError, Kernel};
@@ -68,18 +69,29 @@ pub struct RadixSort {
 
 impl RadixSort {
     pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
-        let scan = ExclusiveScan::new(ctx)?;
-        let kernel = |label, source, entry| {
-            validated(ctx, label, || {
-                Kernel::new(ctx, label, &[SORT_COMMON, source], entry, &[])
-            })
+        Self::with_sum(ctx, WorkgroupSum::for_adapter(ctx))
+    }
+
+    /// A sort whose scatter and histogram scan add up thread totals the given way.
+    pub fn with_sum(ctx: &GpuContext, sum: WorkgroupSum) -> Result<Self, GpuError> {
+        let scan = ExclusiveScan::with_sum(ctx, sum)?;
+        let kernel = |label, sources: &[&str], entry| {
+            validated(ctx, label, || Kernel::new(ctx, label, sources, entry, &[]))
         };
         Ok(Self {
             scan,
-            plan: kernel("radix_sort_plan", SORT_PLAN, "plan_sort")?,
-            histogram: kernel("radix_sort_histogram", SORT_HISTOGRAM, "radix_histogram")?,
-            scatter: kernel("radix_sort_scatter", SORT_SCATTER, "radix_scatter")?,
-            copy: kernel("radix_sort_copy", SORT_COPY, "copy_sorted")?,
+            plan: kernel("radix_sort_plan", &[SORT_COMMON, SORT_PLAN], "plan_sort")?,
+            histogram: kernel(
+                "radix_sort_histogram",
+                &[SORT_COMMON, SORT_HISTOGRAM],
+                "radix_histogram",
+            )?,
+            scatter: kernel(
+                "radix_sort_scatter",
+                &[SORT_COMMON, sum.source(), SORT_SCATTER],
+                "radix_scatter",
+            )?,
+            copy: kernel("radix_sort_copy", &[SORT_COMMON, SORT_COPY], "copy_sorted")?,
             scratch: None,
             pass_params: HashMap::new(),
         })
