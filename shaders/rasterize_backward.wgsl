@@ -13,7 +13,7 @@ var<workgroup> longest: atomic<u32>;
 var<workgroup> longest_snapshot: u32;
 
 // The tile's first intersection and the most intersections any of its pixels walks (each
-// invocation passes the most of its own pixels), the same in every invocation.
+// invocation passes its pixel's count), the same in every invocation.
 fn tile_walk(tile: u32, local_index: u32, contributed: u32) -> vec2<u32> {
     if local_index == 0u {
         range_start = tile_ranges[2u * tile];

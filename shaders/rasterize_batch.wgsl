@@ -1,5 +1,7 @@
-// The batch of splats a rasterize workgroup stages in workgroup memory, shared by the forward and
-// backward kernels (their rasterize_*_common.wgsl declares the `projected` binding read here).
+// The batch of splats a rasterize workgroup stages in workgroup memory, shared by the per-pixel
+// forward and backward kernels (their rasterize_*_common.wgsl declares the `projected` binding
+// read here). The column kernels read splats a subgroup lane each instead
+// (rasterize_lane_chunk.wgsl).
 
 const BATCH: u32 = 256u;
 
