@@ -39,8 +39,10 @@ fn plan_sort() {
     write_groups(0u, blocks);
     write_groups(1u, (count + COPY_WORKGROUP - 1u) / COPY_WORKGROUP);
 
+    // The scatter reads no total, so the histogram scan writes none: 1024 histograms (64 blocks)
+    // need one level (level_output_counts_without_total in scan.rs).
     let histogram_count = blocks * RADIX_BINS;
-    var output_count = histogram_count + 1u;
+    var output_count = histogram_count;
     for (var level = 0u; level < params.scan_levels; level++) {
         let counts_index = FIRST_LEVEL_COUNTS_INDEX + 2u * level;
         if level == 0u {

@@ -77,7 +77,17 @@ pub(crate) const fn level_counts_index(level: usize) -> u32 {
 /// Output counts per level for scanning `count` inputs into `count + 1` outputs (the last output
 /// being the total). Level 0 is first; the last level fits in one block.
 pub(crate) fn level_output_counts(count: u32) -> Vec<u32> {
-    let mut counts = vec![count.saturating_add(1)];
+    levels_from(count.saturating_add(1))
+}
+
+/// Output counts per level for scanning `count` inputs into `count` outputs, without the total
+/// (the radix sort's histograms): 1024 inputs then need one level, not two.
+pub(crate) fn level_output_counts_without_total(count: u32) -> Vec<u32> {
+    levels_from(count.max(1))
+}
+
+fn levels_from(outputs: u32) -> Vec<u32> {
+    let mut counts = vec![outputs];
     while let Some(&last) = counts.last() {
         if last <= SCAN_BLOCK_ELEMENTS {
             break;
@@ -375,5 +385,8 @@ mod tests {
             level_output_counts(30_000_000),
             vec![30_000_001, 29_297, 29]
         );
+        assert_eq!(level_output_counts_without_total(0), vec![1]);
+        assert_eq!(level_output_counts_without_total(1024), vec![1024]);
+        assert_eq!(level_output_counts_without_total(1025), vec![1025, 2]);
     }
 }

@@ -17,7 +17,7 @@ use wgpu::util::DeviceExt;
 
 use crate::gpu::scan::{
     LEVEL_COUNTS_LEN, MAX_SCAN_LEVELS, ScanDispatch, ScanLevels, ScanScratch, WorkgroupSum,
-    level_output_counts,
+    level_output_counts_without_total,
 };
 use crate::gpu::validation::validated;
 use crate::gpu::{ExclusiveScan, GpuContext, GpuError, Kernel};
@@ -123,7 +123,7 @@ impl RadixSort {
             })
         };
         let none = wgpu::BufferUsages::empty();
-        let scan_output_counts = level_output_counts(histogram_count);
+        let scan_output_counts = level_output_counts_without_total(histogram_count);
         let mut scan = ScanScratch::default();
         scan.reserve(ctx, &scan_output_counts);
         self.scratch = Some(SortScratch {
