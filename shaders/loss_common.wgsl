@@ -52,19 +52,3 @@ fn pixel_index(x: i32, y: i32) -> u32 {
 fn inside(x: i32, y: i32) -> bool {
     return x >= 0 && y >= 0 && x < i32(params.width) && y < i32(params.height);
 }
-
-// Three vec4 per pixel, as the SSIM partials are stored (loss_per_pixel.wgsl), filtered in
-// passes 3 and 4.
-struct Partials {
-    d_mu: vec4<f32>,
-    d_rr: vec4<f32>,
-    d_rt: vec4<f32>,
-}
-
-fn no_partials() -> Partials {
-    return Partials(vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0));
-}
-
-fn add_partials(sum: Partials, weight: f32, value: Partials) -> Partials {
-    return Partials(sum.d_mu + weight * value.d_mu, sum.d_rr + weight * value.d_rr, sum.d_rt + weight * value.d_rt);
-}

@@ -2,10 +2,15 @@
 // with respect to the rendered image:
 //   dL/dr = weight / N * (0.8 * sign(r - t) - 0.2 * (G*d_mu + 2 r G*d_rr + t G*d_rt)).
 // Overwrites `rendered_grad` (w = 0). Each invocation filters a run of LOSS_RUN pixels of a
-// column.
+// column (loss_partials_run.wgsl).
 
 @group(0) @binding(4) var<storage, read> row_partials: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> rendered_grad: array<vec4<f32>>;
+
+fn partials_input(pixel: u32) -> Partials {
+    let base = pixel * 3u;
+    return Partials(row_partials[base], row_partials[base + 1u], row_partials[base + 2u]);
+}
 
 fn store_gradient(x: i32, y: i32, sum: Partials) {
     if y < i32(params.height) {
@@ -25,23 +30,9 @@ fn loss_gradient(@builtin(global_invocation_id) id: vec3<u32>) {
     if !inside(x, y) {
         return;
     }
-    var s0 = no_partials();
-    var s1 = no_partials();
-    var s2 = no_partials();
-    var s3 = no_partials();
-    for (var j = 0; j < RUN_INPUTS; j++) {
-        let sy = y + j - WINDOW_RADIUS;
-        if sy >= 0 && sy < i32(params.height) {
-            let base = pixel_index(x, sy) * 3u;
-            let value = Partials(row_partials[base], row_partials[base + 1u], row_partials[base + 2u]);
-            s0 = add_partials(s0, tap_weight(j), value);
-            s1 = add_partials(s1, tap_weight(j - 1), value);
-            s2 = add_partials(s2, tap_weight(j - 2), value);
-            s3 = add_partials(s3, tap_weight(j - 3), value);
-        }
-    }
-    store_gradient(x, y, s0);
-    store_gradient(x, y + 1, s1);
-    store_gradient(x, y + 2, s2);
-    store_gradient(x, y + 3, s3);
+    let run = filter_partials_run(x, y, vec2<i32>(0, 1), y, i32(params.height));
+    store_gradient(x, y, run.s0);
+    store_gradient(x, y + 1, run.s1);
+    store_gradient(x, y + 2, run.s2);
+    store_gradient(x, y + 3, run.s3);
 }

@@ -1,9 +1,14 @@
 // Pass 3 of 4: horizontal Gaussian filtering of the SSIM partials (the adjoint of the forward
 // filter: the window is symmetric and zero padding drops the same out-of-image terms). Each
-// invocation filters a run of LOSS_RUN pixels of a row.
+// invocation filters a run of LOSS_RUN pixels of a row (loss_partials_run.wgsl).
 
 @group(0) @binding(1) var<storage, read> ssim_partials: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read_write> row_partials: array<vec4<f32>>;
+
+fn partials_input(pixel: u32) -> Partials {
+    let base = pixel * 3u;
+    return Partials(ssim_partials[base], ssim_partials[base + 1u], ssim_partials[base + 2u]);
+}
 
 fn store_partials(x: i32, y: i32, sum: Partials) {
     if x < i32(params.width) {
@@ -21,23 +26,9 @@ fn filter_partials_horizontal(@builtin(global_invocation_id) id: vec3<u32>) {
     if !inside(x, y) {
         return;
     }
-    var s0 = no_partials();
-    var s1 = no_partials();
-    var s2 = no_partials();
-    var s3 = no_partials();
-    for (var j = 0; j < RUN_INPUTS; j++) {
-        let sx = x + j - WINDOW_RADIUS;
-        if sx >= 0 && sx < i32(params.width) {
-            let base = pixel_index(sx, y) * 3u;
-            let value = Partials(ssim_partials[base], ssim_partials[base + 1u], ssim_partials[base + 2u]);
-            s0 = add_partials(s0, tap_weight(j), value);
-            s1 = add_partials(s1, tap_weight(j - 1), value);
-            s2 = add_partials(s2, tap_weight(j - 2), value);
-            s3 = add_partials(s3, tap_weight(j - 3), value);
-        }
-    }
-    store_partials(x, y, s0);
-    store_partials(x + 1, y, s1);
-    store_partials(x + 2, y, s2);
-    store_partials(x + 3, y, s3);
+    let run = filter_partials_run(x, y, vec2<i32>(1, 0), x, i32(params.width));
+    store_partials(x, y, run.s0);
+    store_partials(x + 1, y, run.s1);
+    store_partials(x + 2, y, run.s2);
+    store_partials(x + 3, y, run.s3);
 }

@@ -40,6 +40,7 @@ const LOSS_COMMON: &str = include_str!("../../shaders/loss_common.wgsl");
 const LOSS_INPUTS: &str = include_str!("../../shaders/loss_inputs.wgsl");
 const LOSS_MOMENTS_HORIZONTAL: &str = include_str!("../../shaders/loss_moments_horizontal.wgsl");
 const LOSS_PER_PIXEL: &str = include_str!("../../shaders/loss_per_pixel.wgsl");
+const LOSS_PARTIALS_RUN: &str = include_str!("../../shaders/loss_partials_run.wgsl");
 const LOSS_PARTIALS_HORIZONTAL: &str = include_str!("../../shaders/loss_partials_horizontal.wgsl");
 const LOSS_GRADIENT: &str = include_str!("../../shaders/loss_gradient.wgsl");
 const LOSS_REDUCE: &str = include_str!("../../shaders/loss_reduce.wgsl");
@@ -182,12 +183,23 @@ impl RenderLoss {
             )?,
             partials_horizontal: kernel(
                 "loss_partials_horizontal",
-                &plain(LOSS_PARTIALS_HORIZONTAL),
+                &[
+                    constants.as_str(),
+                    LOSS_COMMON,
+                    LOSS_PARTIALS_RUN,
+                    LOSS_PARTIALS_HORIZONTAL,
+                ],
                 "filter_partials_horizontal",
             )?,
             gradient: kernel(
                 "loss_gradient",
-                &with_inputs(LOSS_GRADIENT),
+                &[
+                    constants.as_str(),
+                    LOSS_COMMON,
+                    LOSS_INPUTS,
+                    LOSS_PARTIALS_RUN,
+                    LOSS_GRADIENT,
+                ],
                 "loss_gradient",
             )?,
             reduce: kernel("loss_reduce", &plain(LOSS_REDUCE), "reduce_loss")?,
