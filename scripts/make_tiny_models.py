@@ -328,19 +328,26 @@ def _resize_bilinear(g, x, height_width_i64):
     return g.op("Resize", x, "", "", sizes, mode="linear", coordinate_transformation_mode="pytorch_half_pixel")
 
 
-def _decoder_postprocess(g, low_res):
-    """SAM's mask_postprocessing: upscale to 1024, crop the unpadded region, resize to orig_im_size."""
+def _decoder_postprocess(g, low_res, baked_crop=None):
+    """SAM's mask_postprocessing: upscale to 1024, crop the unpadded region, resize to orig_im_size.
+
+    `baked_crop` = (height, width) crops to that fixed size whatever orig_im_size says, as
+    segment-anything's own export does (683 x 1024, its example image's)."""
     full = _resize_bilinear(g, low_res, g.i64([SAM_IMAGE_SIZE, SAM_IMAGE_SIZE]))
-    # prepadded size = floor(orig * 1024 / max(orig) + 0.5), in float32 as SamOnnxModel computes it
-    scale = g.op("Div", g.const(float(SAM_IMAGE_SIZE)), g.op("ReduceMax", "orig_im_size", axes=[0], keepdims=1))
-    prepadded = g.op("Floor", g.op("Add", g.op("Mul", "orig_im_size", scale), g.const(0.5)))
-    prepadded = g.op("Cast", prepadded, to=TensorProto.INT64)
+    if baked_crop is not None:
+        prepadded = g.i64(list(baked_crop))
+    else:
+        # prepadded size = floor(orig * 1024 / max(orig) + 0.5), in float32 as SamOnnxModel computes it
+        scale = g.op("Div", g.const(float(SAM_IMAGE_SIZE)), g.op("ReduceMax", "orig_im_size", axes=[0], keepdims=1))
+        prepadded = g.op("Floor", g.op("Add", g.op("Mul", "orig_im_size", scale), g.const(0.5)))
+        prepadded = g.op("Cast", prepadded, to=TensorProto.INT64)
     cropped = g.op("Slice", full, g.i64([0, 0]), prepadded, g.i64([2, 3]))
     original = g.op("Cast", "orig_im_size", to=TensorProto.INT64)
     return g.op("Identity", _resize_bilinear(g, cropped, original), output="masks")
 
 
-def build_sam_decoder():
+def build_sam_decoder(point_batch=-1, mask_batch=-1, sam2=False, object_score=False, baked_crop=None,
+                      name="tiny_sam_decoder"):
     """The SAM decoder signature with a colour-and-distance segmenter.
 
     For each prompt, only its first point is used, and only when its label is 1: a low-res cell's
@@ -349,6 +356,13 @@ def build_sam_decoder():
     radius (small / middle / large; channel 0 = middle). A mask_input (has_mask_input = 1) adds
     SAM_MASK_INPUT_WEIGHT * tanh(mask_input / 4). Prompts whose first label is not 1 give
     SAM_NO_PROMPT_LOGIT everywhere.
+
+    The keyword arguments give the official exporters' signatures: `point_batch=1` is
+    segment-anything's own export (one prompt per run), `mask_batch=1` a mask_input /
+    has_mask_input of batch 1 broadcast over the prompts, `sam2` adds the encoder's
+    high_res_feats_* inputs and SAM 2.1's postprocessing (resize straight to orig_im_size), and
+    `object_score` adds SAM 2's `object_score_logits` [B,1] (see _decoder_object_score below), and
+    `baked_crop` fixes the crop before the final resize as segment-anything's export does.
     """
     g = GraphBuilder()
     colours = _decoder_cell_colours(g)
@@ -360,28 +374,88 @@ def build_sam_decoder():
     has_mask = g.op("Unsqueeze", "has_mask_input", g.i64([1, 2, 3]))
     mask_prior = g.op("Mul", g.op("Tanh", g.op("Div", "mask_input", g.const(4.0))), g.const(SAM_MASK_INPUT_WEIGHT))
     logits = g.op("Add", logits, g.op("Mul", has_mask, mask_prior))
+    if sam2:
+        # Read the high-resolution features (times 0) so they are real inputs of the graph.
+        for feature in ["high_res_feats_0", "high_res_feats_1"]:
+            mean = g.op("ReduceMean", feature, axes=[0, 1, 2, 3], keepdims=1)
+            logits = g.op("Add", logits, g.op("Mul", mean, g.const(0.0)))
     logits = g.op("Clip", logits, g.const(-SAM_LOGIT_LIMIT), g.const(SAM_LOGIT_LIMIT))
 
     is_positive = g.op("Unsqueeze", g.op("Equal", label, g.const(1.0)), g.i64([1, 2, 3]))
     low_res = g.op("Where", is_positive, logits, g.const(SAM_NO_PROMPT_LOGIT), output="low_res_masks")
     _decoder_iou_predictions(g, low_res)
-    _decoder_postprocess(g, low_res)
+    if sam2:
+        g.op("Identity", _resize_bilinear(g, low_res, g.op("Cast", "orig_im_size", to=TensorProto.INT64)), output="masks")
+    else:
+        _decoder_postprocess(g, low_res, baked_crop)
+    if object_score:
+        _decoder_object_score(g, colours, xy, label)
 
     f = TensorProto.FLOAT
+    inputs = [
+        tensor_info("image_embeddings", f, [1, 256, SAM_EMBED_GRID, SAM_EMBED_GRID]),
+        tensor_info("point_coords", f, [point_batch, -1, 2]),
+        tensor_info("point_labels", f, [point_batch, -1]),
+        tensor_info("mask_input", f, [mask_batch, 1, SAM_LOW_RES, SAM_LOW_RES]),
+        tensor_info("has_mask_input", f, [mask_batch]),
+        tensor_info("orig_im_size", f, [2]),
+    ]
+    if sam2:
+        inputs += [
+            tensor_info("high_res_feats_0", f, [1, 32, SAM_LOW_RES, SAM_LOW_RES]),
+            tensor_info("high_res_feats_1", f, [1, 64, SAM_LOW_RES // 2, SAM_LOW_RES // 2]),
+        ]
+    outputs = [
+        tensor_info("masks", f, [point_batch, 4, -1, -1]),
+        tensor_info("iou_predictions", f, [point_batch, 4]),
+        tensor_info("low_res_masks", f, [point_batch, 4, SAM_LOW_RES, SAM_LOW_RES]),
+    ]
+    if object_score:
+        outputs.append(tensor_info("object_score_logits", f, [point_batch, 1]))
+    return g.model(name, inputs, outputs)
+
+
+# SAM 2's object score of the stand-in: SLOPE * (colour range under the point - THRESHOLD), with
+# the range max(c) - min(c) of the normalised colour. Saturated colours (the blobs of the test
+# scenes: range ~3) score > 0, neutral ones (grey, white, black: range < 0.5) < 0: "no object".
+SAM_OBJECT_SCORE_THRESHOLD = 1.0
+SAM_OBJECT_SCORE_SLOPE = 4.0
+
+
+def _decoder_object_score(g, colours, xy, label):
+    """object_score_logits [B,1]; -10 for a prompt whose first label is not 1."""
+    cell_xy = g.op("Floor", g.op("Clip", g.op("Div", xy, g.const(float(SAM_CELL))), g.const(0.0), g.const(SAM_LOW_RES - 1.0)))
+    cell_xy = g.op("Cast", cell_xy, to=TensorProto.INT64)
+    column = g.op("Squeeze", g.op("Slice", cell_xy, g.i64([0]), g.i64([1]), g.i64([1])), g.i64([1]))
+    row = g.op("Squeeze", g.op("Slice", cell_xy, g.i64([1]), g.i64([2]), g.i64([1])), g.i64([1]))
+    flat_index = g.op("Add", g.op("Mul", row, g.i64(SAM_LOW_RES)), column)
+    flat_colours = g.op("Reshape", colours, g.i64([3, SAM_LOW_RES * SAM_LOW_RES]))
+    point_colour = g.op("Transpose", g.op("Gather", flat_colours, flat_index, axis=1), perm=[1, 0])  # [B,3]
+    spread = g.op("Sub", g.op("ReduceMax", point_colour, axes=[1], keepdims=1), g.op("ReduceMin", point_colour, axes=[1], keepdims=1))
+    score = g.op("Mul", g.op("Sub", spread, g.const(SAM_OBJECT_SCORE_THRESHOLD)), g.const(SAM_OBJECT_SCORE_SLOPE))
+    positive = g.op("Unsqueeze", g.op("Equal", label, g.const(1.0)), g.i64([1]))
+    g.op("Where", positive, score, g.const(SAM_NO_PROMPT_LOGIT), output="object_score_logits")
+
+
+def build_sam2_encoder():
+    """The tiny encoder plus SAM 2.1's high_res_feats_0 [1,32,256,256] / _1 [1,64,128,128]
+    (fixed random mixes of the 4x4 / 8x8 cell colours; the decoder reads them times 0)."""
+    model = build_sam_encoder()
+    g = GraphBuilder()
+    g.nodes, g.initializers = list(model.graph.node), list(model.graph.initializer)
+    g._count = 10_000
+    rng = np.random.default_rng(11)
+    for output, cell, channels in [("high_res_feats_0", 4, 32), ("high_res_feats_1", 8, 64)]:
+        pooled = g.op("AveragePool", "image", kernel_shape=[cell, cell], strides=[cell, cell])
+        mix = (0.1 * rng.standard_normal((channels, 3, 1, 1))).astype(np.float32)
+        g.op("Conv", pooled, g.const(mix), output=output)
     return g.model(
-        "tiny_sam_decoder",
+        "tiny_sam2_encoder",
+        [tensor_info("image", TensorProto.FLOAT, [1, 3, SAM_IMAGE_SIZE, SAM_IMAGE_SIZE])],
         [
-            tensor_info("image_embeddings", f, [1, 256, SAM_EMBED_GRID, SAM_EMBED_GRID]),
-            tensor_info("point_coords", f, [-1, -1, 2]),
-            tensor_info("point_labels", f, [-1, -1]),
-            tensor_info("mask_input", f, [-1, 1, SAM_LOW_RES, SAM_LOW_RES]),
-            tensor_info("has_mask_input", f, [-1]),
-            tensor_info("orig_im_size", f, [2]),
-        ],
-        [
-            tensor_info("masks", f, [-1, 4, -1, -1]),
-            tensor_info("iou_predictions", f, [-1, 4]),
-            tensor_info("low_res_masks", f, [-1, 4, SAM_LOW_RES, SAM_LOW_RES]),
+            tensor_info("image_embeddings", TensorProto.FLOAT, [1, 256, SAM_EMBED_GRID, SAM_EMBED_GRID]),
+            tensor_info("high_res_feats_0", TensorProto.FLOAT, [1, 32, SAM_LOW_RES, SAM_LOW_RES]),
+            tensor_info("high_res_feats_1", TensorProto.FLOAT, [1, 64, SAM_LOW_RES // 2, SAM_LOW_RES // 2]),
         ],
     )
 
@@ -708,6 +782,92 @@ def write_tiny_model_dir():
         f.write("\n")
 
 
+OFFICIAL_DIR = os.path.join(REPO_ROOT, "tests", "fixtures", "models", "official")
+
+# Folders of tiny models with the signatures of the exports users bring, and no manifest.json
+# (`segsplat models init` writes it): file name -> builder.
+OFFICIAL_VARIANTS = {
+    # segment-anything's own export script (SamOnnxModel): every prompt input has batch 1, and
+    # the crop before the final resize is baked at its example image's 683 x 1024.
+    "sam": {
+        "sam_vit_b_encoder.onnx": build_sam_encoder,
+        "sam_vit_b_decoder.onnx": lambda: build_sam_decoder(
+            point_batch=1, mask_batch=1, baked_crop=(683, 1024), name="official_sam_decoder"),
+    },
+    # MobileSAM's export follows it; this one batches points but broadcasts the mask input.
+    "mobilesam": {
+        "mobile_sam_encoder.onnx": build_sam_encoder,
+        "mobile_sam.onnx": lambda: build_sam_decoder(mask_batch=1, name="official_mobilesam_decoder"),
+    },
+    # Common SAM 2.1 exports: points batched, mask input broadcast, SAM 2's object score added.
+    "sam2": {
+        "sam2.1_hiera_tiny.encoder.onnx": build_sam2_encoder,
+        "sam2.1_hiera_tiny.decoder.onnx": lambda: build_sam_decoder(
+            mask_batch=1, sam2=True, object_score=True, name="official_sam2_decoder"),
+    },
+}
+
+
+def build_clip_text_of_width(width):
+    """A CLIP text signature whose embedding width is `width` and dynamic in the graph
+    (`text_embeds [-1, -1]`): a CLIP image model of another width must be refused as its pair,
+    which needs a run to find out."""
+    g = GraphBuilder()
+    rng = np.random.default_rng(5)
+    ids = g.op("Cast", "input_ids", to=TensorProto.FLOAT)
+    weights = (rng.standard_normal((CONTEXT_LENGTH, width)) / CONTEXT_LENGTH).astype(np.float32)
+    g.op("MatMul", ids, g.const(weights), output="text_embeds")
+    return g.model(
+        f"tiny_clip_text_{width}",
+        [tensor_info("input_ids", TensorProto.INT64, [-1, CONTEXT_LENGTH])],
+        [tensor_info("text_embeds", TensorProto.FLOAT, [-1, -1])],
+    )
+
+
+def write_official_dirs():
+    mismatched = os.path.join(REPO_ROOT, "tests", "fixtures", "models", "mismatched")
+    os.makedirs(mismatched, exist_ok=True)
+    onnx.save(build_clip_text_of_width(256), os.path.join(mismatched, "clip-text-256.onnx"))
+    for variant, files in OFFICIAL_VARIANTS.items():
+        folder = os.path.join(OFFICIAL_DIR, variant)
+        os.makedirs(folder, exist_ok=True)
+        for file_name, build in files.items():
+            onnx.save(build(), os.path.join(folder, file_name))
+
+
+def check_official():
+    """Each official decoder answers a batch its signature allows, with the blob scene."""
+    import onnxruntime as ort
+
+    for variant, files in OFFICIAL_VARIANTS.items():
+        folder = os.path.join(OFFICIAL_DIR, variant)
+        encoder_file, decoder_file = list(files)
+        encoder = ort.InferenceSession(os.path.join(folder, encoder_file))
+        decoder = ort.InferenceSession(os.path.join(folder, decoder_file))
+        image, blobs = blob_scene(160, 120)
+        pixels, scale = sam_preprocess(image)
+        features = dict(zip([o.name for o in encoder.get_outputs()], encoder.run(None, {"image": pixels})))
+        batch = 1 if variant == "sam" else len(blobs) + 1
+        centres = [np.argwhere(mask)[:, ::-1].mean(axis=0) for mask in blobs.values()] + [np.array([2.0, 2.0])]
+        points = np.array([[centre * scale, [0.0, 0.0]] for centre in centres[:batch]], np.float32)
+        feeds = {
+            "point_coords": points,
+            "point_labels": np.tile(np.array([[1.0, -1.0]], np.float32), (batch, 1)),
+            "mask_input": np.zeros((1, 1, SAM_LOW_RES, SAM_LOW_RES), np.float32),
+            "has_mask_input": np.zeros(1, np.float32),
+            "orig_im_size": np.array([120, 160], np.float32),
+        }
+        feeds.update({name: value for name, value in features.items() if name in [i.name for i in decoder.get_inputs()]})
+        outputs = dict(zip([o.name for o in decoder.get_outputs()], decoder.run(None, feeds)))
+        assert outputs["masks"].shape == (batch, 4, 120, 160), outputs["masks"].shape
+        line = f"official {variant}: {batch} prompt(s) in one run, masks {outputs['masks'].shape}"
+        if "object_score_logits" in outputs:
+            scores = outputs["object_score_logits"][:, 0]
+            assert (scores[:-1] > 0).all() and scores[-1] < 0, scores  # blobs vs the grey corner
+            line += f", object scores {np.round(scores, 2).tolist()}"
+        print(line)
+
+
 def write_tokenizer_fixtures():
     os.makedirs(CLIP_FIXTURE_DIR, exist_ok=True)
     for file_name, texts in [("tokenizer_cases.json", TOKENIZER_TEXTS),
@@ -843,11 +1003,13 @@ def main():
         write_tiny_model_dir()
         write_tokenizer_fixtures()
         write_preprocess_fixture()
-        print(f"wrote {TINY_DIR} and {CLIP_FIXTURE_DIR}")
+        write_official_dirs()
+        print(f"wrote {TINY_DIR}, {OFFICIAL_DIR} and {CLIP_FIXTURE_DIR}")
     if args.check or args.check_only:
         check_tokenizer()
         check_clip()
         check_sam()
+        check_official()
 
 
 if __name__ == "__main__":

@@ -23,7 +23,26 @@ fn the_tiny_directory_opens_with_every_role() {
     let runtime = store.runtime().clone();
     let report = ModelStore::check(&tiny_models_dir(), &runtime);
     assert!(report.is_ok(), "{report:?}");
-    assert_eq!(report.files.len(), 5);
+    // Four models, the tokenizer, and the CLIP image/text pair.
+    assert_eq!(report.files.len(), 6);
+}
+
+/// A tiny-model copy whose `role` file is replaced by `source`, its hash updated to match.
+fn copy_with_file_of_another_role(source: &str, role: &str) -> tempfile::TempDir {
+    let copy = copy_of_tiny_models();
+    let mut file = String::new();
+    edit_manifest(copy.path(), |manifest| {
+        file = model_of_role(manifest, role)["file"]
+            .as_str()
+            .unwrap()
+            .to_string();
+    });
+    std::fs::copy(copy.path().join(source), copy.path().join(&file)).unwrap();
+    let hash = segsplat::models::store::sha256_file(&copy.path().join(&file)).unwrap();
+    edit_manifest(copy.path(), |manifest| {
+        model_of_role(manifest, role)["sha256"] = hash.into();
+    });
+    copy
 }
 
 fn open_copy(dir: &std::path::Path) -> Option<ModelError> {
@@ -129,30 +148,20 @@ fn a_manifest_dtype_that_breaks_the_role_is_named() {
 fn another_roles_model_is_a_signature_mismatch() {
     // The clip_text graph under the clip_image entry: the manifest is right for the role, the
     // file is not.
-    let copy = copy_of_tiny_models();
-    std::fs::copy(
-        copy.path().join("tiny-clip-text.onnx"),
-        copy.path().join("tiny-clip-image.onnx"),
-    )
-    .unwrap();
-    let hash =
-        segsplat::models::store::sha256_file(&copy.path().join("tiny-clip-image.onnx")).unwrap();
-    edit_manifest(copy.path(), |manifest| {
-        model_of_role(manifest, "clip_image")["sha256"] = hash.into();
-    });
+    let copy = copy_with_file_of_another_role("tiny-clip-text.onnx", "clip_image");
     let Some(error) = open_copy(copy.path()) else {
         return;
     };
     assert!(matches!(error, ModelError::Signature { .. }), "{error:?}");
     let message = error.to_string();
     assert!(
-        message.starts_with("clip_image tiny-clip-image.onnx: model has no input pixel_values (its inputs: input_ids)"),
+        message.starts_with(
+            "clip_image tiny-clip-image.onnx: this looks like a CLIP text model (inputs input_ids; \
+             outputs text_embeds), not a clip_image: model has no input pixel_values (its inputs: input_ids)"
+        ),
         "{message}"
     );
-    assert!(
-        message.contains("model has no output image_embeds"),
-        "{message}"
-    );
+    assert!(message.ends_with("(and 2 more)"), "{message}");
 }
 
 #[test]
@@ -192,5 +201,60 @@ fn check_reports_every_file_and_keeps_going() {
         .map(|file| file.role.as_str())
         .collect();
     assert_eq!(failed, vec!["sam_encoder", "tokenizer"]);
-    assert_eq!(report.files.len(), 5);
+    assert_eq!(report.files.len(), 6);
+}
+
+#[test]
+fn a_decoder_given_as_the_encoder_says_so_first_and_briefly() {
+    let copy = copy_with_file_of_another_role("tiny-sam-decoder.onnx", "sam_encoder");
+    let Some(error) = open_copy(copy.path()) else {
+        return;
+    };
+    let message = error.to_string();
+    assert!(
+        message.starts_with(
+            "sam_encoder tiny-sam-encoder.onnx: this looks like a SAM decoder (inputs image_embeddings, \
+             point_coords, point_labels, mask_input, has_mask_input, orig_im_size; outputs masks, \
+             iou_predictions, low_res_masks), not a sam_encoder: "
+        ),
+        "{message}"
+    );
+    assert!(message.contains("more)"), "{message}");
+    assert!(
+        message.len() < 500,
+        "{} characters: {message}",
+        message.len()
+    );
+}
+
+#[test]
+fn a_truncated_file_is_named_truncated_when_the_manifest_records_its_size() {
+    let copy = copy_of_tiny_models();
+    let path = copy.path().join("tiny-sam-decoder.onnx");
+    let full = std::fs::read(&path).unwrap();
+    std::fs::write(&path, &full[..full.len() / 2]).unwrap();
+    let Some(error) = open_copy(copy.path()) else {
+        return;
+    };
+    assert!(
+        error
+            .to_string()
+            .contains("(the manifest records no size to compare)"),
+        "{error}"
+    );
+    edit_manifest(copy.path(), |manifest| {
+        model_of_role(manifest, "sam_decoder")["size"] = full.len().into();
+    });
+    let Some(error) = open_copy(copy.path()) else {
+        return;
+    };
+    let message = error.to_string();
+    assert!(
+        message.contains(&format!(
+            "the file is {} bytes, the manifest says {}: it looks truncated",
+            full.len() / 2,
+            full.len()
+        )),
+        "{message}"
+    );
 }

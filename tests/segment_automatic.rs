@@ -168,6 +168,7 @@ impl DiscOracle {
         PointMasks {
             logits,
             predicted_iou,
+            object_present: true,
         }
     }
 }
@@ -306,6 +307,7 @@ fn runs_through_the_generator_enum_and_reports_model_errors() {
                 .map(|_| PointMasks {
                     logits: [vec![1.0; 4], vec![1.0; 4], vec![1.0; 4]],
                     predicted_iou: [0.9; 3],
+                    object_present: true,
                 })
                 .collect())
         }

@@ -294,7 +294,9 @@ fn query_failure_status(failure: QueryFailure) -> Status {
         QueryFailure::NoObjects(_) | QueryFailure::NoEmbeddings { .. } => {
             Status::failed_precondition(message)
         }
-        QueryFailure::NoTextEncoder(_) => Status::unavailable(message),
+        QueryFailure::NoTextEncoder(_) | QueryFailure::EmbeddingWidth(_) => {
+            Status::unavailable(message)
+        }
         QueryFailure::Store(_) | QueryFailure::Encoding(_) => {
             tracing::error!(%message, "gRPC query failed");
             Status::internal(message)

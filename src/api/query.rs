@@ -15,8 +15,8 @@ use super::error::{ApiError, ApiResult, ErrorBody};
 use super::masks::{MaskBody, ViewRequest, parse_mask_format, parse_time};
 use super::state::AppState;
 use crate::language::{
-    CANONICAL_PHRASES, CandidateObject, DEFAULT_RELEVANCY_THRESHOLD, QueryOptions,
-    QueryOptionsError, SharedTextEncoder, TextEncoderUnavailable, answer_query,
+    CANONICAL_PHRASES, CandidateObject, DEFAULT_RELEVANCY_THRESHOLD, EmbeddingWidthMismatch,
+    QueryOptions, QueryOptionsError, SharedTextEncoder, TextEncoderUnavailable, answer_query,
 };
 use crate::pipeline::segment_then_splat::objects::ObjectSummary;
 use crate::store::objects::ObjectRecord;
@@ -44,6 +44,8 @@ pub enum QueryFailure {
     Store(#[from] StoreError),
     #[error("encoding the text failed: {0}")]
     Encoding(String),
+    #[error("text queries are unavailable: {0}")]
+    EmbeddingWidth(#[from] EmbeddingWidthMismatch),
 }
 
 /// One matching object with its geometry.
@@ -117,7 +119,7 @@ pub async fn run_query(
             vector: &embedding.vector,
         })
         .collect();
-    let answer = answer_query(query, &canonical, &candidates, &options);
+    let answer = answer_query(query, &canonical, &candidates, &options)?;
     let matches = answer
         .objects
         .iter()
@@ -149,7 +151,7 @@ impl From<QueryFailure> for ApiError {
             QueryFailure::NoObjects(_) | QueryFailure::NoEmbeddings { .. } => {
                 ApiError::conflict(message)
             }
-            QueryFailure::NoTextEncoder(_) => {
+            QueryFailure::NoTextEncoder(_) | QueryFailure::EmbeddingWidth(_) => {
                 ApiError::new(StatusCode::SERVICE_UNAVAILABLE, "unavailable", message)
             }
             QueryFailure::Store(_) | QueryFailure::Encoding(_) => ApiError::internal(message),

@@ -6,6 +6,8 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::{Args, Subcommand};
 use segsplat::config::Config;
+use segsplat::models::init::{InitOptions, init_model_dir};
+use segsplat::models::manifest::Family;
 use segsplat::models::reference_check::check_against_reference;
 use segsplat::models::service::runtime_options;
 use segsplat::models::{ModelStore, OrtRuntime};
@@ -20,6 +22,9 @@ pub struct ModelsArgs {
 pub enum ModelsCommand {
     /// Check a model directory: manifest, sha256 of every file, signatures (exit 1 on any problem).
     Check(CheckArgs),
+    /// Write manifest.json for a folder of ONNX files (roles recognised from their graphs), then
+    /// check it.
+    Init(InitArgs),
     /// Run real-architecture exports against PyTorch reference outputs
     /// (`scripts/export_models.py --reference-dir`); prints comparisons and timings.
     Verify(VerifyArgs),
@@ -37,6 +42,50 @@ pub struct VerifyArgs {
 }
 
 #[derive(Args)]
+pub struct InitArgs {
+    /// Folder with the .onnx files (and tokenizer.json for a CLIP text model).
+    pub dir: PathBuf,
+    /// CLIP image normalisation mean, three comma-separated values in 0..1 (default: OpenAI's).
+    #[arg(long, value_parser = parse_triple)]
+    pub clip_mean: Option<[f32; 3]>,
+    /// CLIP image normalisation std (default: OpenAI's).
+    #[arg(long, value_parser = parse_triple)]
+    pub clip_std: Option<[f32; 3]>,
+    /// CLIP image side, for graphs whose input side is dynamic.
+    #[arg(long)]
+    pub clip_image_size: Option<u32>,
+    /// SAM family when the graph cannot tell: sam (SAM 1) or mobile_sam (default: mobile_sam
+    /// when a file name says "mobile", else sam). SAM 2 is told from its graph.
+    #[arg(long, value_parser = parse_sam_family)]
+    pub sam_family: Option<Family>,
+    /// Replace an existing manifest.json.
+    #[arg(long)]
+    pub force: bool,
+    #[arg(long)]
+    pub ort_library: Option<PathBuf>,
+}
+
+fn parse_triple(text: &str) -> Result<[f32; 3], String> {
+    let values: Vec<f32> = text
+        .split(',')
+        .map(|part| part.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|error| format!("{text:?}: {error}"))?;
+    <[f32; 3]>::try_from(values)
+        .map_err(|values| format!("{text:?}: expected 3 values, got {}", values.len()))
+}
+
+fn parse_sam_family(text: &str) -> Result<Family, String> {
+    match text {
+        "sam" => Ok(Family::Sam),
+        "mobile_sam" | "mobilesam" => Ok(Family::MobileSam),
+        other => Err(format!(
+            "{other:?}: expected sam or mobile_sam (SAM 2 is recognised from its graph)"
+        )),
+    }
+}
+
+#[derive(Args)]
 pub struct CheckArgs {
     /// Model directory with manifest.json.
     pub dir: PathBuf,
@@ -49,6 +98,7 @@ pub struct CheckArgs {
 pub fn run(args: ModelsArgs, config_file: Option<PathBuf>) -> anyhow::Result<bool> {
     match args.command {
         ModelsCommand::Check(args) => check(args, config_file),
+        ModelsCommand::Init(args) => init(args, config_file),
         ModelsCommand::Verify(args) => verify(args, config_file),
     }
 }
@@ -109,12 +159,54 @@ fn verify(args: VerifyArgs, config_file: Option<PathBuf>) -> anyhow::Result<bool
     Ok(report.passed())
 }
 
+fn init(args: InitArgs, config_file: Option<PathBuf>) -> anyhow::Result<bool> {
+    let runtime = load_runtime(config_file, args.ort_library)?;
+    let options = InitOptions {
+        clip_mean: args.clip_mean,
+        clip_std: args.clip_std,
+        clip_image_size: args.clip_image_size,
+        sam_family: args.sam_family,
+        overwrite: args.force,
+    };
+    let report = init_model_dir(&args.dir, &runtime, &options)?;
+    for model in &report.models {
+        println!(
+            "{:<12} {:<36} {:?}",
+            model.role.as_str(),
+            model.file,
+            model.family
+        );
+        for output in &model.extra_outputs {
+            println!("             extra output {output}");
+        }
+        for assumption in &model.assumed {
+            println!("             assumed: {assumption}");
+        }
+        for finding in &model.findings {
+            println!("             found: {finding}");
+        }
+    }
+    if let Some(tokenizer) = &report.tokenizer {
+        println!("{:<12} {tokenizer}", "tokenizer");
+    }
+    for (file, why) in &report.skipped {
+        println!("skipped      {file}: {why}");
+    }
+    println!("wrote {}; checking it:", report.manifest.display());
+    Ok(print_check(&args.dir, &runtime))
+}
+
 fn check(args: CheckArgs, config_file: Option<PathBuf>) -> anyhow::Result<bool> {
     let runtime = load_runtime(config_file, args.ort_library)?;
-    let report = ModelStore::check(&args.dir, &runtime);
+    Ok(print_check(&args.dir, &runtime))
+}
+
+/// Prints one line per file (and its notes); true when everything checked out.
+fn print_check(dir: &std::path::Path, runtime: &OrtRuntime) -> bool {
+    let report = ModelStore::check(dir, runtime);
     if let Some(error) = &report.manifest_error {
         println!("manifest  PROBLEM  {error}");
-        return Ok(false);
+        return false;
     }
     for file in &report.files {
         let outcome = match &file.result {
@@ -125,6 +217,9 @@ fn check(args: CheckArgs, config_file: Option<PathBuf>) -> anyhow::Result<bool> 
             "{:<12} {:<28} {:<36} {outcome}",
             file.role, file.name, file.file
         );
+        for note in &file.notes {
+            println!("{:<12} note: {note}", "");
+        }
     }
-    Ok(report.is_ok())
+    report.is_ok()
 }

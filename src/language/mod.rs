@@ -9,7 +9,7 @@ pub use embedding::{
     CropEmbedder, EmbeddingAccumulator, EmbeddingError, ObjectVector, ObjectView, object_embeddings,
 };
 pub use query::{
-    CANONICAL_PHRASES, CandidateObject, DEFAULT_RELEVANCY_THRESHOLD, Granularity, QueryAnswer,
-    QueryOptions, QueryOptionsError, ScoredObject, answer_query,
+    CANONICAL_PHRASES, CandidateObject, DEFAULT_RELEVANCY_THRESHOLD, EmbeddingWidthMismatch,
+    Granularity, QueryAnswer, QueryOptions, QueryOptionsError, ScoredObject, answer_query,
 };
 pub use text_encoder::{SharedTextEncoder, TextEncoderUnavailable, image_model_id};

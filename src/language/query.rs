@@ -145,7 +145,23 @@ pub struct QueryAnswer {
     pub objects: Vec<ScoredObject>,
 }
 
-/// Cosine similarity; 0 when either vector is zero or their lengths differ.
+/// Text and object embeddings of different widths: the CLIP text and image models do not belong
+/// together, and no score between them means anything.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error(
+    "the text embedding has {text} values but object ({level_name}, {object_id}) has {object}: the CLIP \
+     text model and the image model that embedded the objects are not a pair",
+    level_name = level.name()
+)]
+pub struct EmbeddingWidthMismatch {
+    pub text: usize,
+    pub object: usize,
+    pub level: Level,
+    pub object_id: u32,
+}
+
+/// Cosine similarity; 0 when either vector is zero or their lengths differ (callers that score
+/// check widths first: [`answer_query`] refuses a mismatch rather than score it 0).
 pub fn cosine(a: &[f32], b: &[f32]) -> f32 {
     if a.len() != b.len() {
         return 0.0;
@@ -170,13 +186,25 @@ pub fn relevancy(query: &[f32], canonical: &[&[f32]], object: &[f32]) -> f32 {
 }
 
 /// Scores every admitted object and keeps the best `top_k` that reach the threshold. Ties in
-/// score are broken by (level, id) so answers are stable.
+/// score are broken by (level, id) so answers are stable. An object or canonical phrase whose
+/// embedding width differs from the query's is an error, never a silent score of 0.
 pub fn answer_query(
     query: &[f32],
     canonical: &[&[f32]],
     objects: &[CandidateObject<'_>],
     options: &QueryOptions,
-) -> QueryAnswer {
+) -> Result<QueryAnswer, EmbeddingWidthMismatch> {
+    if let Some(object) = objects
+        .iter()
+        .find(|object| object.vector.len() != query.len())
+    {
+        return Err(EmbeddingWidthMismatch {
+            text: query.len(),
+            object: object.vector.len(),
+            level: object.level,
+            object_id: object.object_id,
+        });
+    }
     let mut scored: Vec<ScoredObject> = objects
         .iter()
         .filter(|object| options.granularity.admits(object.level))
@@ -197,10 +225,10 @@ pub fn answer_query(
         .filter(|object| object.relevancy >= options.threshold)
         .take(options.top_k)
         .collect();
-    QueryAnswer {
+    Ok(QueryAnswer {
         matched: !objects.is_empty(),
         objects,
-    }
+    })
 }
 
 #[cfg(test)]
@@ -242,6 +270,7 @@ mod tests {
             })
             .collect();
         answer_query(query, &[&fixture.canonical], &candidates, &options)
+            .expect("the fixture's embeddings share one width")
     }
 
     fn ids(answer: &QueryAnswer) -> Vec<(Level, u32)> {
@@ -373,5 +402,33 @@ mod tests {
         assert_eq!(QueryOptions::default().validate(), Ok(()));
         assert_eq!(cosine(&[1.0, 0.0], &[1.0]), 0.0);
         assert_eq!(cosine(&[0.0, 0.0], &[1.0, 0.0]), 0.0);
+    }
+
+    #[test]
+    fn embeddings_of_another_width_are_an_error_not_a_zero_score() {
+        let fixture = fixture();
+        let wide = unit(&[1.0, 0.0, 0.0, 0.1, 0.0, 0.0]);
+        let candidates = [
+            CandidateObject {
+                level: Level::Small,
+                object_id: 1,
+                vector: &fixture.objects[0].2,
+            },
+            CandidateObject {
+                level: Level::Small,
+                object_id: 7,
+                vector: &wide,
+            },
+        ];
+        let query = unit(&[1.0, 0.0, 0.0, 0.0]);
+        let error = answer_query(
+            &query,
+            &[&fixture.canonical],
+            &candidates,
+            &QueryOptions::default(),
+        )
+        .expect_err("a 6-wide object against a 4-wide text");
+        assert_eq!((error.text, error.object, error.object_id), (4, 6, 7));
+        assert!(error.to_string().contains("not a pair"), "{error}");
     }
 }

@@ -24,6 +24,12 @@ pub enum ModelError {
         #[source]
         source: std::io::Error,
     },
+    #[error("cannot write {path}: {source}")]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
     #[error("manifest {path}: {reason}")]
     Manifest { path: PathBuf, reason: String },
     #[error("{role} {file}: file not found in {dir}")]
@@ -32,12 +38,14 @@ pub enum ModelError {
         file: String,
         dir: PathBuf,
     },
-    #[error("{role} {file}: sha256 is {actual}, manifest says {expected}")]
+    #[error("{role} {file}: sha256 is {actual}, manifest says {expected}; {size}")]
     HashMismatch {
         role: String,
         file: String,
         expected: String,
         actual: String,
+        /// The file's size against the manifest's, which tells a truncated copy from another file.
+        size: String,
     },
     #[error("{role} {file}: ONNX Runtime cannot open it: {reason}")]
     Corrupt {
@@ -61,4 +69,7 @@ pub enum ModelError {
     Output { model: String, reason: String },
     #[error("invalid input: {0}")]
     Input(String),
+    /// Two models of one directory that cannot work together.
+    #[error("{0}")]
+    Pair(String),
 }

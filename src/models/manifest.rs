@@ -171,6 +171,21 @@ pub struct SamDecoderPreprocess {
     /// Decoder output channels for small, middle, large.
     pub multimask_channels: [usize; 3],
     pub mask_threshold: f32,
+    /// Where full-resolution masks come from.
+    #[serde(default)]
+    pub mask_source: MaskSource,
+}
+
+/// Where a decoder's full-resolution masks come from.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MaskSource {
+    /// The graph's `masks` output.
+    #[default]
+    Graph,
+    /// segsplat resizes `low_res_masks` itself: for graphs whose `masks` are wrong for most
+    /// image shapes (segment-anything's own export bakes the crop of its example image).
+    LowResMasks,
 }
 
 /// Preprocessing constants, typed by role.
@@ -191,6 +206,9 @@ pub struct ModelEntry {
     pub architecture: String,
     pub file: String,
     pub sha256: String,
+    /// The file's size in bytes, when the manifest records it: a hash mismatch then says whether
+    /// the file is truncated or a different one.
+    pub size: Option<u64>,
     pub inputs: Vec<TensorSpec>,
     pub outputs: Vec<TensorSpec>,
     pub preprocess: Preprocess,
@@ -201,6 +219,8 @@ pub struct ModelEntry {
 pub struct TokenizerEntry {
     pub file: String,
     pub sha256: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub size: Option<u64>,
     pub context_length: usize,
     pub start_token: u32,
     pub end_token: u32,
@@ -231,6 +251,8 @@ struct RawModelEntry {
     architecture: String,
     file: String,
     sha256: String,
+    #[serde(default)]
+    size: Option<u64>,
     inputs: Vec<TensorSpec>,
     outputs: Vec<TensorSpec>,
     preprocess: serde_json::Value,
@@ -368,6 +390,7 @@ fn typed_entry(raw: RawModelEntry) -> Result<ModelEntry, String> {
         architecture: raw.architecture,
         file: raw.file,
         sha256: raw.sha256.to_ascii_lowercase(),
+        size: raw.size,
         inputs: raw.inputs,
         outputs: raw.outputs,
         preprocess,

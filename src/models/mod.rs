@@ -3,8 +3,11 @@
 //! prompt driver. The directory contract is docs/models.md.
 
 pub mod clip;
+pub mod clip_pair;
 pub mod error;
+pub mod init;
 pub mod manifest;
+pub mod recognise;
 pub mod reference_check;
 pub mod resample;
 pub mod runtime;

@@ -9,7 +9,9 @@ use std::time::Instant;
 use super::clip::{ClipImageEncoder, ClipTextEncoder, clip_pixel_values, l2_normalise};
 use super::error::ModelError;
 use super::manifest::{Preprocess, Role};
-use super::sam::{PointLabel, SamModel, SamPrompt, sam_encoder_input};
+use super::sam::{
+    DEFAULT_PROMPT_CHUNK, OBJECT_SCORE_OUTPUT, PointLabel, SamModel, SamPrompt, sam_encoder_input,
+};
 use super::store::ModelStore;
 
 /// One compared quantity: the largest absolute difference, against a tolerance.
@@ -324,8 +326,14 @@ fn check_sam(
     );
 
     let started = Instant::now();
-    // One prompt per run so prompts with and without mask input decode alike.
-    let answers = model.predict(&encoded, &prompts, 1)?;
+    // The service's own chunk, so a decoder that cannot batch the way the predictor sends
+    // prompts fails here rather than in the first automatic-mask run.
+    let answers = model.predict(&encoded, &prompts, DEFAULT_PROMPT_CHUNK)?;
+    report.notes.push(format!(
+        "{label} decoder: {} prompts, {}",
+        prompts.len(),
+        model.batching().describe()
+    ));
     let elapsed = started.elapsed().as_secs_f64();
     report.timings.push((
         format!("{label} decoder, {} prompts", prompts.len()),
@@ -350,6 +358,20 @@ fn check_sam(
     ] {
         let (_, expected) = read_npy_f32(&dir.join(format!("{name}.npy")))?;
         report.compare(format!("{label} {name}"), actual, &expected, tolerance);
+    }
+    let scores_path = dir.join(format!("{OBJECT_SCORE_OUTPUT}.npy"));
+    if model.has_object_score() && scores_path.is_file() {
+        let scores: Vec<f32> = answers
+            .iter()
+            .filter_map(|answer| answer.object_score_logit)
+            .collect();
+        let (_, expected) = read_npy_f32(&scores_path)?;
+        report.compare(
+            format!("{label} {OBJECT_SCORE_OUTPUT}"),
+            &scores,
+            &expected,
+            1e-3,
+        );
     }
     Ok(())
 }

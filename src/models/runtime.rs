@@ -301,6 +301,43 @@ fn load_library(path: &Path) -> Result<LoadedLibrary, ModelError> {
     })
 }
 
+/// Why the dynamic loader refused `path`, said in terms of what the file is: a file that is no
+/// shared library at all reads as that, not only as the loader's "invalid ELF header".
+fn unloadable_library(path: &Path, loader_error: &str) -> String {
+    let mut head = [0u8; 4];
+    let read = std::fs::File::open(path)
+        .and_then(|mut file| std::io::Read::read(&mut file, &mut head))
+        .unwrap_or(0);
+    let head = &head[..read];
+    let is_library = head.starts_with(b"\x7fELF")
+        || head.starts_with(b"MZ")
+        || [
+            [0xfe, 0xed, 0xfa, 0xcf],
+            [0xcf, 0xfa, 0xed, 0xfe],
+            [0xca, 0xfe, 0xba, 0xbe],
+        ]
+        .iter()
+        .any(|magic| head == magic);
+    let named_like_ort = path
+        .file_name()
+        .and_then(|name| name.to_str())
+        .is_some_and(|name| name.contains("onnxruntime"));
+    if !is_library {
+        format!(
+            "this is not a shared library at all (no ELF, Mach-O or PE header), so not ONNX \
+             Runtime; point at ONNX Runtime's libonnxruntime (e.g. from `pip install \
+             onnxruntime`). The loader said: {loader_error}"
+        )
+    } else if !named_like_ort {
+        format!(
+            "the loader refused this shared library, whose name does not look like ONNX \
+             Runtime's (libonnxruntime*): {loader_error}"
+        )
+    } else {
+        format!("the loader refused it: {loader_error}")
+    }
+}
+
 fn minor_version(version: &str) -> Option<u32> {
     let mut parts = version.split('.');
     let major: u32 = parts.next()?.parse().ok()?;
@@ -317,12 +354,17 @@ pub fn library_version(path: &Path) -> Result<String, ModelError> {
     };
     // SAFETY: loading runs the library's initialisers; this is the ONNX Runtime library the
     // operator pointed us at, which `ort` loads the same way.
-    let library =
-        unsafe { libloading::Library::new(path) }.map_err(|error| load_error(error.to_string()))?;
+    let library = unsafe { libloading::Library::new(path) }
+        .map_err(|error| load_error(unloadable_library(path, &error.to_string())))?;
     // SAFETY: `OrtGetApiBase` has this signature in every ONNX Runtime release (C API, stable).
     let get_api_base: libloading::Symbol<unsafe extern "C" fn() -> *const ort::sys::OrtApiBase> =
-        unsafe { library.get(b"OrtGetApiBase") }
-            .map_err(|_| load_error("not an ONNX Runtime library: no OrtGetApiBase".to_string()))?;
+        unsafe { library.get(b"OrtGetApiBase") }.map_err(|_| {
+            load_error(
+                "this is a shared library, but not ONNX Runtime (it has no OrtGetApiBase); \
+                     point at ONNX Runtime's libonnxruntime (e.g. from `pip install onnxruntime`)"
+                    .to_string(),
+            )
+        })?;
     // SAFETY: the function takes no arguments and returns a pointer to a static struct.
     let base = unsafe { get_api_base() };
     if base.is_null() {
@@ -370,5 +412,22 @@ mod tests {
         assert_eq!(minor_version("1.32.0"), Some(32));
         assert_eq!(minor_version("2.0.0"), None);
         assert_eq!(minor_version("garbage"), None);
+    }
+
+    #[test]
+    fn a_file_that_is_no_library_is_named_as_such() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let text = dir.path().join("libonnxruntime.so");
+        std::fs::write(&text, "not a library").expect("write");
+        let error = library_version(&text).expect_err("a text file is no library");
+        assert!(
+            error.to_string().contains("not a shared library at all"),
+            "{error}"
+        );
+        let elf = dir.path().join("libz.so");
+        std::fs::write(&elf, b"\x7fELF truncated").expect("write");
+        assert!(
+            unloadable_library(&elf, "dlopen failed").contains("does not look like ONNX Runtime"),
+        );
     }
 }

@@ -104,6 +104,20 @@ pub fn role_signature(entry: &ModelEntry) -> (Vec<ExpectedTensor>, Vec<ExpectedT
     }
 }
 
+/// Outputs a role may have and segsplat reads when present: SAM 2's decoders report an object
+/// score per prompt (`> 0`: the prompt hit an object).
+pub fn optional_outputs(entry: &ModelEntry) -> Vec<ExpectedTensor> {
+    use ExpectedDim::{Any, Fixed};
+    match entry.preprocess {
+        Preprocess::SamDecoder(_) => vec![expected(
+            "object_score_logits",
+            Dtype::Float32,
+            &[Any, Fixed(1)],
+        )],
+        _ => Vec::new(),
+    }
+}
+
 fn sam2_high_res_features(image_size: i64) -> [ExpectedTensor; 2] {
     use ExpectedDim::Fixed;
     [
@@ -130,69 +144,109 @@ fn sam2_high_res_features(image_size: i64) -> [ExpectedTensor; 2] {
     ]
 }
 
-/// Problems of the manifest's signature against the role's; empty when it fits.
-pub fn manifest_vs_role(entry: &ModelEntry) -> Vec<String> {
+/// The outcome of a signature comparison: problems make the model unusable; notes are worth
+/// telling (outputs segsplat does not read, optional outputs it will use).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct SignatureCheck {
+    pub problems: Vec<String>,
+    pub notes: Vec<String>,
+}
+
+impl SignatureCheck {
+    pub fn is_ok(&self) -> bool {
+        self.problems.is_empty()
+    }
+}
+
+/// The manifest's signature against the role's.
+pub fn manifest_vs_role(entry: &ModelEntry) -> SignatureCheck {
     let (inputs, outputs) = role_signature(entry);
-    let mut problems = Vec::new();
-    compare_expected("input", &inputs, &entry.inputs, entry.role, &mut problems);
+    let optional = optional_outputs(entry);
+    let mut check = SignatureCheck::default();
+    compare_expected("input", &inputs, &[], &entry.inputs, entry.role, &mut check);
     compare_expected(
         "output",
         &outputs,
+        &optional,
         &entry.outputs,
         entry.role,
-        &mut problems,
+        &mut check,
     );
-    problems
+    check
 }
 
 fn compare_expected(
     kind: &str,
     expected: &[ExpectedTensor],
+    optional: &[ExpectedTensor],
     declared: &[TensorSpec],
     role: Role,
-    problems: &mut Vec<String>,
+    check: &mut SignatureCheck,
 ) {
     for want in expected {
         let Some(have) = declared.iter().find(|spec| spec.name == want.name) else {
-            problems.push(format!(
+            check.problems.push(format!(
                 "manifest lacks {kind} {} that a {role} needs",
                 want.name
             ));
             continue;
         };
-        if have.dtype != want.dtype {
-            problems.push(format!(
-                "manifest {kind} {} has dtype {}, a {role} needs {}",
-                want.name, have.dtype, want.dtype
-            ));
-        }
-        if have.shape.len() != want.shape.len() {
-            problems.push(format!(
-                "manifest {kind} {} has rank {} ({:?}), a {role} needs rank {}",
-                want.name,
-                have.shape.len(),
-                have.shape,
-                want.shape.len()
-            ));
-            continue;
-        }
-        for (axis, (have_dim, want_dim)) in have.shape.iter().zip(&want.shape).enumerate() {
-            if let ExpectedDim::Fixed(value) = want_dim
-                && *have_dim != *value
-                && *have_dim != -1
-            {
-                problems.push(format!(
-                    "manifest {kind} {} has dimension {axis} = {have_dim}, a {role} needs {value}",
-                    want.name
-                ));
-            }
-        }
+        compare_spec(kind, want, have, role, &mut check.problems);
     }
     for have in declared {
-        if !expected.iter().any(|want| want.name == have.name) {
-            problems.push(format!(
-                "manifest {kind} {} is not part of a {role}'s signature",
+        if expected.iter().any(|want| want.name == have.name) {
+            continue;
+        }
+        if let Some(want) = optional.iter().find(|want| want.name == have.name) {
+            compare_spec(kind, want, have, role, &mut check.problems);
+            check
+                .notes
+                .push(format!("optional {kind} {} is read", have.name));
+        } else if kind == "output" {
+            // Outputs are fetched by name, so one segsplat does not read costs nothing.
+            check
+                .notes
+                .push(format!("extra {kind} {} is not read", have.name));
+        } else {
+            check.problems.push(format!(
+                "manifest {kind} {} is not part of a {role}'s signature (segsplat cannot feed it)",
                 have.name
+            ));
+        }
+    }
+}
+
+fn compare_spec(
+    kind: &str,
+    want: &ExpectedTensor,
+    have: &TensorSpec,
+    role: Role,
+    problems: &mut Vec<String>,
+) {
+    if have.dtype != want.dtype {
+        problems.push(format!(
+            "manifest {kind} {} has dtype {}, a {role} needs {}",
+            want.name, have.dtype, want.dtype
+        ));
+    }
+    if have.shape.len() != want.shape.len() {
+        problems.push(format!(
+            "manifest {kind} {} has rank {} ({:?}), a {role} needs rank {}",
+            want.name,
+            have.shape.len(),
+            have.shape,
+            want.shape.len()
+        ));
+        return;
+    }
+    for (axis, (have_dim, want_dim)) in have.shape.iter().zip(&want.shape).enumerate() {
+        if let ExpectedDim::Fixed(value) = want_dim
+            && *have_dim != *value
+            && *have_dim != -1
+        {
+            problems.push(format!(
+                "manifest {kind} {} has dimension {axis} = {have_dim}, a {role} needs {value}",
+                want.name
             ));
         }
     }
@@ -209,24 +263,26 @@ pub struct ActualTensor {
     pub shape: Vec<i64>,
 }
 
-/// Problems of the session's actual signature against the manifest; empty when it fits.
+/// The session's actual signature against the manifest. Outputs the manifest leaves out are
+/// notes, not problems: segsplat fetches outputs by name.
 pub fn session_vs_manifest(
     entry: &ModelEntry,
     actual_inputs: &[ActualTensor],
     actual_outputs: &[ActualTensor],
-) -> Vec<String> {
-    let mut problems = Vec::new();
-    compare_actual("input", &entry.inputs, actual_inputs, &mut problems);
-    compare_actual("output", &entry.outputs, actual_outputs, &mut problems);
-    problems
+) -> SignatureCheck {
+    let mut check = SignatureCheck::default();
+    compare_actual("input", &entry.inputs, actual_inputs, &mut check);
+    compare_actual("output", &entry.outputs, actual_outputs, &mut check);
+    check
 }
 
 fn compare_actual(
     kind: &str,
     declared: &[TensorSpec],
     actual: &[ActualTensor],
-    problems: &mut Vec<String>,
+    check: &mut SignatureCheck,
 ) {
+    let problems = &mut check.problems;
     for spec in declared {
         let Some(have) = actual.iter().find(|tensor| tensor.name == spec.name) else {
             let names: Vec<&str> = actual.iter().map(|tensor| tensor.name.as_str()).collect();
@@ -269,7 +325,15 @@ fn compare_actual(
         }
     }
     for have in actual {
-        if !declared.iter().any(|spec| spec.name == have.name) {
+        if declared.iter().any(|spec| spec.name == have.name) {
+            continue;
+        }
+        if kind == "output" {
+            check.notes.push(format!(
+                "model output {} is not in the manifest and is not read",
+                have.name
+            ));
+        } else {
             problems.push(format!(
                 "model has {kind} {} that the manifest does not list",
                 have.name
@@ -299,6 +363,7 @@ mod tests {
             architecture: "test".to_string(),
             file: "text.onnx".to_string(),
             sha256: "0".repeat(64),
+            size: None,
             inputs,
             outputs: vec![TensorSpec {
                 name: "text_embeds".to_string(),
@@ -322,8 +387,9 @@ mod tests {
 
     #[test]
     fn role_check_names_dtype_and_fixed_dimension() {
-        assert!(manifest_vs_role(&text_entry(vec![ids(Dtype::Int64, vec![-1, 77])])).is_empty());
-        let problems = manifest_vs_role(&text_entry(vec![ids(Dtype::Int32, vec![-1, 76])]));
+        assert!(manifest_vs_role(&text_entry(vec![ids(Dtype::Int64, vec![-1, 77])])).is_ok());
+        let problems =
+            manifest_vs_role(&text_entry(vec![ids(Dtype::Int32, vec![-1, 76])])).problems;
         assert_eq!(
             problems,
             vec![
@@ -348,9 +414,9 @@ mod tests {
             type_description: "float32".to_string(),
             shape: vec![-1, 512],
         }];
-        assert!(session_vs_manifest(&entry, &[actual(vec![-1, -1])], &outputs).is_empty());
+        assert!(session_vs_manifest(&entry, &[actual(vec![-1, -1])], &outputs).is_ok());
         assert_eq!(
-            session_vs_manifest(&entry, &[actual(vec![1, 77])], &outputs),
+            session_vs_manifest(&entry, &[actual(vec![1, 77])], &outputs).problems,
             vec!["input input_ids has dimension 0 = 1, manifest says dynamic".to_string()]
         );
     }

@@ -9,11 +9,17 @@ use std::sync::Arc;
 use sha2::{Digest, Sha256};
 
 use super::clip::ClipTokenizer;
+use super::clip_pair::check_clip_pair;
 use super::error::ModelError;
 use super::manifest::{Manifest, ModelEntry, Role};
+use super::recognise::{describe_signature, recognise};
 use super::runtime::OrtRuntime;
 use super::session::{ModelSession, actual_signature};
-use super::signature::{manifest_vs_role, session_vs_manifest};
+use super::signature::{ActualTensor, manifest_vs_role, session_vs_manifest};
+
+/// Problems listed in one signature error; the rest are counted. The first few say what is
+/// wrong; forty more only bury them.
+const PROBLEMS_LISTED: usize = 3;
 
 /// The outcome of checking one model (or the tokenizer) of a directory.
 #[derive(Debug)]
@@ -23,6 +29,8 @@ pub struct CheckedFile {
     pub name: String,
     pub file: String,
     pub result: Result<(), ModelError>,
+    /// What is worth knowing but not wrong (outputs not read, optional outputs used).
+    pub notes: Vec<String>,
 }
 
 /// Everything `segsplat models check` reports about a directory.
@@ -55,8 +63,14 @@ impl ModelStore {
         let manifest = Manifest::load(dir)?;
         let mut sessions = HashMap::new();
         for entry in &manifest.models {
-            let session = open_model(dir, entry, &runtime)?;
+            let (session, _notes) = open_model(dir, entry, &runtime)?;
             sessions.insert(entry.role, Arc::new(session));
+        }
+        if let (Some(image), Some(text)) = (
+            sessions.get(&Role::ClipImage),
+            sessions.get(&Role::ClipText),
+        ) {
+            check_clip_pair(image, text)?;
         }
         let tokenizer = open_tokenizer(dir, &manifest)?.map(Arc::new);
         if manifest.model(Role::ClipText).is_some() && tokenizer.is_none() {
@@ -85,22 +99,43 @@ impl ModelStore {
                 };
             }
         };
-        let mut files: Vec<CheckedFile> = manifest
-            .models
-            .iter()
-            .map(|entry| CheckedFile {
+        let mut files = Vec::new();
+        let mut sessions = HashMap::new();
+        for entry in &manifest.models {
+            let (result, notes) = match open_model(dir, entry, runtime) {
+                Ok((session, notes)) => {
+                    sessions.insert(entry.role, session);
+                    (Ok(()), notes)
+                }
+                Err(error) => (Err(error), Vec::new()),
+            };
+            files.push(CheckedFile {
                 role: entry.role.to_string(),
                 name: entry.name.clone(),
                 file: entry.file.clone(),
-                result: open_model(dir, entry, runtime).map(|_| ()),
-            })
-            .collect();
+                result,
+                notes,
+            });
+        }
+        if let (Some(image), Some(text)) = (
+            sessions.get(&Role::ClipImage),
+            sessions.get(&Role::ClipText),
+        ) {
+            files.push(CheckedFile {
+                role: "clip pair".to_string(),
+                name: format!("{} + {}", image.entry().name, text.entry().name),
+                file: String::new(),
+                result: check_clip_pair(image, text),
+                notes: Vec::new(),
+            });
+        }
         if let Some(tokenizer) = &manifest.tokenizer {
             files.push(CheckedFile {
                 role: "tokenizer".to_string(),
                 name: "tokenizer".to_string(),
                 file: tokenizer.file.clone(),
                 result: open_tokenizer(dir, &manifest).map(|_| ()),
+                notes: Vec::new(),
             });
         }
         DirectoryCheck {
@@ -171,21 +206,21 @@ impl ModelStore {
     }
 }
 
-/// Hash, open and signature-check one model.
+/// Hash, open and signature-check one model; also returns the checks' notes.
 fn open_model(
     dir: &Path,
     entry: &ModelEntry,
     runtime: &OrtRuntime,
-) -> Result<ModelSession, ModelError> {
+) -> Result<(ModelSession, Vec<String>), ModelError> {
     let role = entry.role.to_string();
     let path = dir.join(&entry.file);
-    verify_hash(&path, &role, &entry.file, &entry.sha256, dir)?;
-    let role_problems = manifest_vs_role(entry);
-    if !role_problems.is_empty() {
+    verify_hash(&path, &role, &entry.file, &entry.sha256, entry.size, dir)?;
+    let role_check = manifest_vs_role(entry);
+    if !role_check.is_ok() {
         return Err(ModelError::Signature {
             role,
             file: entry.file.clone(),
-            problems: role_problems.join("; "),
+            problems: listed(&role_check.problems, PROBLEMS_LISTED),
         });
     }
     let (session, provider) =
@@ -197,15 +232,48 @@ fn open_model(
                 reason,
             })?;
     let (inputs, outputs) = actual_signature(&session);
-    let problems = session_vs_manifest(entry, &inputs, &outputs);
-    if !problems.is_empty() {
+    let session_check = session_vs_manifest(entry, &inputs, &outputs);
+    if !session_check.is_ok() {
         return Err(ModelError::Signature {
             role,
             file: entry.file.clone(),
-            problems: problems.join("; "),
+            problems: match looks_like(entry.role, &inputs, &outputs) {
+                // What the file is says most; one difference is enough to go on.
+                Some(looks) => format!("{looks}{}", listed(&session_check.problems, 1)),
+                None => listed(&session_check.problems, PROBLEMS_LISTED),
+            },
         });
     }
-    Ok(ModelSession::new(entry.clone(), session, provider))
+    let mut notes = role_check.notes;
+    notes.extend(session_check.notes);
+    Ok((ModelSession::new(entry.clone(), session, provider), notes))
+}
+
+/// "this looks like a SAM decoder (...), not a sam_encoder: " when the graph plays another role.
+fn looks_like(role: Role, inputs: &[ActualTensor], outputs: &[ActualTensor]) -> Option<String> {
+    recognise(inputs, outputs)
+        .filter(|found| found.role != role)
+        .map(|found| {
+            format!(
+                "this looks like {} ({}), not a {role}: ",
+                found.describe(),
+                describe_signature(inputs, outputs)
+            )
+        })
+}
+
+/// The first `count` problems, and how many more there are.
+fn listed(problems: &[String], count: usize) -> String {
+    let mut text = problems
+        .iter()
+        .take(count)
+        .cloned()
+        .collect::<Vec<_>>()
+        .join("; ");
+    if problems.len() > count {
+        text.push_str(&format!(" (and {} more)", problems.len() - count));
+    }
+    text
 }
 
 fn open_tokenizer(dir: &Path, manifest: &Manifest) -> Result<Option<ClipTokenizer>, ModelError> {
@@ -213,7 +281,14 @@ fn open_tokenizer(dir: &Path, manifest: &Manifest) -> Result<Option<ClipTokenize
         return Ok(None);
     };
     let path = dir.join(&entry.file);
-    verify_hash(&path, "tokenizer", &entry.file, &entry.sha256, dir)?;
+    verify_hash(
+        &path,
+        "tokenizer",
+        &entry.file,
+        &entry.sha256,
+        entry.size,
+        dir,
+    )?;
     ClipTokenizer::from_file(
         &path,
         entry.context_length,
@@ -228,6 +303,7 @@ fn verify_hash(
     role: &str,
     file: &str,
     expected: &str,
+    expected_size: Option<u64>,
     dir: &Path,
 ) -> Result<(), ModelError> {
     if !path.is_file() {
@@ -239,14 +315,36 @@ fn verify_hash(
     }
     let actual = sha256_file(path)?;
     if !actual.eq_ignore_ascii_case(expected) {
+        let size = std::fs::metadata(path)
+            .map(|metadata| metadata.len())
+            .map_err(|source| ModelError::Read {
+                path: path.to_path_buf(),
+                source,
+            })?;
         return Err(ModelError::HashMismatch {
             role: role.to_string(),
             file: file.to_string(),
             expected: expected.to_string(),
             actual,
+            size: size_comparison(size, expected_size),
         });
     }
     Ok(())
+}
+
+fn size_comparison(size: u64, expected: Option<u64>) -> String {
+    match expected {
+        Some(expected) if size < expected => format!(
+            "the file is {size} bytes, the manifest says {expected}: it looks truncated (an interrupted copy or download?)"
+        ),
+        Some(expected) if size > expected => format!(
+            "the file is {size} bytes, the manifest says {expected}: a different or re-exported file"
+        ),
+        Some(_) => format!(
+            "the size ({size} bytes) matches the manifest, so the content changed (a re-export, or corruption)"
+        ),
+        None => format!("the file is {size} bytes (the manifest records no size to compare)"),
+    }
 }
 
 /// Hex sha256 of a file, streamed (SAM ViT-H is 2.5 GB).

@@ -209,6 +209,7 @@ fn candidates_from_answers(
         }
     }
     let jobs: Vec<(usize, usize)> = (0..answers.len())
+        .filter(|answer| answers[*answer].object_present)
         .flat_map(|answer| (0..3).map(move |level| (answer, level)))
         .collect();
     let results: Vec<(usize, Option<ScoredMask>)> = jobs

@@ -9,6 +9,9 @@ pub struct PointMasks {
     pub logits: [Vec<f32>; 3],
     /// The decoder's predicted IoU of each of the three masks.
     pub predicted_iou: [f32; 3],
+    /// False when the model says the point hit no object (SAM 2's object score); the mask
+    /// generator then keeps none of the three masks, whatever their predicted IoU.
+    pub object_present: bool,
 }
 
 /// A model that segments one image from point prompts. The image is encoded once by

@@ -7,9 +7,13 @@ use std::sync::Arc;
 
 use image::RgbImage;
 
+use super::batching::DecoderBatching;
+use super::mask_postprocess::upscale_low_res_logits;
 use super::preprocess::{EncoderInput, sam_encoder_input};
 use crate::models::error::ModelError;
-use crate::models::manifest::{Preprocess, Role, SamDecoderPreprocess, SamEncoderPreprocess};
+use crate::models::manifest::{
+    MaskSource, Preprocess, Role, SamDecoderPreprocess, SamEncoderPreprocess,
+};
 use crate::models::session::{InputTensor, ModelSession, OutputTensor};
 use crate::models::store::ModelStore;
 use crate::segment::prompt::{PointMasks, PointPromptSegmenter, PromptError};
@@ -19,6 +23,8 @@ pub const LOW_RES_SIDE: usize = 256;
 /// Prompts per decoder run unless configured: 16 full-resolution 4-channel answers at
 /// 1000 x 660 are ~170 MB.
 pub const DEFAULT_PROMPT_CHUNK: usize = 16;
+/// The optional SAM 2 decoder output that says whether the prompt hit an object at all.
+pub const OBJECT_SCORE_OUTPUT: &str = "object_score_logits";
 
 /// SAM's point labels, as the decoder reads them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -54,6 +60,16 @@ pub struct SamAnswer {
     pub predicted_iou: Vec<f32>,
     /// `256 x 256` logits per channel, to feed back as `mask_input`.
     pub low_res_logits: Vec<Vec<f32>>,
+    /// SAM 2's object score logit (`object_score_logits`), when the decoder has it.
+    pub object_score_logit: Option<f32>,
+}
+
+impl SamAnswer {
+    /// False when the decoder says the prompt hit no object (SAM 2's object score <= 0); SAM 2's
+    /// own trackers then treat every mask channel as empty.
+    pub fn object_present(&self) -> bool {
+        self.object_score_logit.is_none_or(|score| score > 0.0)
+    }
 }
 
 /// An image after the encoder: its size and every encoder output by name.
@@ -90,6 +106,8 @@ pub struct SamModel {
     decoder: Arc<ModelSession>,
     encoder_preprocess: SamEncoderPreprocess,
     decoder_preprocess: SamDecoderPreprocess,
+    batching: DecoderBatching,
+    has_object_score: bool,
 }
 
 impl SamModel {
@@ -108,11 +126,19 @@ impl SamModel {
                 "sam_encoder/sam_decoder entries lack their preprocessing".to_string(),
             ));
         };
+        let batching = DecoderBatching::of(decoder.entry());
+        let has_object_score = decoder
+            .entry()
+            .outputs
+            .iter()
+            .any(|spec| spec.name == OBJECT_SCORE_OUTPUT);
         Ok(SamModel {
             encoder,
             decoder,
             encoder_preprocess,
             decoder_preprocess,
+            batching,
+            has_object_score,
         })
     }
 
@@ -122,6 +148,16 @@ impl SamModel {
 
     pub fn decoder_name(&self) -> &str {
         &self.decoder.entry().name
+    }
+
+    /// How prompts are grouped into decoder runs.
+    pub fn batching(&self) -> DecoderBatching {
+        self.batching
+    }
+
+    /// Whether the decoder reports SAM 2's object score.
+    pub fn has_object_score(&self) -> bool {
+        self.has_object_score
     }
 
     /// Decoder channels of small, middle and large.
@@ -169,31 +205,22 @@ impl SamModel {
         })
     }
 
-    /// Answers `prompts` against `image`, `chunk` prompts per decoder run (prompts with the same
-    /// number of points share a run; different counts run separately).
+    /// Answers `prompts` against `image`, up to `chunk` prompts per decoder run where the graph
+    /// allows it (see [`DecoderBatching`]); prompts with different numbers of points run apart.
     pub fn predict(
         &self,
         image: &EncodedImage,
         prompts: &[SamPrompt],
         chunk: usize,
     ) -> Result<Vec<SamAnswer>, ModelError> {
-        let chunk = chunk.max(1);
+        let tokens: Vec<Vec<([f32; 2], f32)>> = prompts
+            .iter()
+            .map(|prompt| prompt_tokens(image, prompt))
+            .collect::<Result<_, _>>()?;
+        let counts: Vec<usize> = tokens.iter().map(Vec::len).collect();
         let mut answers = Vec::with_capacity(prompts.len());
-        let mut start = 0;
-        while start < prompts.len() {
-            let tokens = prompt_tokens(image, &prompts[start])?;
-            let mut batch = vec![tokens];
-            let mut end = start + 1;
-            while end < prompts.len() && batch.len() < chunk {
-                let next = prompt_tokens(image, &prompts[end])?;
-                if next.len() != batch[0].len() {
-                    break;
-                }
-                batch.push(next);
-                end += 1;
-            }
-            answers.extend(self.decode(image, &batch, &prompts[start..end])?);
-            start = end;
+        for (start, end) in self.batching.runs(prompts, &counts, chunk) {
+            answers.extend(self.decode(image, &tokens[start..end], &prompts[start..end])?);
         }
         Ok(answers)
     }
@@ -215,9 +242,16 @@ impl SamModel {
             }
         }
         let low_res = LOW_RES_SIDE * LOW_RES_SIDE;
-        let mut mask_input = vec![0f32; batch * low_res];
-        let mut has_mask_input = vec![0f32; batch];
-        for (index, prompt) in prompts.iter().enumerate() {
+        // A broadcast mask prior is one for the whole run: `runs` only groups prompts without
+        // one, and a prompt with one runs alone, so its prior is the run's.
+        let mask_batch = if self.batching.shared_mask_input {
+            1
+        } else {
+            batch
+        };
+        let mut mask_input = vec![0f32; mask_batch * low_res];
+        let mut has_mask_input = vec![0f32; mask_batch];
+        for (index, prompt) in prompts.iter().enumerate().take(mask_batch) {
             if let Some(mask) = &prompt.mask_input {
                 if mask.len() != low_res {
                     return Err(ModelError::Input(format!(
@@ -232,8 +266,8 @@ impl SamModel {
         let original_size = [image.height as f32, image.width as f32];
         let coords_shape = [batch, points, 2];
         let labels_shape = [batch, points];
-        let mask_shape = [batch, 1, LOW_RES_SIDE, LOW_RES_SIDE];
-        let has_mask_shape = [batch];
+        let mask_shape = [mask_batch, 1, LOW_RES_SIDE, LOW_RES_SIDE];
+        let has_mask_shape = [mask_batch];
         let size_shape = [2];
         let mut inputs: Vec<(&str, InputTensor<'_>)> = Vec::new();
         for spec in &self.decoder.entry().inputs {
@@ -275,10 +309,115 @@ impl SamModel {
             };
             inputs.push((name, tensor));
         }
-        let outputs = self
-            .decoder
-            .run(&inputs, &["masks", "iou_predictions", "low_res_masks"])?;
-        split_answers(self.decoder_name(), image, batch, outputs)
+        let masks_from_graph = self.decoder_preprocess.mask_source == MaskSource::Graph;
+        let mut output_names = vec!["iou_predictions", "low_res_masks"];
+        if masks_from_graph {
+            output_names.push("masks");
+        }
+        if self.has_object_score {
+            output_names.push(OBJECT_SCORE_OUTPUT);
+        }
+        let mut outputs = self.decoder.run(&inputs, &output_names)?.into_iter();
+        let (Some(iou), Some(low_res)) = (outputs.next(), outputs.next()) else {
+            return Err(self.output_error("expected iou_predictions and low_res_masks".to_string()));
+        };
+        let masks = if masks_from_graph {
+            outputs.next()
+        } else {
+            None
+        };
+        let object_scores = outputs.next();
+        self.split_answers(
+            image,
+            batch,
+            DecoderOutputs {
+                masks,
+                iou,
+                low_res,
+                object_scores,
+            },
+        )
+    }
+}
+
+/// One decoder run's outputs; `masks` is absent when segsplat makes them from `low_res`.
+struct DecoderOutputs {
+    masks: Option<OutputTensor>,
+    iou: OutputTensor,
+    low_res: OutputTensor,
+    object_scores: Option<OutputTensor>,
+}
+
+impl SamModel {
+    fn output_error(&self, reason: String) -> ModelError {
+        ModelError::Output {
+            model: self.decoder_name().to_string(),
+            reason,
+        }
+    }
+
+    fn split_answers(
+        &self,
+        image: &EncodedImage,
+        batch: usize,
+        outputs: DecoderOutputs,
+    ) -> Result<Vec<SamAnswer>, ModelError> {
+        let DecoderOutputs {
+            masks,
+            iou,
+            low_res,
+            object_scores,
+        } = outputs;
+        if iou.shape != [batch, 4] || low_res.shape != [batch, 4, LOW_RES_SIDE, LOW_RES_SIDE] {
+            return Err(self.output_error(format!(
+                "shapes iou_predictions {:?}, low_res_masks {:?}; expected [{batch}, 4] and \
+                 [{batch}, 4, {LOW_RES_SIDE}, {LOW_RES_SIDE}]",
+                iou.shape, low_res.shape
+            )));
+        }
+        let expected_masks = [batch, 4, image.height as usize, image.width as usize];
+        if let Some(masks) = &masks
+            && masks.shape != expected_masks
+        {
+            return Err(self.output_error(format!(
+                "masks have shape {:?}, expected {expected_masks:?}",
+                masks.shape
+            )));
+        }
+        if let Some(scores) = &object_scores
+            && scores.data.len() != batch
+        {
+            return Err(self.output_error(format!(
+                "{OBJECT_SCORE_OUTPUT} has shape {:?}, expected one score per prompt ({batch})",
+                scores.shape
+            )));
+        }
+        let pixels = image.width as usize * image.height as usize;
+        let low_res_pixels = LOW_RES_SIDE * LOW_RES_SIDE;
+        let low_res_channel = |index: usize, channel: usize| {
+            &low_res.data[(index * 4 + channel) * low_res_pixels..][..low_res_pixels]
+        };
+        let full_channel = |index: usize, channel: usize| match &masks {
+            Some(masks) => masks.data[(index * 4 + channel) * pixels..][..pixels].to_vec(),
+            None => upscale_low_res_logits(
+                low_res_channel(index, channel),
+                LOW_RES_SIDE,
+                image.width,
+                image.height,
+                self.encoder_preprocess.resize,
+                self.encoder_preprocess.image_size,
+            ),
+        };
+        Ok((0..batch)
+            .map(|index| SamAnswer {
+                logits: (0..4).map(|channel| full_channel(index, channel)).collect(),
+                predicted_iou: iou.data[index * 4..index * 4 + 4].to_vec(),
+                low_res_logits: (0..4)
+                    .map(|channel| low_res_channel(index, channel).to_vec())
+                    .collect(),
+                object_score_logit: object_scores.as_ref().map(|scores| scores.data[index]),
+            })
+            .collect())
     }
 }
 
@@ -314,48 +453,6 @@ fn prompt_tokens(
         ));
     }
     Ok(tokens)
-}
-
-fn split_answers(
-    model: &str,
-    image: &EncodedImage,
-    batch: usize,
-    outputs: Vec<OutputTensor>,
-) -> Result<Vec<SamAnswer>, ModelError> {
-    let [masks, iou, low_res] =
-        <[OutputTensor; 3]>::try_from(outputs).map_err(|_| ModelError::Output {
-            model: model.to_string(),
-            reason: "expected masks, iou_predictions, low_res_masks".to_string(),
-        })?;
-    let pixels = image.width as usize * image.height as usize;
-    let low_res_pixels = LOW_RES_SIDE * LOW_RES_SIDE;
-    let expected_masks = [batch, 4, image.height as usize, image.width as usize];
-    if masks.shape != expected_masks
-        || iou.shape != [batch, 4]
-        || low_res.shape != [batch, 4, LOW_RES_SIDE, LOW_RES_SIDE]
-    {
-        return Err(ModelError::Output {
-            model: model.to_string(),
-            reason: format!(
-                "shapes masks {:?}, iou_predictions {:?}, low_res_masks {:?}; expected masks {expected_masks:?}",
-                masks.shape, iou.shape, low_res.shape
-            ),
-        });
-    }
-    Ok((0..batch)
-        .map(|index| SamAnswer {
-            logits: (0..4)
-                .map(|channel| masks.data[(index * 4 + channel) * pixels..][..pixels].to_vec())
-                .collect(),
-            predicted_iou: iou.data[index * 4..index * 4 + 4].to_vec(),
-            low_res_logits: (0..4)
-                .map(|channel| {
-                    low_res.data[(index * 4 + channel) * low_res_pixels..][..low_res_pixels]
-                        .to_vec()
-                })
-                .collect(),
-        })
-        .collect())
 }
 
 /// [`SamModel`] plus the current image: the [`PointPromptSegmenter`] the mask generator drives.
@@ -434,6 +531,7 @@ impl PointPromptSegmenter for SamPredictor {
         Ok(answers
             .into_iter()
             .map(|mut answer| PointMasks {
+                object_present: answer.object_present(),
                 predicted_iou: [
                     answer.predicted_iou[small],
                     answer.predicted_iou[middle],

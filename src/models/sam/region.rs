@@ -66,6 +66,16 @@ impl RegionPromptSegmenter for SamPredictor {
                         reason: "no single-mask channel".to_string(),
                     }));
                 };
+                if !answer.object_present() {
+                    // SAM 2's trackers read "no object" as an empty mask, whatever the mask
+                    // channels hold: the track counts this frame as lost.
+                    answers.push(RegionAnswer {
+                        mask: BitMask::new(width, height),
+                        predicted_iou: 0.0,
+                        low_res_logits: None,
+                    });
+                    continue;
+                }
                 let mask = BitMask::from_logits(width, height, logits, 0.0).map_err(model_error)?;
                 let low_res_logits = (SINGLE_MASK_CHANNEL < answer.low_res_logits.len())
                     .then(|| answer.low_res_logits.swap_remove(SINGLE_MASK_CHANNEL));

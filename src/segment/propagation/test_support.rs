@@ -267,11 +267,13 @@ impl PointPromptSegmenter for PointOracle {
                     PointMasks {
                         logits: [vec![-10.0; pixels], vec![-10.0; pixels], logits],
                         predicted_iou: [0.1, 0.1, 0.95],
+                        object_present: true,
                     }
                 } else {
                     PointMasks {
                         logits: [logits.clone(), logits.clone(), logits],
                         predicted_iou: [0.95; 3],
+                        object_present: true,
                     }
                 }
             })
