@@ -600,7 +600,8 @@ TOKENIZER_TEXTS = [
     "word " * 80,
 ]
 # Texts where open_clip's extra cleaning (ftfy.fix_text, html.unescape) changes the text before
-# tokenising, so an HF tokenizer.json cannot reproduce the ids; recorded separately.
+# tokenising, so an HF tokenizer.json alone cannot reproduce the ids; recorded separately (the Rust
+# ClipTokenizer cleans first and does; scripts/make_tokenizer_table.py writes many more).
 TOKENIZER_CLEANING_TEXTS = [
     "fish &amp; chips",
     "&lt;b&gt;bold&lt;/b&gt;",

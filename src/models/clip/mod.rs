@@ -3,6 +3,7 @@
 pub mod encoder;
 pub mod masked_crop;
 pub mod preprocess;
+pub mod text_clean;
 pub mod tokenizer;
 
 pub use encoder::{
@@ -10,4 +11,5 @@ pub use encoder::{
 };
 pub use masked_crop::masked_square_crop;
 pub use preprocess::clip_pixel_values;
+pub use text_clean::clean_text;
 pub use tokenizer::ClipTokenizer;

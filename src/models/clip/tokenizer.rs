@@ -1,13 +1,25 @@
-//! CLIP's byte-level BPE tokenizer from a HuggingFace `tokenizer.json`, with open_clip's framing:
-//! `<|startoftext|>`, at most `context_length - 2` BPE ids, `<|endoftext|>`, zeros to
-//! `context_length`. The framing is done here, not by the JSON's post-processor, so a
-//! tokenizer.json with other padding or truncation settings still gives open_clip's ids.
-//! open_clip's text cleaning (ftfy, HTML unescape) is not reproduced.
+//! CLIP's byte-level BPE tokenizer from a HuggingFace `tokenizer.json`, with open_clip's text
+//! clean-up and framing, so that a prompt gets the ids `open_clip.get_tokenizer(...)` gives it.
+//!
+//! The clean-up (`text_clean`: ftfy's fixes, HTML entities, whitespace, lower case) replaces the
+//! JSON's normalizer: open_clip normalises nothing after its clean-up, and the usual CLIP normalizer
+//! (NFC, whitespace, lower case) run again would, for instance, compose an accent that
+//! `html.unescape` produced as a combining mark. The framing is done here too, not by the JSON's
+//! post-processor, so a tokenizer.json with other padding or truncation settings still gives
+//! open_clip's ids: `<|startoftext|>`, at most `context_length - 2` BPE ids, `<|endoftext|>`, zeros
+//! to `context_length`.
+//!
+//! Known difference: text that spells a special token. open_clip reads `<start_of_text>` and
+//! `<end_of_text>` in a prompt as its start and end ids and `<|endoftext|>` as punctuation and
+//! letters; the HF tokenizer reads its added tokens `<|startoftext|>` and `<|endoftext|>` as the
+//! ids and the other two as punctuation and letters.
 
 use std::path::{Path, PathBuf};
 
 use tokenizers::Tokenizer;
+use tokenizers::normalizers::NormalizerWrapper;
 
+use super::text_clean::clean_text;
 use crate::models::error::ModelError;
 
 pub struct ClipTokenizer {
@@ -47,6 +59,7 @@ impl ClipTokenizer {
             .with_truncation(None)
             .map_err(|error| failed(error.to_string()))?;
         tokenizer.with_padding(None);
+        tokenizer.with_normalizer(None::<NormalizerWrapper>);
         Ok(ClipTokenizer {
             tokenizer,
             path: path.to_path_buf(),
@@ -60,15 +73,16 @@ impl ClipTokenizer {
         self.context_length
     }
 
-    /// open_clip's ids for one text: always `context_length` long.
+    /// open_clip's ids for one text (cleaned first): always `context_length` long.
     pub fn encode(&self, text: &str) -> Result<Vec<i64>, ModelError> {
-        let encoding =
-            self.tokenizer
-                .encode(text, false)
-                .map_err(|error| ModelError::Tokenizer {
-                    path: self.path.clone(),
-                    reason: format!("cannot tokenize {text:?}: {error}"),
-                })?;
+        let cleaned = clean_text(text);
+        let encoding = self
+            .tokenizer
+            .encode(cleaned.as_str(), false)
+            .map_err(|error| ModelError::Tokenizer {
+                path: self.path.clone(),
+                reason: format!("cannot tokenize {text:?}: {error}"),
+            })?;
         let body = encoding.get_ids();
         let kept = body.len().min(self.context_length - 2);
         let mut ids = Vec::with_capacity(self.context_length);
