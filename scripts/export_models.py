@@ -23,6 +23,15 @@ CLIP embeddings are exported WITHOUT L2 normalisation (the projected embedding a
 `encode_image/encode_text(normalize=False)` returns it); the manifest says so with
 `"output_normalized": false` in `preprocess`. Normalise before taking cosines.
 
+`--official-signature` exports the SAM-family decoders as users' own files come instead (the
+encoders are the same): SAM 1 / MobileSAM through the package's own `SamOnnxModel(sam,
+return_single_mask=False)` exported as segment-anything's scripts/export_onnx_model.py does
+(batch 1, only the number of points dynamic), SAM 2.1 in the common form (prompt batch dynamic, one
+mask_input [1,1,256,256] / has_mask_input [1] for the batch, plus `object_score_logits` [B,1]). No
+manifest.json is written (`segsplat models init DIR` writes one); CLIP models are exported as usual.
+The decoders are verified one prompt per run (and SAM 2.1 with 4 prompts in one batch) and the
+reference files keep the normal mode's format (decoder outputs computed one prompt per run).
+
 `--reference-dir DIR` saves, per model, what the Rust runtime needs to compare its own
 preprocessing and ONNX outputs against PyTorch: the raw RGB image (PNG), the preprocessed input
 tensors, the prompts and the torch outputs, all as .npy (little-endian, C order), plus an
@@ -49,6 +58,7 @@ SAM_IMAGE_SIZE = 1024
 SAM_LOW_RES = 256
 SOT_TOKEN, EOT_TOKEN = 49406, 49407
 SEED = 1234
+VERIFY = True  # --no-verify clears it (and replaces verify() with a no-op)
 
 # Max abs error allowed between onnxruntime and eager torch, relative to the largest magnitude of
 # the torch output (max(|ref|, 1)): fp32 graphs with fused/reordered ops differ at ~1e-5 relative;
@@ -660,6 +670,312 @@ def export_sam_family(spec, checkpoint, image, out_dir, reference_root):
 
 
 # ---------------------------------------------------------------------------------------------
+# --official-signature: the graphs users bring (segment-anything's own decoder export, the common
+# SAM 2 export form), written without a manifest
+# ---------------------------------------------------------------------------------------------
+
+# segment-anything / MobileSAM scripts/export_onnx_model.py: batch fixed at 1, only the number of
+# points dynamic; the exporter names the output dimensions itself (all four symbolic).
+OFFICIAL_SAM1_DYNAMIC_AXES = {"point_coords": {1: "num_points"}, "point_labels": {1: "num_points"}}
+OFFICIAL_SAM1_DECODER = (
+    [io("image_embeddings", [1, 256, 64, 64]), io("point_coords", [1, -1, 2]), io("point_labels", [1, -1]),
+     io("mask_input", [1, 1, SAM_LOW_RES, SAM_LOW_RES]), io("has_mask_input", [1]), io("orig_im_size", [2])],
+    [io("masks", [1, 4, -1, -1]), io("iou_predictions", [1, 4]), io("low_res_masks", [1, 4, SAM_LOW_RES, SAM_LOW_RES])],
+)
+# The common SAM 2 form: prompt batch and points dynamic, one mask input shared by the batch, and
+# the mask decoder's object score as a fourth output.
+OFFICIAL_SAM2_DYNAMIC_AXES = {
+    "point_coords": {0: "num_labels", 1: "num_points"},
+    "point_labels": {0: "num_labels", 1: "num_points"},
+    "masks": {0: "num_labels", 2: "height", 3: "width"},
+    "iou_predictions": {0: "num_labels"},
+    "low_res_masks": {0: "num_labels"},
+    "object_score_logits": {0: "num_labels"},
+}
+OFFICIAL_SAM2_DECODER = (
+    [SAM_EMBEDDINGS] + SAM2_HIGH_RES
+    + [io("point_coords", [-1, -1, 2]), io("point_labels", [-1, -1]), io("mask_input", [1, 1, SAM_LOW_RES, SAM_LOW_RES]),
+       io("has_mask_input", [1]), io("orig_im_size", [2])],
+    DECODER_OUTPUTS + [io("object_score_logits", [-1, 1])],
+)
+# segment-anything's export dummy orig_im_size (scripts/export_onnx_model.py).
+OFFICIAL_DUMMY_ORIG_IM_SIZE = [1500, 2250]
+
+
+class Sam2OfficialDecoder(nn.Module):
+    """SAM 2.1 decoder in the common export form: mask_input [1,1,256,256] / has_mask_input [1]
+    shared by the prompt batch, all four mask tokens, plus object_score_logits [B,1]."""
+
+    def __init__(self, sam2_model):
+        super().__init__()
+        self.prompt_encoder = sam2_model.sam_prompt_encoder
+        self.mask_decoder = sam2_model.sam_mask_decoder
+
+    def forward(self, image_embeddings, high_res_feats_0, high_res_feats_1, point_coords, point_labels,
+                mask_input, has_mask_input, orig_im_size):
+        sparse = embed_points(self.prompt_encoder, point_coords, point_labels)
+        dense = embed_masks(self.prompt_encoder, mask_input, has_mask_input)  # [1,256,64,64], broadcast
+        low_res_masks, iou_predictions, _, object_score_logits = self.mask_decoder.predict_masks(
+            image_embeddings=image_embeddings,
+            image_pe=self.prompt_encoder.get_dense_pe(),
+            sparse_prompt_embeddings=sparse,
+            dense_prompt_embeddings=dense,
+            repeat_image=True,
+            high_res_features=[high_res_feats_0, high_res_feats_1],
+        )
+        masks = DynamicMaskPostprocess.apply(low_res_masks, orig_im_size, False)
+        return masks, iou_predictions, low_res_masks, object_score_logits
+
+
+def official_decoder(spec, model):
+    """(module, export dummy inputs, (inputs, outputs) declared, dynamic_axes)."""
+    if spec.family == "sam2":
+        module = Sam2OfficialDecoder(model)
+        declared, axes, batch = OFFICIAL_SAM2_DECODER, OFFICIAL_SAM2_DYNAMIC_AXES, 2
+    else:
+        if spec.family == "mobile_sam":
+            from mobile_sam.utils.onnx import SamOnnxModel
+        else:
+            from segment_anything.utils.onnx import SamOnnxModel
+        module = SamOnnxModel(model, return_single_mask=False)
+        declared, axes, batch = OFFICIAL_SAM1_DECODER, OFFICIAL_SAM1_DYNAMIC_AXES, 1
+    # segment-anything's dummy inputs (batch 2 for the SAM 2 form so the prompt batch cannot be
+    # confused with the image batch while tracing).
+    dummy = {"image_embeddings": torch.randn(1, 256, 64, 64)}
+    if spec.family == "sam2":
+        dummy["high_res_feats_0"] = torch.randn(1, 32, 256, 256)
+        dummy["high_res_feats_1"] = torch.randn(1, 64, 128, 128)
+    dummy.update({
+        "point_coords": torch.randint(low=0, high=1024, size=(batch, 5, 2), dtype=torch.float),
+        "point_labels": torch.randint(low=0, high=4, size=(batch, 5), dtype=torch.float),
+        "mask_input": torch.randn(1, 1, SAM_LOW_RES, SAM_LOW_RES, dtype=torch.float),
+        "has_mask_input": torch.tensor([1], dtype=torch.float),
+        "orig_im_size": torch.tensor(OFFICIAL_DUMMY_ORIG_IM_SIZE, dtype=torch.float),
+    })
+    return module.eval(), dummy, declared, axes
+
+
+def export_official_onnx(module, dummy, path, output_names, dynamic_axes):
+    """torch.onnx.export exactly as segment-anything's scripts/export_onnx_model.py calls it (plus
+    dynamo=False: the TorchScript exporter that script was written for, the default before torch
+    2.9). The file is left as torch wrote it (no IR-version rewrite)."""
+    import warnings
+
+    started = time.perf_counter()
+    with torch.no_grad():
+        _ = module(**dummy)  # the official script runs the model once before exporting
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", category=torch.jit.TracerWarning)
+        warnings.filterwarnings("ignore", category=UserWarning)
+        warnings.filterwarnings("ignore", category=DeprecationWarning)
+        torch.onnx.export(
+            module, tuple(dummy.values()), path,
+            export_params=True, verbose=False, opset_version=OPSET, do_constant_folding=True,
+            input_names=list(dummy.keys()), output_names=output_names, dynamic_axes=dynamic_axes,
+            dynamo=False,
+        )
+    module.eval()
+    seconds = time.perf_counter() - started
+    log(f"  exported {os.path.basename(path)} in {seconds:.1f} s ({os.path.getsize(path) / 1e6:.1f} MB)")
+    return seconds
+
+
+def graph_signature(path):
+    """[(kind, name, dtype, [dims])] of the ONNX graph; a dim is an int or its symbolic name."""
+    import onnx
+
+    model = onnx.load(path, load_external_data=False)
+    rows = []
+    for kind, values in (("input", model.graph.input), ("output", model.graph.output)):
+        for value in values:
+            tensor = value.type.tensor_type
+            dtype = np.dtype(onnx.helper.tensor_dtype_to_np_dtype(tensor.elem_type)).name
+            dims = [d.dim_value if d.HasField("dim_value") else (d.dim_param or "?") for d in tensor.shape.dim]
+            rows.append((kind, value.name, dtype, dims))
+    return model, rows
+
+
+def log_graph_signature(path):
+    model, rows = graph_signature(path)
+    log(f"  signature of {os.path.basename(path)} (IR {model.ir_version}, opset "
+        f"{max(o.version for o in model.opset_import if o.domain in ('', 'ai.onnx'))}):")
+    for kind, name, dtype, dims in rows:
+        log(f"    {kind:6} {name} {dtype}[{', '.join(str(d) for d in dims)}]")
+    return model
+
+
+def run_onnx(path, feeds):
+    import onnxruntime as ort
+
+    session = ort.InferenceSession(path, providers=["CPUExecutionProvider"])
+    return dict(zip([o.name for o in session.get_outputs()], session.run(None, feeds)))
+
+
+def baked_crop_postprocess(low_res_masks, orig_im_size, crop):
+    """segment-anything 1.0 SamOnnxModel.mask_postprocessing as its traced graph computes it: the
+    crop to the unpadded region is the export dummy's (int() of a tensor becomes a constant), the
+    final resize follows orig_im_size."""
+    masks = F.interpolate(torch.from_numpy(low_res_masks), size=(SAM_IMAGE_SIZE, SAM_IMAGE_SIZE),
+                          mode="bilinear", align_corners=False)
+    masks = masks[..., : crop[0], : crop[1]]
+    height, width = int(orig_im_size[0]), int(orig_im_size[1])
+    return F.interpolate(masks, size=(height, width), mode="bilinear", align_corners=False).numpy()
+
+
+def relative_error(got, reference):
+    return float(np.abs(got - reference).max()) / max(1.0, float(np.abs(reference).max()))
+
+
+def probe_mask_crop(path, module, feeds, output_names):
+    """How the official SAM 1 / MobileSAM graph crops the padded region: None when the crop
+    follows orig_im_size, else the (rows, cols) baked in at export. Probed at a portrait size whose
+    unpadded region differs from the export dummy's."""
+    probe = {**feeds, "orig_im_size": np.array([600, 400], np.float32)}
+    expected, _ = eager(module, probe, output_names)
+    got = run_onnx(path, probe)["masks"]
+    if got.shape == expected["masks"].shape and relative_error(got, expected["masks"]) <= TOLERANCES["masks"]:
+        log("  official decoder mask postprocessing: the crop to the unpadded region follows orig_im_size")
+        return None
+    crop = type(module).resize_longest_image_size(torch.tensor(OFFICIAL_DUMMY_ORIG_IM_SIZE), SAM_IMAGE_SIZE).tolist()
+    emulated = baked_crop_postprocess(expected["low_res_masks"], probe["orig_im_size"], crop)
+    if got.shape == emulated.shape and relative_error(got, emulated) <= TOLERANCES["masks"]:
+        log(f"  official decoder mask postprocessing: crop BAKED at {crop[0]} x {crop[1]} (export dummy orig_im_size "
+            f"{OFFICIAL_DUMMY_ORIG_IM_SIZE[0]} x {OFFICIAL_DUMMY_ORIG_IM_SIZE[1]}); output size follows orig_im_size")
+        return crop
+    raise VerificationError(f"{path}: masks match neither the dynamic nor the baked-crop postprocessing")
+
+
+def official_prompt_feeds(decoder_in, embeddings, prompts, index, orig_im_size=None):
+    """Batch-1 decoder feeds for prompt `index` of sam_prompts (its own mask input / flag)."""
+    values = {
+        **embeddings,
+        "point_coords": prompts["point_coords"][index:index + 1],
+        "point_labels": prompts["point_labels"][index:index + 1],
+        "mask_input": prompts["mask_input"][index:index + 1],
+        "has_mask_input": prompts["has_mask_input"][index:index + 1],
+        "orig_im_size": prompts["orig_im_size"] if orig_im_size is None else orig_im_size,
+    }
+    return {entry["name"]: np.ascontiguousarray(values[entry["name"]]) for entry in decoder_in}
+
+
+def export_sam_family_official(spec, checkpoint, image, out_dir, reference_root):
+    """Encoder as in the normal mode; decoder as the official / common exporters write it."""
+    sam2 = spec.family == "sam2"
+    model = load_sam2(spec, checkpoint) if sam2 else load_sam(spec, checkpoint)
+    (encoder_in, encoder_out), _ = sam_signatures(spec.family)
+    encoder = Sam2ImageEncoder(model) if sam2 else SamImageEncoder(model)
+    timings = {}
+    reference = ReferenceWriter(reference_root, spec.key)
+    reference.image(image)
+
+    with torch.no_grad():
+        pixels, to_model_frame = sam_preprocess(spec.family, model, image)
+    encoder_feeds = {"image": pixels.numpy().astype(np.float32)}
+    encoder_name = f"{spec.key}-encoder"
+    encoder_path = os.path.join(out_dir, encoder_name + ".onnx")
+    timings["encoder export"] = export_onnx(encoder, [pixels], encoder_path, encoder_in, encoder_out)
+    log_graph_signature(encoder_path)
+    embeddings, timings["encoder torch"] = eager(encoder, encoder_feeds, [o["name"] for o in encoder_out])
+    timings["encoder onnxruntime"] = verify(encoder_path, encoder_feeds, embeddings)
+
+    decoder, dummy, (decoder_in, decoder_out), dynamic_axes = official_decoder(spec, model)
+    names = [o["name"] for o in decoder_out]
+    decoder_name = f"{spec.key}-decoder"
+    decoder_path = os.path.join(out_dir, decoder_name + ".onnx")
+    timings["decoder export"] = export_official_onnx(decoder, dummy, decoder_path, names, dynamic_axes)
+    check_graph_signature(log_graph_signature(decoder_path), decoder_in, decoder_out)
+
+    prompts = sam_prompts(image.shape, to_model_frame)
+    crop = None
+    if VERIFY and not sam2:
+        crop = probe_mask_crop(decoder_path, decoder, official_prompt_feeds(decoder_in, embeddings, prompts, 0), names)
+
+    def check(feeds, label):
+        """eager torch vs onnxruntime on `feeds`; returns (torch outputs, graph outputs, seconds)."""
+        torch_out, torch_seconds = eager(decoder, feeds, names)
+        expected = dict(torch_out)
+        if crop is not None:
+            expected["masks"] = baked_crop_postprocess(torch_out["low_res_masks"], feeds["orig_im_size"], crop)
+        seconds = verify(decoder_path, feeds, expected, label=label + (" [masks vs baked-crop postprocessing]" if crop else ""))
+        return torch_out, expected, torch_seconds, seconds
+
+    # The reference: one prompt per run (the graphs take one mask input for the whole batch).
+    per_prompt, graph_masks = [], []
+    timings["decoder torch"] = timings["decoder onnxruntime"] = 0.0
+    for index in range(len(prompts["point_coords"])):
+        feeds = official_prompt_feeds(decoder_in, embeddings, prompts, index)
+        torch_out, expected, torch_seconds, seconds = check(feeds, f" (prompt {index})")
+        per_prompt.append(torch_out)
+        graph_masks.append(expected["masks"])
+        timings["decoder torch"] += torch_seconds
+        timings["decoder onnxruntime"] += seconds
+    decoder_outputs = {name: np.concatenate([out[name] for out in per_prompt]) for name in names}
+    if crop is not None:
+        graph_masks = np.concatenate(graph_masks)
+        log(f"  official graph masks vs true postprocessing at {image.shape[0]} x {image.shape[1]} (baked crop): "
+            f"max abs err {np.abs(graph_masks - decoder_outputs['masks']).max():.2e}")
+    compare_with_official_predictor(spec, model, image, prompts, decoder_outputs)
+
+    height, width = image.shape[:2]
+    other_size = np.array([width // 2 + 7, height + 13], np.float32)
+    extra_points = to_model_frame(np.array([[0.3 * width, 0.35 * height], [0.72 * width, 0.65 * height],
+                                            [0.15 * width, 0.8 * height], [0.85 * width, 0.2 * height]], np.float32))
+    if sam2:
+        # Four prompts in one batch (no mask input), then the same batch sharing prompt 2's mask
+        # input at another output size; every batch row must equal the prompt run on its own.
+        batch = {**embeddings,
+                 "point_coords": np.stack([extra_points, np.zeros_like(extra_points)], axis=1),
+                 "point_labels": np.array([[1.0, -1.0]] * 4, np.float32),
+                 "mask_input": np.zeros((1, 1, SAM_LOW_RES, SAM_LOW_RES), np.float32),
+                 "has_mask_input": np.zeros(1, np.float32), "orig_im_size": prompts["orig_im_size"]}
+        batch = {entry["name"]: np.ascontiguousarray(batch[entry["name"]]) for entry in decoder_in}
+        check(batch, " (4 prompts in one batch)")
+        if VERIFY:
+            got = run_onnx(decoder_path, batch)
+            single = run_onnx(decoder_path, official_prompt_feeds(decoder_in, embeddings, prompts, 1))
+            worst = max(relative_error(got[name][1:2], single[name]) for name in names)
+            log(f"  batch row 1 vs prompt 1 alone (onnxruntime): relative {worst:.2e}")
+            if worst > TOLERANCES["masks"]:
+                raise VerificationError(f"{decoder_path}: a prompt decodes differently inside a batch ({worst:.2e})")
+        masked = {**batch, "mask_input": prompts["mask_input"][2:3], "has_mask_input": np.ones(1, np.float32),
+                  "orig_im_size": other_size}
+        check(masked, f" (4 prompts + shared mask input, orig_im_size {other_size.astype(int).tolist()})")
+    else:
+        # Batch fixed at 1: one prompt per run; more points (3 + padding), a box (labels 2, 3, no
+        # padding point), and prompt 2 (with mask input) at another output size.
+        three = {**official_prompt_feeds(decoder_in, embeddings, prompts, 0),
+                 "point_coords": np.concatenate([extra_points[None, :3], np.zeros((1, 1, 2), np.float32)], axis=1),
+                 "point_labels": np.array([[1.0, 1.0, 0.0, -1.0]], np.float32)}
+        check(three, " (3 points + padding)")
+        box = {**official_prompt_feeds(decoder_in, embeddings, prompts, 0),
+               "point_coords": to_model_frame(np.array([[0.2 * width, 0.25 * height], [0.6 * width, 0.7 * height]],
+                                                       np.float32))[None],
+               "point_labels": np.array([[2.0, 3.0]], np.float32)}
+        check(box, " (box)")
+        check(official_prompt_feeds(decoder_in, embeddings, prompts, 2, other_size),
+              f" (prompt 2, orig_im_size {other_size.astype(int).tolist()})")
+
+    for key, value in {**encoder_feeds, **embeddings, **prompts, **decoder_outputs}.items():
+        role = "input" if key in encoder_feeds or key in prompts else "torch output"
+        reference.array(key, value, f"{role} ({'encoder' if key in encoder_feeds or key in embeddings else 'decoder'})")
+    if crop is not None:
+        reference.array("masks_graph_baked_crop", graph_masks,
+                        f"what {decoder_name}.onnx returns as masks: crop baked at {crop[0]} x {crop[1]}")
+    reference.finish({
+        "signature": "official (--official-signature): segment-anything SamOnnxModel decoder" if not sam2
+                     else "official (--official-signature): common SAM 2 decoder form with object_score_logits",
+        "preprocess": "official code: ResizeLongestSide + Sam.preprocess" if not sam2 else "official SAM2Transforms",
+        "point_coords": "1024-frame coordinates fed to the decoder; point_coords_original are in image.png pixels",
+        "prompts": "3 prompts: one positive point + padding point (0,0)/-1 each; prompt 2 has has_mask_input=1",
+        "decoder_runs": "one prompt per decoder run (batch 1, that prompt's own mask_input / has_mask_input), stacked",
+        "masks": "true postprocessing (what the eager module and the official predictor return)"
+                 + (f"; the graph bakes the crop at {crop[0]} x {crop[1]}, see masks_graph_baked_crop.npy" if crop else ""),
+    })
+    log(f"  decoder signature: official ({'common SAM 2 form' if sam2 else 'SamOnnxModel, return_single_mask=False'})")
+    return [], timings
+
+
+# ---------------------------------------------------------------------------------------------
 # Model directory: manifest + tokenizer
 # ---------------------------------------------------------------------------------------------
 
@@ -715,6 +1031,9 @@ def parse_args(argv):
     parser.add_argument("--image", help="RGB image for verification/reference (default: generated 320x240)")
     parser.add_argument("--reference-dir", help="save inputs and torch outputs here (one folder per model)")
     parser.add_argument("--no-verify", action="store_true", help="skip the onnxruntime comparison (not advised)")
+    parser.add_argument("--official-signature", action="store_true",
+                        help="SAM-family decoders as the official / common exporters write them (segment-anything's "
+                             "SamOnnxModel; the common SAM 2 form with object_score_logits); no manifest.json")
     args = parser.parse_args(argv)
     args.models = [m.strip() for m in args.models.split(",") if m.strip()]
     unknown = [m for m in args.models if m not in MODEL_SPECS]
@@ -734,8 +1053,9 @@ def parse_args(argv):
 def main(argv=None):
     args = parse_args(argv)
     if args.no_verify:
-        global verify
+        global verify, VERIFY
         verify = lambda *a, **k: 0.0  # noqa: E731
+        VERIFY = False
     os.makedirs(args.out, exist_ok=True)
     torch.set_grad_enabled(False)
     image = load_or_generate_image(args.image)
@@ -748,14 +1068,25 @@ def main(argv=None):
         torch.manual_seed(SEED)
         started = time.perf_counter()
         exporter = export_clip if spec.family == "clip" else export_sam_family
+        if args.official_signature and spec.family != "clip":
+            exporter = export_sam_family_official
         entries, timings = exporter(spec, checkpoint, image, args.out, args.reference_dir)
+        if args.official_signature and spec.family == "clip":
+            for entry in entries:
+                log_graph_signature(os.path.join(args.out, entry["file"]))
         timings["total"] = time.perf_counter() - started
         summary[key] = timings
         all_entries += entries
         if spec.family == "clip":
             tokenizer = write_tokenizer(args.out)
-    write_manifest(args.out, all_entries, tokenizer)
-    log(f"wrote {os.path.join(args.out, 'manifest.json')}")
+    if args.official_signature:
+        log(f"--official-signature: no manifest.json written in {args.out} (the user's files come without one; "
+            f"`segsplat models init {args.out}` writes it)")
+        if os.path.exists(os.path.join(args.out, "manifest.json")):
+            log(f"warning: {os.path.join(args.out, 'manifest.json')} is left from an earlier run and no longer matches")
+    else:
+        write_manifest(args.out, all_entries, tokenizer)
+        log(f"wrote {os.path.join(args.out, 'manifest.json')}")
     log("timings (s): " + json.dumps({k: {n: round(v, 3) for n, v in t.items()} for k, t in summary.items()}, indent=1))
     return 0
 
