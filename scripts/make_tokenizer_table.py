@@ -76,6 +76,11 @@ TEXTS = [
     "MiXeD \u00c7aSe \u00c0\u00c9\u00ce \u00d1O\u00d1O",
     # longer than 77 tokens after clean-up
     "a \uff26\uff35\uff2c\uff2c photo of &amp; \ufb01sh, \u201cdon\u2019t\u201d " * 12,
+    # typed special tokens: open_clip's own become its ids where its scan meets them (not glued
+    # to punctuation); the HF spellings are plain text, never an early end
+    "a <start_of_text> red mug",
+    "the <|endoftext|> mug <|startoftext|>red",
+    "<END_OF_TEXT> x<<start_of_text> red<start_of_text>mug",
     # empty and whitespace only
     "",
     "   \t\n  ",

@@ -9,13 +9,17 @@
 //! open_clip's ids: `<|startoftext|>`, at most `context_length - 2` BPE ids, `<|endoftext|>`, zeros
 //! to `context_length`.
 //!
-//! Known difference: text that spells a special token. open_clip reads `<start_of_text>` and
-//! `<end_of_text>` in a prompt as its start and end ids and `<|endoftext|>` as punctuation and
-//! letters; the HF tokenizer reads its added tokens `<|startoftext|>` and `<|endoftext|>` as the
-//! ids and the other two as punctuation and letters.
+//! Text that spells a special token is read as open_clip reads it: `<start_of_text>` and
+//! `<end_of_text>` become the start and end ids where open_clip's token pattern meets them, and
+//! `<|startoftext|>` / `<|endoftext|>` are punctuation and letters like any other text. The HF
+//! file's added tokens are switched off for that: left on, a typed `<|endoftext|>` would end the
+//! prompt early, since the text model takes its end at the largest id.
 
 use std::path::{Path, PathBuf};
+use std::str::FromStr;
+use std::sync::LazyLock;
 
+use regex::Regex;
 use tokenizers::Tokenizer;
 use tokenizers::normalizers::NormalizerWrapper;
 
@@ -53,8 +57,13 @@ impl ClipTokenizer {
         if context_length < 2 {
             return Err(failed("context_length must be >= 2".to_string()));
         }
+        let text = std::fs::read_to_string(path).map_err(|error| failed(error.to_string()))?;
+        let mut json: serde_json::Value =
+            serde_json::from_str(&text).map_err(|error| failed(error.to_string()))?;
+        // Added tokens are matched in the text before any pre-tokenizer; open_clip has none.
+        json["added_tokens"] = serde_json::Value::Array(Vec::new());
         let mut tokenizer =
-            Tokenizer::from_file(path).map_err(|error| failed(error.to_string()))?;
+            Tokenizer::from_str(&json.to_string()).map_err(|error| failed(error.to_string()))?;
         tokenizer
             .with_truncation(None)
             .map_err(|error| failed(error.to_string()))?;
@@ -76,14 +85,22 @@ impl ClipTokenizer {
     /// open_clip's ids for one text (cleaned first): always `context_length` long.
     pub fn encode(&self, text: &str) -> Result<Vec<i64>, ModelError> {
         let cleaned = clean_text(text);
-        let encoding = self
-            .tokenizer
-            .encode(cleaned.as_str(), false)
-            .map_err(|error| ModelError::Tokenizer {
-                path: self.path.clone(),
-                reason: format!("cannot tokenize {text:?}: {error}"),
-            })?;
-        let body = encoding.get_ids();
+        let mut body = Vec::new();
+        for piece in pieces(&cleaned) {
+            match piece {
+                Piece::Start => body.push(self.start_token),
+                Piece::End => body.push(self.end_token),
+                Piece::Text(text) => {
+                    let encoding = self.tokenizer.encode(text, false).map_err(|error| {
+                        ModelError::Tokenizer {
+                            path: self.path.clone(),
+                            reason: format!("cannot tokenize {text:?}: {error}"),
+                        }
+                    })?;
+                    body.extend_from_slice(encoding.get_ids());
+                }
+            }
+        }
         let kept = body.len().min(self.context_length - 2);
         let mut ids = Vec::with_capacity(self.context_length);
         ids.push(i64::from(self.start_token));
@@ -100,5 +117,70 @@ impl ClipTokenizer {
             ids.extend(self.encode(text)?);
         }
         Ok(ids)
+    }
+}
+
+/// open_clip's token pattern (`SimpleTokenizer.pat`), special tokens first; scanned like
+/// Python's `findall`, it tells where a typed special token counts as one.
+static OPEN_CLIP_PATTERN: LazyLock<Option<Regex>> = LazyLock::new(|| {
+    Regex::new(
+        r"<start_of_text>|<end_of_text>|'s|'t|'re|'ve|'m|'ll|'d|[\p{L}]+|[\p{N}]|[^\s\p{L}\p{N}]+",
+    )
+    .ok()
+});
+
+#[derive(Debug, PartialEq, Eq)]
+enum Piece<'a> {
+    Text(&'a str),
+    Start,
+    End,
+}
+
+/// Splits cleaned text at the special tokens open_clip's scan meets; the text between them
+/// goes to the BPE, whose pre-tokenizer splits it as open_clip's pattern would.
+fn pieces(text: &str) -> Vec<Piece<'_>> {
+    let Some(pattern) = OPEN_CLIP_PATTERN.as_ref() else {
+        return vec![Piece::Text(text)];
+    };
+    let mut pieces = Vec::new();
+    let mut text_start = 0;
+    for found in pattern.find_iter(text) {
+        let special = match found.as_str() {
+            "<start_of_text>" => Piece::Start,
+            "<end_of_text>" => Piece::End,
+            _ => continue,
+        };
+        if found.start() > text_start {
+            pieces.push(Piece::Text(&text[text_start..found.start()]));
+        }
+        pieces.push(special);
+        text_start = found.end();
+    }
+    if text_start < text.len() {
+        pieces.push(Piece::Text(&text[text_start..]));
+    }
+    pieces
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn typed_special_tokens_split_where_open_clips_scan_meets_them() {
+        assert_eq!(
+            pieces("red<start_of_text>mug"),
+            vec![Piece::Text("red"), Piece::Start, Piece::Text("mug")]
+        );
+        assert_eq!(pieces("<end_of_text>"), vec![Piece::End]);
+        // Glued to punctuation the scan is inside a punctuation run: plain text.
+        assert_eq!(
+            pieces("x<<start_of_text>"),
+            vec![Piece::Text("x<<start_of_text>")]
+        );
+        assert_eq!(
+            pieces("the <|endoftext|> mug"),
+            vec![Piece::Text("the <|endoftext|> mug")]
+        );
     }
 }
