@@ -225,16 +225,68 @@ struct BenchReport {
     backward_ms_end: f64,
     /// Training loop only (setup, timing and evaluation excluded).
     steps_per_sec: f64,
+    /// Kernel dispatches recorded by the training loop, per step.
+    dispatches_per_step: f64,
     train_seconds: f64,
     psnr: f64,
     ssim: f64,
     peak_resident_mib: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     object_loss: Option<ObjectLossReport>,
+    /// With `--object-loss`: the same Gaussians trained without the object loss, first.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    plain_baseline: Option<PlainBaselineReport>,
     #[serde(skip_serializing_if = "Option::is_none")]
     deformation: Option<DeformationReport>,
     #[serde(skip_serializing_if = "Option::is_none")]
     kernel_profile: Option<KernelProfileReport>,
+}
+
+/// The plain step on the object-loss run's own starting Gaussians (background shell included),
+/// so the ratio compares like with like.
+#[derive(Serialize)]
+struct PlainBaselineReport {
+    gaussians_start: usize,
+    steps_per_sec: f64,
+    dispatches_per_step: f64,
+    psnr: f64,
+    /// Object-loss step time over plain step time.
+    step_time_ratio: f64,
+    /// Object-loss dispatches per step over plain dispatches per step.
+    dispatch_ratio: f64,
+}
+
+/// Trains `steps` on `trainer`, returning its progress and the dispatches it recorded per step.
+fn run_counting_dispatches(
+    ctx: &GpuContext,
+    trainer: &mut Trainer,
+) -> anyhow::Result<(segsplat::splat::train::TrainProgress, f64)> {
+    let before = ctx.dispatch_count();
+    let progress = trainer.run(|_| true)?;
+    let dispatches = ctx.dispatch_count() - before;
+    let per_step = dispatches as f64 / f64::from(progress.step.max(1));
+    Ok((progress, per_step))
+}
+
+/// The plain half of `--object-loss`: `config` without the object loss, from `model`.
+fn plain_baseline(
+    ctx: &GpuContext,
+    scene: &Scene,
+    config: &TrainConfig,
+    model: GaussianModel,
+    timing_repeats: u32,
+) -> anyhow::Result<(usize, f64, f64, f64)> {
+    let config = TrainConfig {
+        object_loss: None,
+        ..config.clone()
+    };
+    let mut trainer = Trainer::new(ctx, scene, config, Some(model))?;
+    let gaussians = trainer.gaussian_count();
+    // The same warm-up as the timed run gets, so neither pays first-use costs in its loop.
+    trainer.time_passes(timing_repeats)?;
+    let (progress, dispatches) = run_counting_dispatches(ctx, &mut trainer)?;
+    let eval = trainer.evaluate()?;
+    Ok((gaussians, progress.steps_per_sec, dispatches, eval.psnr))
 }
 
 /// `--profile-kernels`: GPU time per training step by kernel, averaged over `steps`.
@@ -385,10 +437,32 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     } else {
         None
     };
-    let (mut trainer, object_loss) = bench_trainer(&ctx, &scene, config, initial, &args)?;
+    let (mut trainer, object_loss) = bench_trainer(&ctx, &scene, config.clone(), initial, &args)?;
+    let plain = if object_loss.is_some() {
+        Some(plain_baseline(
+            &ctx,
+            &scene,
+            &config,
+            trainer.model()?,
+            args.timing_repeats,
+        )?)
+    } else {
+        None
+    };
     let gaussians_start = trainer.gaussian_count();
     let (forward_ms_start, backward_ms_start) = trainer.time_passes(args.timing_repeats)?;
-    let progress = trainer.run(|_| true)?;
+    let (progress, dispatches_per_step) = run_counting_dispatches(&ctx, &mut trainer)?;
+    let plain_baseline =
+        plain.map(
+            |(gaussians_start, steps_per_sec, dispatches, psnr)| PlainBaselineReport {
+                gaussians_start,
+                steps_per_sec,
+                dispatches_per_step: dispatches,
+                psnr,
+                step_time_ratio: steps_per_sec / progress.steps_per_sec,
+                dispatch_ratio: dispatches_per_step / dispatches.max(1.0),
+            },
+        );
     let (forward_ms_end, backward_ms_end) = trainer.time_passes(args.timing_repeats)?;
     let field_timing = trainer.time_deformation(args.timing_repeats)?;
     let eval = trainer.evaluate()?;
@@ -437,11 +511,13 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         backward_ms_start,
         backward_ms_end,
         steps_per_sec: progress.steps_per_sec,
+        dispatches_per_step,
         train_seconds: progress.elapsed_secs,
         psnr: eval.psnr,
         ssim: eval.ssim,
         peak_resident_mib: super::peak_resident_mib(),
         object_loss,
+        plain_baseline,
         deformation,
         kernel_profile,
     };

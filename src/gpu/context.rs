@@ -7,6 +7,7 @@
 //! subgroups. Kernels fall back to CAS loops / shared memory when they are absent.
 
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use serde::Serialize;
 
@@ -171,6 +172,9 @@ pub struct GpuContext {
     pub features: wgpu::Features,
     /// Per-kernel timestamps, when turned on by [`GpuContext::enable_kernel_profiling`].
     pub profiler: Option<Arc<KernelProfiler>>,
+    /// Dispatches recorded by every kernel built on this context: for small scenes a step costs
+    /// dispatch overhead more than arithmetic, so benchmarks report the count.
+    pub dispatches: Arc<AtomicU64>,
 }
 
 impl GpuContext {
@@ -228,7 +232,13 @@ impl GpuContext {
             limits,
             features,
             profiler: None,
+            dispatches: Arc::new(AtomicU64::new(0)),
         })
+    }
+
+    /// Dispatches recorded so far by the kernels built on this context.
+    pub fn dispatch_count(&self) -> u64 {
+        self.dispatches.load(Ordering::Relaxed)
     }
 
     /// Times every pass of the kernels built on this context from now on (see

@@ -5,6 +5,7 @@
 //! caller passes buffers to [`Kernel::bind`].
 
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::gpu::GpuContext;
 use crate::gpu::profiler::KernelProfiler;
@@ -57,6 +58,7 @@ pub struct Kernel {
     pub pipeline: wgpu::ComputePipeline,
     label: &'static str,
     profiler: Option<Arc<KernelProfiler>>,
+    dispatches: Arc<AtomicU64>,
 }
 
 impl Kernel {
@@ -93,6 +95,7 @@ impl Kernel {
             pipeline,
             label,
             profiler: ctx.profiler.clone(),
+            dispatches: Arc::clone(&ctx.dispatches),
         }
     }
 
@@ -133,6 +136,7 @@ impl Kernel {
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, bind_group, &[]);
         pass.dispatch_workgroups(workgroups[0], workgroups[1], workgroups[2]);
+        self.dispatches.fetch_add(1, Ordering::Relaxed);
     }
 
     /// Records one dispatch whose group counts are read on the GPU from `indirect` at `offset`
@@ -151,6 +155,7 @@ impl Kernel {
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, bind_group, &[]);
         pass.dispatch_workgroups_indirect(indirect, offset);
+        self.dispatches.fetch_add(1, Ordering::Relaxed);
     }
 }
 
