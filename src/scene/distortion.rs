@@ -608,3 +608,47 @@ mod tests {
         }
     }
 }
+
+#[cfg(test)]
+mod cost {
+    use super::*;
+
+    /// The cost of undistorting one phone frame (1080x1920, OPENCV) at load; run with
+    /// `cargo test --lib scene::distortion::cost -- --ignored --nocapture`.
+    #[test]
+    #[ignore = "timing, prints the cost"]
+    fn undistort_a_1080x1920_frame() {
+        let camera = Intrinsics {
+            width: 1080,
+            height: 1920,
+            fx: 1450.0,
+            fy: 1450.0,
+            cx: 540.0,
+            cy: 960.0,
+            model: "OPENCV".to_string(),
+            distortion: vec![0.08, -0.15, 0.001, -0.0005],
+        };
+        let lens = Lens::from_intrinsics(&camera).unwrap();
+        let image = Rgb32FImage::from_fn(1080, 1920, |x, y| {
+            image::Rgb([(x % 7) as f32 / 7.0, (y % 5) as f32 / 5.0, 0.5])
+        });
+        let mask = InstanceMask {
+            width: 1080,
+            height: 1920,
+            ids: (0..1080 * 1920).map(|i| (i % 13) as u32).collect(),
+        };
+        for _ in 0..2 {
+            let start = std::time::Instant::now();
+            let (_, stats) = undistort_rgb(&image, &camera, &lens);
+            let rgb = start.elapsed();
+            let start = std::time::Instant::now();
+            undistort_mask(&mask, &camera, &lens);
+            let ids = start.elapsed();
+            println!(
+                "1080x1920 OPENCV on {} threads: image {rgb:?}, mask {ids:?}, {:.2}% from outside",
+                rayon::current_num_threads(),
+                stats.outside_fraction * 100.0
+            );
+        }
+    }
+}
