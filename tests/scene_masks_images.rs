@@ -3,8 +3,10 @@
 use std::fs;
 use std::path::Path;
 
-use segsplat::scene::colmap::ColmapEncoding;
-use segsplat::scene::synthetic::{self, SYNTHETIC_BACKGROUND, SyntheticSpec, synthetic_objects};
+use segsplat::scene::colmap::{CameraModel, ColmapEncoding};
+use segsplat::scene::synthetic::{
+    self, SYNTHETIC_BACKGROUND, SyntheticLens, SyntheticSpec, synthetic_objects,
+};
 use segsplat::scene::{
     InstanceMask, Level, LoadOptions, Scene, SceneError, load_frame_rgb, load_instance_mask,
     load_scene, scale_for_max_side, validate_scene,
@@ -273,4 +275,80 @@ fn source_level_picks_the_nearest_given_level() {
         sources(&[Small, Middle, Large]),
         [Some(Small), Some(Middle), Some(Large)]
     );
+}
+
+#[test]
+fn masks_of_a_distorted_camera_are_undistorted_with_their_labels() {
+    let spec = |lens| SyntheticSpec {
+        frame_count: 3,
+        width: 160,
+        height: 120,
+        with_masks: Some(Level::ALL.to_vec()),
+        lens,
+        camera_distance: 2.0,
+        ..SyntheticSpec::default()
+    };
+    let (distorted_dir, pinhole_dir) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let lens = SyntheticLens {
+        model: CameraModel::OpenCv,
+        distortion: vec![-0.35, 0.12, 0.003, -0.004],
+    };
+    synthetic::write_colmap(
+        distorted_dir.path(),
+        &spec(Some(lens)),
+        ColmapEncoding::Binary,
+    )
+    .unwrap();
+    synthetic::write_colmap(pinhole_dir.path(), &spec(None), ColmapEncoding::Binary).unwrap();
+    let distorted = load_scene(distorted_dir.path(), &LoadOptions::default()).unwrap();
+    let pinhole = load_scene(pinhole_dir.path(), &LoadOptions::default()).unwrap();
+    validate_scene(&distorted).unwrap();
+    let share_differing = |a: &InstanceMask, b: &InstanceMask| {
+        let differing = a.ids.iter().zip(&b.ids).filter(|(x, y)| x != y).count();
+        differing as f64 / a.ids.len() as f64
+    };
+    for level in Level::ALL {
+        for frame_index in 0..distorted.frames.len() {
+            let undistorted = load_instance_mask(&distorted, level, frame_index)
+                .unwrap()
+                .unwrap();
+            let reference = load_instance_mask(&pinhole, level, frame_index)
+                .unwrap()
+                .unwrap();
+            let path = distorted
+                .masks
+                .as_ref()
+                .unwrap()
+                .path_for(level, frame_index)
+                .unwrap();
+            let raw = image::open(distorted.root.join(path)).unwrap();
+            let (width, height) = (raw.width(), raw.height());
+            let ids = match raw {
+                image::DynamicImage::ImageLuma8(gray) => {
+                    gray.into_raw().into_iter().map(u32::from).collect()
+                }
+                image::DynamicImage::ImageLuma16(gray) => {
+                    gray.into_raw().into_iter().map(u32::from).collect()
+                }
+                other => panic!("unexpected mask type {:?}", other.color()),
+            };
+            let raw = InstanceMask { width, height, ids };
+            // Labels stay labels: the same set of ids, nothing blended between them.
+            assert_eq!(distinct_ids(&undistorted), distinct_ids(&reference));
+            let (after, before) = (
+                share_differing(&undistorted, &reference),
+                share_differing(&raw, &reference),
+            );
+            println!(
+                "{level:?} frame {frame_index}: pixels off the pinhole mask {:.2}% undistorted, {:.2}% as stored",
+                after * 100.0,
+                before * 100.0
+            );
+            assert!(after < 0.005, "{level:?} {frame_index}: {after}");
+            assert!(
+                before > 4.0 * after.max(0.001),
+                "{level:?} {frame_index}: {before}"
+            );
+        }
+    }
 }

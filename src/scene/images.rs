@@ -9,7 +9,8 @@ use std::path::Path;
 use image::imageops::FilterType;
 use image::{DynamicImage, ImageReader, Rgb32FImage};
 
-use super::{Scene, SceneError};
+use super::distortion::{Lens, undistort_rgb};
+use super::{Frame, Scene, SceneError};
 
 /// Image size after scaling by `factor`, rounded, at least one pixel per side.
 pub fn scaled_size(width: u32, height: u32, factor: f64) -> (u32, u32) {
@@ -66,8 +67,10 @@ pub(crate) fn image_size(root: &Path, relative_path: &Path) -> Result<(u32, u32)
     })
 }
 
-/// Frame `frame_index` as 0..1 RGB floats, RGBA composited on `scene.background`, downscaled so
-/// the longest side is at most `max_side` (Lanczos3, never upscaled). Scale the frame's
+/// Frame `frame_index` as 0..1 RGB floats, RGBA composited on `scene.background`, undistorted to
+/// the pinhole camera with the frame's `fx, fy, cx, cy` when its camera model has distortion
+/// (bilinear, at full resolution; see [`crate::scene::distortion`]), then downscaled so the
+/// longest side is at most `max_side` (Lanczos3, never upscaled). Scale the frame's
 /// intrinsics with [`crate::scene::Intrinsics::scaled`] and the same
 /// [`scale_for_max_side`] factor to match.
 pub fn load_frame_rgb(
@@ -94,7 +97,7 @@ pub fn load_frame_rgb(
             (frame.intrinsics.width, frame.intrinsics.height),
         ));
     }
-    let rgb = composite_on_background(decoded, scene.background);
+    let rgb = undistorted(frame, composite_on_background(decoded, scene.background))?;
     let factor = max_side.map_or(1.0, |max_side| scale_for_max_side(width, height, max_side));
     if factor >= 1.0 {
         return Ok(rgb);
@@ -107,6 +110,34 @@ pub fn load_frame_rgb(
         *value = value.clamp(0.0, 1.0);
     }
     Ok(resized)
+}
+
+/// The lens of `frame`'s camera; errors name the frame's image.
+pub(crate) fn frame_lens(frame: &Frame) -> Result<Lens, SceneError> {
+    Lens::from_intrinsics(&frame.intrinsics).map_err(|message| SceneError::Inconsistent {
+        file: frame.image_path.display().to_string(),
+        message: format!("camera of frame {}: {message}", frame.name),
+    })
+}
+
+/// Share of remapped pixels taken from outside the distorted image above which a warning says so.
+pub(crate) const OUTSIDE_WARNING_FRACTION: f64 = 0.02;
+
+fn undistorted(frame: &Frame, rgb: Rgb32FImage) -> Result<Rgb32FImage, SceneError> {
+    let lens = frame_lens(frame)?;
+    if lens.is_pinhole() {
+        return Ok(rgb);
+    }
+    let (pinhole, stats) = undistort_rgb(&rgb, &frame.intrinsics, &lens);
+    if stats.outside_fraction > OUTSIDE_WARNING_FRACTION {
+        tracing::warn!(
+            frame = %frame.name,
+            model = %frame.intrinsics.model,
+            outside_percent = stats.outside_fraction * 100.0,
+            "undistorted image has pixels from outside the original, filled from its edge"
+        );
+    }
+    Ok(pinhole)
 }
 
 pub(crate) fn size_mismatch(file: &Path, actual: (u32, u32), expected: (u32, u32)) -> SceneError {

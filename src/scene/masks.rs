@@ -5,7 +5,8 @@ use std::path::{Path, PathBuf};
 
 use image::DynamicImage;
 
-use super::images::{decode_image, size_mismatch};
+use super::distortion::undistort_mask;
+use super::images::{decode_image, frame_lens, size_mismatch};
 use super::{Frame, InstanceMask, Level, MaskLayout, Scene, SceneError};
 
 pub const MASKS_DIR: &str = "masks";
@@ -55,7 +56,8 @@ pub fn discover_masks(root: &Path, frames: &[Frame]) -> Result<Option<MaskLayout
 }
 
 /// The instance mask serving `level` for frame `frame_index` (a missing level falls back as
-/// [`MaskLayout::source_level`] says); `Ok(None)` when the scene has no user masks.
+/// [`MaskLayout::source_level`] says), undistorted like the frame's image when its camera has
+/// distortion (nearest pixel, so ids stay ids); `Ok(None)` when the scene has no user masks.
 pub fn load_instance_mask(
     scene: &Scene,
     level: Level,
@@ -81,7 +83,11 @@ pub fn load_instance_mask(
     if (mask.width, mask.height) != expected {
         return Err(size_mismatch(path, (mask.width, mask.height), expected));
     }
-    Ok(Some(mask))
+    let lens = frame_lens(frame)?;
+    if lens.is_pinhole() {
+        return Ok(Some(mask));
+    }
+    Ok(Some(undistort_mask(&mask, &frame.intrinsics, &lens).0))
 }
 
 /// Decodes one mask file, refusing anything but single-channel 8- or 16-bit images.

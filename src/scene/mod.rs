@@ -3,13 +3,16 @@
 //! Cameras come out in the OpenCV convention (x right, y down, z forward) whatever the source
 //! format used (nerfstudio and Blender store OpenGL-convention poses, Neu3D LLFF's
 //! down-right-back axes; they are converted here). Dynamic formats (D-NeRF, Nerfies/HyperNeRF,
-//! Neu3D) give every frame a capture time normalised to [0, 1].
+//! Neu3D) give every frame a capture time normalised to [0, 1]. Lens distortion is undone where
+//! images and masks are loaded ([`distortion`]): callers see pinhole frames with the same
+//! `fx, fy, cx, cy` whatever the source's camera model.
 
 pub mod archive;
 pub mod blender;
 pub mod colmap;
 mod dataset_path;
 mod dataset_root;
+pub mod distortion;
 mod images;
 pub mod masks;
 pub mod nerfies;
@@ -123,6 +126,21 @@ pub fn load_scene(root: &Path, options: &LoadOptions) -> Result<Scene, SceneErro
             found: dataset_root::describe_contents(&dataset_root),
         });
     };
+    check_lenses(&scene)?;
     scene.masks = masks::discover_masks(&dataset_root, &scene.frames)?;
     Ok(scene)
+}
+
+/// Every frame's camera must be one whose distortion [`distortion`] undoes (the COLMAP and
+/// nerfstudio loaders check this themselves with their own file names; this catches the rest).
+fn check_lenses(scene: &Scene) -> Result<(), SceneError> {
+    for frame in &scene.frames {
+        distortion::Lens::from_intrinsics(&frame.intrinsics).map_err(|message| {
+            SceneError::Parse {
+                file: frame.image_path.display().to_string(),
+                message: format!("camera of frame {}: {message}", frame.name),
+            }
+        })?;
+    }
+    Ok(())
 }

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 
 use super::dataset_path::contained_relative_path;
+use super::distortion::Lens;
 use super::point_ply::read_point_ply;
 use super::transforms_json::{opencv_world_from_camera, read_json, relative_file_path};
 use super::{Frame, Intrinsics, LoadOptions, Scene, SceneError, SceneFormat};
@@ -30,6 +31,8 @@ struct CameraFields {
     k2: Option<f64>,
     k3: Option<f64>,
     k4: Option<f64>,
+    k5: Option<f64>,
+    k6: Option<f64>,
     p1: Option<f64>,
     p2: Option<f64>,
 }
@@ -51,6 +54,8 @@ impl CameraFields {
             k2: frame.k2.or(self.k2),
             k3: frame.k3.or(self.k3),
             k4: frame.k4.or(self.k4),
+            k5: frame.k5.or(self.k5),
+            k6: frame.k6.or(self.k6),
             p1: frame.p1.or(self.p1),
             p2: frame.p2.or(self.p2),
         }
@@ -164,7 +169,7 @@ fn intrinsics(camera: &CameraFields, frame_index: usize) -> Result<Intrinsics, S
     let cx = camera.cx.unwrap_or(f64::from(width) / 2.0);
     let cy = camera.cy.unwrap_or(f64::from(height) / 2.0);
     let (model, distortion) = distortion(camera, frame_index)?;
-    Ok(Intrinsics {
+    let intrinsics = Intrinsics {
         width,
         height,
         fx,
@@ -173,10 +178,29 @@ fn intrinsics(camera: &CameraFields, frame_index: usize) -> Result<Intrinsics, S
         cy,
         model,
         distortion,
-    })
+    };
+    Lens::from_intrinsics(&intrinsics).map_err(|message| SceneError::Parse {
+        file: TRANSFORMS_FILE.to_string(),
+        message: format!("frame {frame_index}: {message}"),
+    })?;
+    Ok(intrinsics)
 }
 
-/// nerfstudio's distortion fields in the parameter order of the matching COLMAP model.
+/// `camera_model` values nerfstudio reads as a perspective camera with OpenCV distortion.
+const PERSPECTIVE_MODELS: [&str; 5] = [
+    "OPENCV",
+    "PINHOLE",
+    "SIMPLE_PINHOLE",
+    "SIMPLE_RADIAL",
+    "RADIAL",
+];
+
+/// nerfstudio's distortion fields in the parameter order of the matching COLMAP model:
+/// OPENCV_FISHEYE `k1..k4`; the perspective models (no `camera_model`, OPENCV, PINHOLE,
+/// SIMPLE_PINHOLE, SIMPLE_RADIAL, RADIAL, which nerfstudio all treats as OPENCV) `k1 k2 p1 p2`,
+/// or FULL_OPENCV `k1 k2 p1 p2 k3 k4 k5 k6` when `k3`..`k6` are set. nerfstudio's own converter
+/// writes those from COLMAP's FULL_OPENCV cameras, so `k4`..`k6` are read as COLMAP's rational
+/// denominator terms. Other models are refused, naming the model.
 fn distortion(camera: &CameraFields, frame_index: usize) -> Result<(String, Vec<f64>), SceneError> {
     let value = |field: Option<f64>| field.unwrap_or(0.0);
     let (k1, k2, k3, k4) = (
@@ -185,18 +209,30 @@ fn distortion(camera: &CameraFields, frame_index: usize) -> Result<(String, Vec<
         value(camera.k3),
         value(camera.k4),
     );
+    let (k5, k6) = (value(camera.k5), value(camera.k6));
     let (p1, p2) = (value(camera.p1), value(camera.p2));
     match camera.camera_model.as_deref() {
-        Some("OPENCV_FISHEYE") => Ok(("OPENCV_FISHEYE".to_string(), vec![k1, k2, k3, k4])),
-        Some("EQUIRECTANGULAR") => Err(SceneError::Parse {
+        Some("OPENCV_FISHEYE") => {
+            if [p1, p2, k5, k6].iter().any(|k| *k != 0.0) {
+                tracing::warn!(
+                    frame_index,
+                    "{TRANSFORMS_FILE}: OPENCV_FISHEYE uses k1..k4; p1, p2, k5 and k6 are ignored"
+                );
+            }
+            Ok(("OPENCV_FISHEYE".to_string(), vec![k1, k2, k3, k4]))
+        }
+        Some(other) if !PERSPECTIVE_MODELS.contains(&other) => Err(SceneError::Parse {
             file: TRANSFORMS_FILE.to_string(),
-            message: format!("frame {frame_index}: camera_model EQUIRECTANGULAR is not supported"),
+            message: format!(
+                "frame {frame_index}: camera_model {other:?} is not supported (supported: \
+                 OPENCV, OPENCV_FISHEYE, PINHOLE, SIMPLE_PINHOLE, SIMPLE_RADIAL, RADIAL)"
+            ),
         }),
         declared => {
-            if k3 != 0.0 || k4 != 0.0 {
+            if [k3, k4, k5, k6].iter().any(|k| *k != 0.0) {
                 Ok((
                     "FULL_OPENCV".to_string(),
-                    vec![k1, k2, p1, p2, k3, k4, 0.0, 0.0],
+                    vec![k1, k2, p1, p2, k3, k4, k5, k6],
                 ))
             } else if declared == Some("OPENCV") || [k1, k2, p1, p2].iter().any(|k| *k != 0.0) {
                 Ok(("OPENCV".to_string(), vec![k1, k2, p1, p2]))

@@ -18,6 +18,7 @@ use super::colmap::{
     self, CameraModel, ColmapCamera, ColmapEncoding, ColmapImage, ColmapKeypoint, ColmapModel,
     ColmapPoint, ColmapTrackElement,
 };
+use super::distortion::{Lens, distort_pixel, undistort_pixel};
 use super::masks::mask_path;
 use super::point_ply::write_point_ply;
 use super::transforms_json::opencv_from_opengl_camera;
@@ -49,6 +50,22 @@ pub struct SyntheticSpec {
     pub image_format: SyntheticImageFormat,
     /// Blender only: write a D-NeRF `time` per frame (frame index / (count - 1)).
     pub with_time: bool,
+    /// COLMAP and nerfstudio only: a distorted camera. Images, masks and keypoints are then
+    /// ray-cast through the distorted lens (each pixel's ray found by undistorting it), with the
+    /// pinhole [`synthetic_intrinsics`] as `fx, fy, cx, cy`; `None` writes a pinhole camera.
+    pub lens: Option<SyntheticLens>,
+    /// Distance of the cameras from the world's vertical axis (4 by default; about 2 puts the
+    /// spheres near the edges of the frame, where lens distortion is strongest).
+    pub camera_distance: f32,
+}
+
+/// A lens for [`SyntheticSpec::lens`]: a COLMAP model and its distortion parameters in COLMAP's
+/// order (e.g. OPENCV `k1 k2 p1 p2`). nerfstudio can write OPENCV, FULL_OPENCV and
+/// OPENCV_FISHEYE.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SyntheticLens {
+    pub model: CameraModel,
+    pub distortion: Vec<f64>,
 }
 
 impl Default for SyntheticSpec {
@@ -60,6 +77,8 @@ impl Default for SyntheticSpec {
             with_masks: None,
             image_format: SyntheticImageFormat::Png,
             with_time: false,
+            lens: None,
+            camera_distance: CAMERA_DISTANCE,
         }
     }
 }
@@ -122,6 +141,18 @@ pub fn synthetic_intrinsics(spec: &SyntheticSpec) -> Intrinsics {
     }
 }
 
+/// The camera the COLMAP and nerfstudio writers store: [`synthetic_intrinsics`] with the spec's
+/// lens model and distortion, and that lens.
+pub fn synthetic_camera(spec: &SyntheticSpec) -> io::Result<(Intrinsics, Lens)> {
+    let mut camera = synthetic_intrinsics(spec);
+    if let Some(lens) = &spec.lens {
+        camera.model = lens.model.name().to_string();
+        camera.distortion = lens.distortion.clone();
+    }
+    let lens = Lens::from_intrinsics(&camera).map_err(io::Error::other)?;
+    Ok((camera, lens))
+}
+
 /// Camera-to-world poses (OpenCV convention), on a circle around the z axis (world up = +z),
 /// each looking at the origin.
 pub fn synthetic_world_from_cameras(spec: &SyntheticSpec) -> Vec<Mat4> {
@@ -129,8 +160,8 @@ pub fn synthetic_world_from_cameras(spec: &SyntheticSpec) -> Vec<Mat4> {
         .map(|index| {
             let angle = TAU * index as f32 / spec.frame_count.max(1) as f32;
             let eye = Vec3::new(
-                CAMERA_DISTANCE * angle.cos(),
-                CAMERA_DISTANCE * angle.sin(),
+                spec.camera_distance * angle.cos(),
+                spec.camera_distance * angle.sin(),
                 CAMERA_HEIGHT,
             );
             camera_looking_at_origin(eye)
@@ -210,21 +241,36 @@ pub(super) struct RenderedView {
 }
 
 pub(super) fn render_view(intrinsics: &Intrinsics, world_from_camera: Mat4) -> RenderedView {
+    render_distorted_view(intrinsics, &Lens::Pinhole, world_from_camera)
+}
+
+/// [`render_view`] through a distorted lens: each pixel centre is undistorted to find its ray
+/// (pixels whose undistortion fails see nothing).
+pub(super) fn render_distorted_view(
+    intrinsics: &Intrinsics,
+    lens: &Lens,
+    world_from_camera: Mat4,
+) -> RenderedView {
     let objects = synthetic_objects();
     let (width, height) = (intrinsics.width, intrinsics.height);
     let mut rgba = image::RgbaImage::new(width, height);
     let mut object_from_pixel = Vec::with_capacity((width * height) as usize);
     for y in 0..height {
         for x in 0..width {
-            let (origin, direction) = pixel_ray(
-                intrinsics,
-                world_from_camera,
-                x as f32 + 0.5,
-                y as f32 + 0.5,
-            );
-            let hit = cast_ray(origin, direction, &objects);
+            let centre = [f64::from(x) + 0.5, f64::from(y) + 0.5];
+            let pinhole_pixel = if lens.is_pinhole() {
+                Some(centre)
+            } else {
+                undistort_pixel(intrinsics, lens, centre)
+            };
+            let hit = pinhole_pixel.and_then(|[u, v]| {
+                let (origin, direction) =
+                    pixel_ray(intrinsics, world_from_camera, u as f32, v as f32);
+                let hit = cast_ray(origin, direction, &objects)?;
+                Some((hit, direction))
+            });
             let pixel = match &hit {
-                Some(hit) => {
+                Some((hit, direction)) => {
                     let shade = 0.55 + 0.45 * hit.normal.dot(-direction).max(0.0);
                     let color = objects[hit.object_index].color;
                     let [r, g, b] = color.map(|channel| (f32::from(channel) * shade) as u8);
@@ -236,7 +282,7 @@ pub(super) fn render_view(intrinsics: &Intrinsics, world_from_camera: Mat4) -> R
                 }
             };
             rgba.put_pixel(x, y, pixel);
-            object_from_pixel.push(hit.map(|hit| hit.object_index));
+            object_from_pixel.push(hit.map(|(hit, _)| hit.object_index));
         }
     }
     RenderedView {
@@ -279,11 +325,13 @@ pub(super) fn surface_point_cloud() -> SparsePoints {
     }
 }
 
-/// Pixel position of `point` in a view, when the view sees that point unoccluded.
+/// Pixel position of `point` in a view (through `lens`), when the view sees that point
+/// unoccluded.
 fn observe(
     point: Vec3,
     object_index: usize,
     intrinsics: &Intrinsics,
+    lens: &Lens,
     world_from_camera: Mat4,
 ) -> Option<[f64; 2]> {
     let camera_point = world_from_camera.inverse().transform_point3(point);
@@ -292,8 +340,16 @@ fn observe(
     }
     let u = intrinsics.fx as f32 * camera_point.x / camera_point.z + intrinsics.cx as f32;
     let v = intrinsics.fy as f32 * camera_point.y / camera_point.z + intrinsics.cy as f32;
-    let inside =
-        u >= 0.0 && v >= 0.0 && u < intrinsics.width as f32 && v < intrinsics.height as f32;
+    let pinhole = [f64::from(u), f64::from(v)];
+    let [du, dv] = if lens.is_pinhole() {
+        pinhole
+    } else {
+        distort_pixel(intrinsics, lens, pinhole)
+    };
+    let inside = du >= 0.0
+        && dv >= 0.0
+        && du < f64::from(intrinsics.width)
+        && dv < f64::from(intrinsics.height);
     if !inside {
         return None;
     }
@@ -301,7 +357,7 @@ fn observe(
     let hit = cast_ray(origin, direction, &synthetic_objects())?;
     let distance = (point - origin).length();
     let visible = hit.object_index == object_index && (hit.distance - distance).abs() < 1e-2;
-    visible.then_some([f64::from(u), f64::from(v)])
+    visible.then_some([du, dv])
 }
 
 pub(super) fn write_image(
@@ -360,24 +416,29 @@ pub(super) fn write_masks(
 }
 
 /// A COLMAP dataset: `images/frame_NNNN.<ext>` and `sparse/0/` in the given encoding, one
-/// PINHOLE camera, images listed in reverse name order (loaders must sort), points with tracks.
+/// PINHOLE camera (or the spec's lens model), images listed in reverse name order (loaders must
+/// sort), points with tracks (keypoints where the lens puts them).
 pub fn write_colmap(dir: &Path, spec: &SyntheticSpec, encoding: ColmapEncoding) -> io::Result<()> {
-    let intrinsics = synthetic_intrinsics(spec);
+    let (intrinsics, lens) = synthetic_camera(spec)?;
+    let camera_model = spec
+        .lens
+        .as_ref()
+        .map_or(CameraModel::Pinhole, |lens| lens.model);
     let poses = synthetic_world_from_cameras(spec);
     let mut model = ColmapModel::default();
     model.cameras.insert(
         1,
         ColmapCamera {
             id: 1,
-            model: CameraModel::Pinhole,
+            model: camera_model,
             width: u64::from(spec.width),
             height: u64::from(spec.height),
-            params: CameraModel::Pinhole.params_from_intrinsics(&intrinsics),
+            params: camera_model.params_from_intrinsics(&intrinsics),
         },
     );
     for (index, world_from_camera) in poses.iter().enumerate() {
         let name = format!("frame_{index:04}.{}", spec.image_format.extension());
-        let view = render_view(&intrinsics, *world_from_camera);
+        let view = render_distorted_view(&intrinsics, &lens, *world_from_camera);
         write_image(
             &dir.join(colmap::IMAGES_DIR).join(&name),
             &view,
@@ -398,7 +459,13 @@ pub fn write_colmap(dir: &Path, spec: &SyntheticSpec, encoding: ColmapEncoding) 
         let point_id = point_index as u64 + 1;
         let mut track = Vec::new();
         for (image, world_from_camera) in model.images.iter_mut().zip(&poses) {
-            if let Some(xy) = observe(position, object_index, &intrinsics, *world_from_camera) {
+            if let Some(xy) = observe(
+                position,
+                object_index,
+                &intrinsics,
+                &lens,
+                *world_from_camera,
+            ) {
                 track.push(ColmapTrackElement {
                     image_id: image.id,
                     point2d_index: image.points2d.len() as u32,
@@ -436,15 +503,16 @@ pub(crate) fn opengl_matrix_rows(world_from_camera: Mat4) -> Vec<Vec<f64>> {
         .collect()
 }
 
-/// A nerfstudio dataset: `transforms.json` (global OPENCV intrinsics with zero distortion,
-/// frames in reverse order), `images/frame_NNNN.<ext>` and the surface points as
-/// `sparse_pc.ply`.
+/// A nerfstudio dataset: `transforms.json` (global OPENCV intrinsics with zero distortion, or the
+/// spec's lens as nerfstudio's fields, frames in reverse order), `images/frame_NNNN.<ext>` and
+/// the surface points as `sparse_pc.ply`.
 pub fn write_nerfstudio(dir: &Path, spec: &SyntheticSpec) -> io::Result<()> {
-    let intrinsics = synthetic_intrinsics(spec);
+    let (intrinsics, lens) = synthetic_camera(spec)?;
+    let lens_fields = nerfstudio_lens_fields(spec.lens.as_ref())?;
     let mut frames = Vec::new();
     for (index, world_from_camera) in synthetic_world_from_cameras(spec).into_iter().enumerate() {
         let name = format!("frame_{index:04}.{}", spec.image_format.extension());
-        let view = render_view(&intrinsics, world_from_camera);
+        let view = render_distorted_view(&intrinsics, &lens, world_from_camera);
         write_image(&dir.join("images").join(&name), &view, spec.image_format)?;
         write_masks(dir, spec, &name, &view)?;
         frames.push(json!({
@@ -454,16 +522,59 @@ pub fn write_nerfstudio(dir: &Path, spec: &SyntheticSpec) -> io::Result<()> {
     }
     frames.reverse();
     write_point_ply(&dir.join(NERFSTUDIO_POINTS_FILE), &surface_point_cloud())?;
-    let transforms = json!({
+    let mut transforms = json!({
         "ply_file_path": NERFSTUDIO_POINTS_FILE,
-        "camera_model": "OPENCV",
         "fl_x": intrinsics.fx, "fl_y": intrinsics.fy,
         "cx": intrinsics.cx, "cy": intrinsics.cy,
         "w": intrinsics.width, "h": intrinsics.height,
-        "k1": 0.0, "k2": 0.0, "p1": 0.0, "p2": 0.0,
         "frames": frames,
     });
+    for (field, value) in lens_fields {
+        transforms[field] = value;
+    }
     write_json(&dir.join(nerfstudio::TRANSFORMS_FILE), &transforms)
+}
+
+/// `camera_model` and the distortion fields of transforms.json for a lens.
+fn nerfstudio_lens_fields(
+    lens: Option<&SyntheticLens>,
+) -> io::Result<Vec<(&'static str, serde_json::Value)>> {
+    let Some(lens) = lens else {
+        return Ok(vec![
+            ("camera_model", json!("OPENCV")),
+            ("k1", json!(0.0)),
+            ("k2", json!(0.0)),
+            ("p1", json!(0.0)),
+            ("p2", json!(0.0)),
+        ]);
+    };
+    let (camera_model, names): (&str, &[&'static str]) = match lens.model {
+        CameraModel::OpenCv => ("OPENCV", &["k1", "k2", "p1", "p2"]),
+        CameraModel::FullOpenCv => ("OPENCV", &["k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"]),
+        CameraModel::OpenCvFisheye => ("OPENCV_FISHEYE", &["k1", "k2", "k3", "k4"]),
+        other => {
+            return Err(io::Error::other(format!(
+                "nerfstudio's transforms.json cannot express a {} camera",
+                other.name()
+            )));
+        }
+    };
+    if names.len() != lens.distortion.len() {
+        return Err(io::Error::other(format!(
+            "{} takes {} distortion parameters, {} given",
+            lens.model.name(),
+            names.len(),
+            lens.distortion.len()
+        )));
+    }
+    let mut fields = vec![("camera_model", json!(camera_model))];
+    fields.extend(
+        names
+            .iter()
+            .zip(&lens.distortion)
+            .map(|(name, value)| (*name, json!(value))),
+    );
+    Ok(fields)
 }
 
 /// Which frames the Blender writer puts in the test split: every fourth, starting at index 3.

@@ -19,6 +19,7 @@ pub use model::{
 };
 
 use super::dataset_path::contained_relative_path;
+use super::distortion::{Lens, undistort_pixel};
 use super::{Frame, LoadOptions, Scene, SceneError, SceneFormat, SparsePoints, TrackObservation};
 
 /// Folder (relative to the dataset root) holding the images a COLMAP model names.
@@ -103,6 +104,7 @@ pub fn scene_from_model(
     image_order.sort_by(|a, b| model.images[*a].name.cmp(&model.images[*b].name));
 
     let mut frames = Vec::with_capacity(model.images.len());
+    let mut lenses = Vec::with_capacity(model.images.len());
     let mut frame_index_from_image_id = HashMap::with_capacity(model.images.len());
     for image_index in image_order {
         let image = &model.images[image_index];
@@ -128,6 +130,7 @@ pub fn scene_from_model(
             .model
             .intrinsics(width, height, &camera.params)
             .ok_or_else(|| parse_error("wrong parameter count for its model".to_string()))?;
+        let lens = Lens::from_intrinsics(&intrinsics).map_err(parse_error)?;
         if frame_index_from_image_id
             .insert(image.id, frames.len() as u32)
             .is_some()
@@ -144,6 +147,7 @@ pub fn scene_from_model(
                 image.id, image.name
             ),
         })?;
+        lenses.push(lens);
         frames.push(Frame {
             name: image.name.clone(),
             image_path: Path::new(IMAGES_DIR).join(name_path),
@@ -155,7 +159,13 @@ pub fn scene_from_model(
         });
     }
 
-    let points = sparse_points(model, &frame_index_from_image_id, display_dir)?;
+    let points = sparse_points(
+        model,
+        &frame_index_from_image_id,
+        &frames,
+        &lenses,
+        display_dir,
+    )?;
     Ok(Scene {
         root: root.to_path_buf(),
         format: SceneFormat::Colmap,
@@ -186,11 +196,17 @@ pub fn colmap_pose_from_world_from_camera(world_from_camera: glam::Mat4) -> ([f6
     )
 }
 
+/// The model's points with their tracks; keypoints of distorted cameras are undistorted to the
+/// pinhole camera the frames are loaded as (an observation whose undistortion does not converge
+/// is left out).
 fn sparse_points(
     model: &ColmapModel,
     frame_index_from_image_id: &HashMap<u32, u32>,
+    frames: &[Frame],
+    lenses: &[Lens],
     display_dir: &str,
 ) -> Result<SparsePoints, SceneError> {
+    let mut dropped_observations = 0usize;
     let image_from_id: HashMap<u32, &ColmapImage> =
         model.images.iter().map(|image| (image.id, image)).collect();
     let mut points = SparsePoints {
@@ -225,9 +241,20 @@ fn sparse_points(
                         image.points2d.len()
                     ))
                 })?;
+            let index = *frame_index as usize;
+            let lens = &lenses[index];
+            let xy = if lens.is_pinhole() {
+                Some(keypoint.xy)
+            } else {
+                undistort_pixel(&frames[index].intrinsics, lens, keypoint.xy)
+            };
+            let Some([x, y]) = xy else {
+                dropped_observations += 1;
+                continue;
+            };
             track.push(TrackObservation {
                 frame_index: *frame_index,
-                pixel: [keypoint.xy[0] as f32, keypoint.xy[1] as f32],
+                pixel: [x as f32, y as f32],
             });
         }
         let [x, y, z] = point.xyz;
@@ -238,6 +265,12 @@ fn sparse_points(
             point.rgb.map(|channel| f32::from(channel) / 255.0),
         ));
         points.tracks.push(track);
+    }
+    if dropped_observations > 0 {
+        tracing::warn!(
+            dropped_observations,
+            "keypoints whose undistortion did not converge were left out of the point tracks"
+        );
     }
     Ok(points)
 }
