@@ -67,13 +67,22 @@ async fn reconstruct_job_trains_and_stores_artifacts() {
         .create_job(
             scene_id,
             "reconstruct",
+            // One more SH band every 100 steps cannot happen in 60: the job says so.
             serde_json::json!({"steps": 60, "checkpoint_every": 25, "densify_from": 20,
-                               "densify_interval": 20, "densify_until": 50}),
+                               "densify_interval": 20, "densify_until": 50,
+                               "sh_degree_interval": 100}),
         )
         .await;
     let job = client
         .wait_for_state(&job_id, "succeeded", Duration::from_secs(240))
         .await;
+    let (status, events) = client.get_bytes(&format!("/v1/jobs/{job_id}/events")).await;
+    assert_eq!(status, 200);
+    let events = String::from_utf8_lossy(&events);
+    assert!(
+        events.contains("event: warning") && events.contains("the SH degree stays 0"),
+        "a stage the config makes impossible is a warning event: {events}"
+    );
     assert_eq!(job["progress"]["stage"], "evaluate", "{job}");
     assert!(
         job["progress"]["metrics"]["psnr"].as_f64().unwrap() > 10.0,

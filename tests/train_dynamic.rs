@@ -47,9 +47,9 @@ fn deformation() -> DeformationConfig {
             skip_after: 2,
             ..FieldShape::default()
         },
-        warm_up_steps: 200,
+        warm_up_steps: Some(200),
         // The released schedule decays over 40k steps; this short run keeps its early rates.
-        learning_rate_decay_steps: 40_000,
+        learning_rate_decay_steps: Some(40_000),
         ..DeformationConfig::default()
     }
 }
@@ -59,12 +59,12 @@ fn config(scene: &Scene, steps: u32, dynamic: bool) -> TrainConfig {
         steps,
         max_resolution: None,
         background: scene.background,
-        sh_degree_interval: 200,
+        sh_degree_interval: Some(200),
         max_sh_degree: 1,
-        densify_from: 100,
-        densify_until: steps / 2,
-        densify_interval: 100,
-        opacity_reset_interval: 0,
+        densify_from: Some(100),
+        densify_until: Some(steps / 2),
+        densify_interval: Some(100),
+        opacity_reset_interval: Some(0),
         max_gaussians: 6000,
         deformation: dynamic.then(deformation),
         ..Default::default()
@@ -108,7 +108,7 @@ fn checkpoint_restores_the_field_exactly() {
     let scene = dynamic_scene(dir.path());
     let mut config = config(&scene, 60, true);
     if let Some(deformation) = config.deformation.as_mut() {
-        deformation.warm_up_steps = 10;
+        deformation.warm_up_steps = Some(10);
     }
     let mut trainer = Trainer::new(ctx, &scene, config, Some(initial())).expect("trainer");
     trainer.run_until(30, |_| true).expect("train");
@@ -206,4 +206,51 @@ fn bench_reports_the_deformation_field_cost() {
     );
     let ratio = rate("static_steps_per_sec") / rate("steps_per_sec");
     assert!((rate("step_time_ratio") - ratio).abs() < 1e-9, "{report}");
+}
+
+/// A job much shorter than the 30k-step recipe still trains its deformation field: with the
+/// schedule left to its defaults the 3000-step warm-up scales to the job (6 of 60 steps), so
+/// the field's parameters move (before, a dynamic job under 3000 steps trained none).
+#[test]
+fn a_short_dynamic_job_trains_its_field_with_default_schedules() {
+    let Some(ctx) = gpu_context() else { return };
+    let dir = tempfile::tempdir().expect("tempdir");
+    let scene = dynamic_scene(dir.path());
+    let config = TrainConfig {
+        steps: 60,
+        max_resolution: None,
+        background: scene.background,
+        max_gaussians: 6000,
+        deformation: Some(DeformationConfig {
+            field: FieldShape {
+                depth: 4,
+                width: 64,
+                skip_after: 2,
+                ..FieldShape::default()
+            },
+            ..DeformationConfig::default()
+        }),
+        ..Default::default()
+    };
+    let mut trainer = Trainer::new(ctx, &scene, config, Some(initial())).expect("trainer");
+    let schedule = trainer.schedule().deformation.expect("dynamic schedule");
+    assert_eq!(schedule.warm_up_steps, 6);
+    assert!(trainer.schedule().warnings().is_empty());
+    let parameters = |trainer: &Trainer| -> Vec<f32> {
+        trainer
+            .checkpoint()
+            .expect("checkpoint")
+            .get("deform.parameters")
+            .expect("field parameters")
+    };
+    let before = parameters(&trainer);
+    trainer.run(|_| true).expect("train");
+    let after = parameters(&trainer);
+    assert_eq!(before.len(), after.len());
+    let moved = before.iter().zip(&after).filter(|(a, b)| a != b).count();
+    assert!(
+        moved * 2 > before.len(),
+        "the field trained: {moved} of {} parameters moved",
+        before.len()
+    );
 }

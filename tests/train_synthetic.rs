@@ -41,11 +41,11 @@ fn config(steps: u32) -> TrainConfig {
         steps,
         max_resolution: None,
         background: SYNTHETIC_BACKGROUND.map(|c| c as f32 / 255.0),
-        sh_degree_interval: 100,
-        densify_from: 100,
-        densify_until: 400,
-        densify_interval: 100,
-        opacity_reset_interval: 0,
+        sh_degree_interval: Some(100),
+        densify_from: Some(100),
+        densify_until: Some(400),
+        densify_interval: Some(100),
+        opacity_reset_interval: Some(0),
         ..Default::default()
     }
 }

@@ -354,7 +354,7 @@ fn deformation_config(args: &BenchArgs) -> DeformationConfig {
     }
     DeformationConfig {
         field,
-        warm_up_steps: 0,
+        warm_up_steps: Some(0),
         ..DeformationConfig::default()
     }
 }
@@ -422,7 +422,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         (None, None) => None,
     };
     if args.no_densify {
-        config.densify_until = 0;
+        config.densify_until = Some(0);
     }
     let baseline = if args.deformation {
         config.deformation = Some(deformation_config(&args));

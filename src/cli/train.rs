@@ -73,6 +73,9 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     } else {
         Trainer::new(&ctx, &scene, config.clone(), None)?
     };
+    for warning in trainer.schedule().warnings() {
+        eprintln!("warning: {warning}");
+    }
     let total = trainer.config().steps;
     let bar = ProgressBar::new(total as u64).with_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} steps  {msg}  [{elapsed} < {eta}]")

@@ -83,6 +83,25 @@ impl ProgressReporter {
         tokio::runtime::Handle::current().block_on(self.report(progress))
     }
 
+    /// Records a `warning` event (`{"stage", "message"}`) for the job, e.g. a config whose stage
+    /// cannot happen. Returns false when this worker no longer holds the job's lease.
+    pub async fn warn(&self, stage: &str, message: &str) -> Result<bool, StoreError> {
+        let payload = serde_json::json!({ "stage": stage, "message": message });
+        let recorded = self
+            .database
+            .record_job_event(&self.job_id, &self.lease_owner, "warning", &payload)
+            .await?;
+        if recorded.is_some() {
+            self.bus.notify(&self.job_id);
+        }
+        Ok(recorded.is_some())
+    }
+
+    /// [`Self::warn`] from blocking code (inside `spawn_blocking`).
+    pub fn warn_blocking(&self, stage: &str, message: &str) -> Result<bool, StoreError> {
+        tokio::runtime::Handle::current().block_on(self.warn(stage, message))
+    }
+
     fn estimate_eta(&self, progress: &Progress) -> Option<f64> {
         let mut clock = self.clock.lock().ok()?;
         let restart = clock.as_ref().is_none_or(|current| {

@@ -44,6 +44,17 @@ pub fn report(ctx: &JobContext, stage: &str, step: u64, total_steps: u64, metric
     }
 }
 
+/// Records a `warning` job event for every stage the trainer's config makes impossible (a
+/// deformation warm-up longer than the job, densification that never starts, ...), and logs it.
+pub fn warn_about_schedule(ctx: &JobContext, trainer: &Trainer) {
+    for message in trainer.schedule().warnings() {
+        tracing::warn!(job = %ctx.job_id, "{message}");
+        if let Err(error) = ctx.progress.warn_blocking("train", &message) {
+            tracing::warn!(%error, "warning event not recorded");
+        }
+    }
+}
+
 fn report_training(ctx: &JobContext, progress: &TrainProgress) {
     let mut metrics = vec![
         ("loss", progress.loss as f64),
@@ -80,6 +91,9 @@ pub fn train_with_checkpoints(
     checkpoint_every: u32,
 ) -> Result<f64, JobFailure> {
     let total = trainer.config().steps;
+    if trainer.step() == 0 {
+        warn_about_schedule(ctx, trainer);
+    }
     let started = std::time::Instant::now();
     while trainer.step() < total {
         let next_checkpoint = match checkpoint_every {

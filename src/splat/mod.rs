@@ -4,6 +4,7 @@
 //! Rasterisation constants follow 3DGS / gsplat exactly so trained scenes behave like theirs.
 
 pub mod adam;
+pub mod background_shell;
 pub mod camera;
 pub mod checkpoint;
 pub mod deform;

@@ -10,8 +10,9 @@ use serde::{Deserialize, Serialize};
 pub struct LearningRates {
     pub position_initial: f32,
     pub position_final: f32,
-    /// Steps over which the position rate decays exponentially from initial to final.
-    pub position_decay_steps: u32,
+    /// Steps over which the position rate decays exponentially from initial to final; left
+    /// out: the job's `steps` (3DGS: 30k for a 30k-step job).
+    pub position_decay_steps: Option<u32>,
     pub sh_dc: f32,
     /// Higher SH bands learn `sh_rest_divisor` times slower than the DC term.
     pub sh_rest_divisor: f32,
@@ -25,7 +26,7 @@ impl Default for LearningRates {
         Self {
             position_initial: 1.6e-4,
             position_final: 1.6e-6,
-            position_decay_steps: 30_000,
+            position_decay_steps: None,
             sh_dc: 2.5e-3,
             sh_rest_divisor: 20.0,
             opacity: 0.05,
@@ -37,13 +38,13 @@ impl Default for LearningRates {
 
 impl LearningRates {
     /// Position learning rate at `step`: log-linear interpolation from initial to final over
-    /// `position_decay_steps`, times the scene extent.
-    pub fn position_at(&self, step: u32, scene_extent: f32) -> f32 {
+    /// `decay_steps` (the resolved `position_decay_steps`), times the scene extent.
+    pub fn position_at(&self, step: u32, decay_steps: u32, scene_extent: f32) -> f32 {
         exponential_decay(
             self.position_initial,
             self.position_final,
             step,
-            self.position_decay_steps,
+            decay_steps,
         ) * scene_extent
     }
 
@@ -96,8 +97,8 @@ mod tests {
     #[test]
     fn position_rate_scales_with_extent() {
         let rates = LearningRates::default();
-        let small = rates.position_at(0, 1.0);
-        let large = rates.position_at(0, 10.0);
+        let small = rates.position_at(0, 30_000, 1.0);
+        let large = rates.position_at(0, 30_000, 10.0);
         assert!((large / small - 10.0).abs() < 1e-4);
     }
 

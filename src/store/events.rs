@@ -46,6 +46,31 @@ impl Database {
         Ok(Some(id))
     }
 
+    /// Records an event of a handler's own `kind` (e.g. `warning`) for `job_id`, if `owner` still
+    /// holds the job's lease. Returns the event id, or `None` when the lease was lost.
+    pub async fn record_job_event(
+        &self,
+        job_id: &str,
+        owner: &str,
+        kind: &str,
+        payload: &serde_json::Value,
+    ) -> Result<Option<i64>, StoreError> {
+        let mut transaction = self.pool().begin().await?;
+        let holds: Option<i64> = sqlx::query_scalar(
+            "SELECT 1 FROM jobs WHERE id = ? AND lease_owner = ? AND state = 'running'",
+        )
+        .bind(job_id)
+        .bind(owner)
+        .fetch_optional(&mut *transaction)
+        .await?;
+        if holds.is_none() {
+            return Ok(None);
+        }
+        let id = insert_event(&mut transaction, job_id, kind, payload).await?;
+        transaction.commit().await?;
+        Ok(Some(id))
+    }
+
     /// Events of `job_id` with id greater than `after_id`, oldest first, at most `limit`.
     pub async fn job_events_after(
         &self,

@@ -45,11 +45,11 @@ pub fn config() -> TrainConfig {
         steps: 600,
         max_resolution: None,
         background: SYNTHETIC_BACKGROUND.map(|c| c as f32 / 255.0),
-        sh_degree_interval: 100,
-        densify_from: 100,
-        densify_until: 450,
-        densify_interval: 100,
-        opacity_reset_interval: 0,
+        sh_degree_interval: Some(100),
+        densify_from: Some(100),
+        densify_until: Some(450),
+        densify_interval: Some(100),
+        opacity_reset_interval: Some(0),
         object_loss: Some(ObjectLossConfig {
             objects_per_level: 2,
             ..Default::default()

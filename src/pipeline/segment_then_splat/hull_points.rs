@@ -9,7 +9,7 @@ use glam::Vec3;
 
 use super::view_masks::{ViewMaskSet, ViewMasks};
 use crate::scene::Level;
-use crate::splat::{GaussianModel, OBJECT_NONE};
+use crate::splat::GaussianModel;
 
 /// How missed objects are filled.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -174,18 +174,8 @@ fn depth_range(view: &ViewMasks, model: &GaussianModel) -> (f32, f32) {
 }
 
 /// Appends `points` to `model` as grey Gaussians (colour is learned) with no object ids yet.
-pub fn append_points(model: &mut GaussianModel, points: &[Vec3]) {
-    let grey = vec![Vec3::splat(0.5); points.len()];
-    let added = crate::splat::init::gaussians_from_points(points, &grey);
-    model.means.extend(added.means);
-    model.log_scales.extend(added.log_scales);
-    model.rotations.extend(added.rotations);
-    model.opacity_logits.extend(added.opacity_logits);
-    model.sh_coefficients.extend(added.sh_coefficients);
-    model
-        .object_ids
-        .extend(std::iter::repeat_n([OBJECT_NONE; 3], points.len()));
-}
+#[doc(inline)]
+pub use crate::splat::background_shell::append_points;
 
 #[cfg(test)]
 mod tests {

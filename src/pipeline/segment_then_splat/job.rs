@@ -22,8 +22,8 @@ use super::propagated_masks::propagated_view_masks;
 use super::scene_size::{SceneSize, SceneSizedFields};
 use super::track_merge::{TrackMergeRule, merge_lost_tracks};
 use super::training::{
-    DEFAULT_BACKGROUND_SHELL, DEFAULT_OBJECT_FLOORS, SegmentedTrainingOptions,
-    attach_object_training, segmented_trainer_from_view_masks, training_frames,
+    DEFAULT_OBJECT_FLOORS, SegmentedTrainingOptions, attach_object_training,
+    segmented_trainer_from_view_masks, training_frames,
 };
 use super::view_masks::ViewMaskSet;
 use crate::gpu::GpuContext;
@@ -79,8 +79,6 @@ pub struct SegmentThenSplatConfig {
     pub object_floors: [usize; 3],
     /// Steps between checkpoints (0 = only at the end).
     pub checkpoint_every: u32,
-    /// Background Gaussians (no object) on a far sphere around the cameras and points.
-    pub background_shell: usize,
     /// Fields that follow the scene's size at run time (METHOD.md: 20k steps and one object
     /// per level for scenes under 100 training views, else 40k and three; middle and large
     /// levels from step 5k and 10k). Filled on submission with the fields the config left out.
@@ -97,7 +95,6 @@ impl Default for SegmentThenSplatConfig {
             masks: MaskSource::Auto,
             object_floors: DEFAULT_OBJECT_FLOORS,
             checkpoint_every: 1000,
-            background_shell: DEFAULT_BACKGROUND_SHELL,
             scene_sized: SceneSizedFields::default(),
         }
     }
@@ -217,7 +214,7 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
     let (masks, segmented) = view_masks_for(ctx, &scene, &config, &frames)?;
     let options = SegmentedTrainingOptions {
         object_floors: config.object_floors,
-        background_shell: config.background_shell,
+        background_shell: config.train.background_shell,
         ..SegmentedTrainingOptions::default()
     };
     let mut trainer = match ctx.load_checkpoint(CHECKPOINT_NAME).map_err(retryable)? {

@@ -2,7 +2,8 @@
 //! initial points, training with the object loss, per-object language embeddings.
 
 pub mod association;
-pub mod background_shell;
+/// The background shell lives with the trainer (plain training uses it too).
+pub use crate::splat::background_shell;
 mod global_objects;
 pub mod hull_points;
 pub mod id_voting;

@@ -52,7 +52,7 @@ pub struct SegmentedTrainingOptions {
 
 /// Background shell Gaussians by default (the released code's count, placed far away rather
 /// than at the origin).
-pub const DEFAULT_BACKGROUND_SHELL: usize = 1000;
+pub use crate::splat::background_shell::DEFAULT_BACKGROUND_SHELL;
 
 impl Default for SegmentedTrainingOptions {
     fn default() -> Self {

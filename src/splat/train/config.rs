@@ -1,4 +1,5 @@
-//! Training configuration with 3DGS defaults; every field can be set per job.
+//! Training configuration with 3DGS defaults (schedules scaled to the job's length); every field
+//! can be set per job.
 
 use serde::{Deserialize, Serialize};
 
@@ -6,6 +7,7 @@ use crate::splat::deform::DeformationConfig;
 use crate::splat::densify::DensifyConfig;
 use crate::splat::schedule::LearningRates;
 use crate::splat::train::object_loss::ObjectLossConfig;
+use crate::splat::train::schedule::TrainSchedule;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -24,19 +26,28 @@ pub struct TrainConfig {
     pub background: [f32; 3],
     /// Highest SH degree; one more band is enabled every `sh_degree_interval` steps.
     pub max_sh_degree: u32,
-    pub sh_degree_interval: u32,
+    /// Schedule values left out (`None`) are the 3DGS recipe's 30k-step values scaled to
+    /// `steps` ([`crate::splat::train::schedule`]); given values are kept.
+    pub sh_degree_interval: Option<u32>,
     pub learning_rates: LearningRates,
     pub densify: DensifyConfig,
     /// Densify every `densify_interval` steps in [`densify_from`, `densify_until`).
-    pub densify_from: u32,
-    pub densify_until: u32,
-    pub densify_interval: u32,
-    /// Every `opacity_reset_interval` steps (while densifying) opacities are capped at 0.01.
-    pub opacity_reset_interval: u32,
+    /// (never in the job's last tenth, the settle margin).
+    pub densify_from: Option<u32>,
+    pub densify_until: Option<u32>,
+    pub densify_interval: Option<u32>,
+    /// Every `opacity_reset_interval` steps (while densifying) opacities are capped at 0.01;
+    /// 0 never resets.
+    pub opacity_reset_interval: Option<u32>,
     /// Upper bound on Gaussians: densification stops growing past it.
     pub max_gaussians: usize,
     /// Random initial Gaussians when the dataset has no sparse points.
     pub random_init_count: usize,
+    /// Background Gaussians (no object) on a far sphere around the cameras and points, for the
+    /// far background (sky, walls) the sparse points miss. Plain training adds them to a
+    /// scene's sparse points (not to random initialisations); Segment then Splat to its voted
+    /// model. 0: none.
+    pub background_shell: usize,
     /// The Segment-then-Splat object loss; `None` trains plain 3DGS. It acts once the trainer
     /// is given object masks ([`crate::splat::train::Trainer::set_object_targets`]).
     pub object_loss: Option<ObjectLossConfig>,
@@ -54,15 +65,16 @@ impl Default for TrainConfig {
             seed: 0,
             background: [0.0; 3],
             max_sh_degree: 3,
-            sh_degree_interval: 1000,
+            sh_degree_interval: None,
             learning_rates: LearningRates::default(),
             densify: DensifyConfig::default(),
-            densify_from: 500,
-            densify_until: 15_000,
-            densify_interval: 100,
-            opacity_reset_interval: 3000,
+            densify_from: None,
+            densify_until: None,
+            densify_interval: None,
+            opacity_reset_interval: None,
             max_gaussians: 6_000_000,
             random_init_count: 100_000,
+            background_shell: crate::splat::background_shell::DEFAULT_BACKGROUND_SHELL,
             object_loss: None,
             deformation: None,
         }
@@ -94,8 +106,11 @@ impl TrainConfig {
         if self.max_sh_degree > 3 {
             return fail("max_sh_degree", "must be 0..=3");
         }
-        if self.densify_interval == 0 {
+        if self.densify_interval == Some(0) {
             return fail("densify_interval", "must be at least 1");
+        }
+        if self.sh_degree_interval == Some(0) {
+            return fail("sh_degree_interval", "must be at least 1");
         }
         if self.background.iter().any(|c| !(0.0..=1.0).contains(c)) {
             return fail("background", "components must be within 0..=1");
@@ -119,17 +134,8 @@ impl TrainConfig {
         Ok(())
     }
 
-    /// Whether densification runs after `step` (1-based count of finished steps).
-    pub fn densifies_at(&self, step: u32) -> bool {
-        step >= self.densify_from
-            && step < self.densify_until
-            && step.is_multiple_of(self.densify_interval)
-    }
-
-    /// Whether the opacity reset runs after `step`.
-    pub fn resets_opacity_at(&self, step: u32) -> bool {
-        self.opacity_reset_interval > 0
-            && step < self.densify_until
-            && step.is_multiple_of(self.opacity_reset_interval)
+    /// When each stage runs in this job (defaults scaled to `steps`).
+    pub fn schedule(&self) -> TrainSchedule {
+        TrainSchedule::resolve(self)
     }
 }

@@ -3,9 +3,11 @@
 pub mod config;
 pub mod densify_stats;
 pub mod object_loss;
+pub mod schedule;
 pub mod trainer;
 pub mod views;
 
 pub use config::TrainConfig;
 pub use object_loss::{ObjectLossConfig, ObjectTargets, SkippedPair};
+pub use schedule::TrainSchedule;
 pub use trainer::{EvalReport, TrainError, TrainProgress, Trainer, TrainerMeta};

@@ -14,11 +14,14 @@ use crate::splat::deform::{
     StoredDeformation,
 };
 use crate::splat::model::GaussianView;
+use crate::splat::train::schedule::DeformationSchedule;
 use crate::splat::{GaussianModel, GpuGaussians};
 
 /// The field, its deformed geometry and what the current step deformed.
 pub(super) struct Dynamics {
     pub config: DeformationConfig,
+    /// Its warm-up, learning-rate decay and time-noise steps for this job.
+    pub schedule: DeformationSchedule,
     pub field: DeformationField,
     pub geometry: DeformedGeometry,
     /// Gap between distinct training times (scales the time noise).
@@ -31,6 +34,7 @@ impl Dynamics {
     pub fn new(
         ctx: &GpuContext,
         config: DeformationConfig,
+        schedule: DeformationSchedule,
         parameters: &[f32],
         capacity: usize,
         train_times: impl IntoIterator<Item = f32>,
@@ -41,6 +45,7 @@ impl Dynamics {
             time_interval: time_interval(train_times),
             deformed_at: None,
             config,
+            schedule,
         })
     }
 }
@@ -70,7 +75,7 @@ pub(super) fn deform_to(
     let Some(dynamics) = dynamics.as_mut() else {
         return Ok(());
     };
-    if !dynamics.config.active_at(step) {
+    if !dynamics.schedule.active_at(step) {
         dynamics.deformed_at = None;
         return Ok(());
     }
@@ -111,8 +116,10 @@ impl Trainer {
         let Some(dynamics) = self.dynamics.as_ref() else {
             return view_time;
         };
-        let sigma = dynamics.config.time_noise_at(step, dynamics.time_interval);
-        if sigma <= 0.0 || !dynamics.config.active_at(step) {
+        let sigma = dynamics
+            .config
+            .time_noise_at(step, dynamics.time_interval, &dynamics.schedule);
+        if sigma <= 0.0 || !dynamics.schedule.active_at(step) {
             return view_time;
         }
         let noise: f32 = StandardNormal.sample(&mut self.rng);
@@ -140,9 +147,9 @@ impl Trainer {
             .encode_backward(&self.ctx, encoder, &self.gaussians, &self.grads, time)?;
         // The field's Adam counts its steps from its first active step, like a fresh optimiser.
         let field_step = adam_step
-            .saturating_sub(dynamics.config.warm_up_steps)
+            .saturating_sub(dynamics.schedule.warm_up_steps)
             .max(1);
-        let rate = dynamics.config.learning_rate_at(step);
+        let rate = dynamics.config.learning_rate_at(step, &dynamics.schedule);
         dynamics
             .field
             .encode_adam(&self.ctx, encoder, &self.adam, rate, field_step)?;

@@ -7,6 +7,10 @@
 use glam::Vec3;
 
 use crate::scene::Scene;
+use crate::splat::model::{GaussianModel, OBJECT_NONE};
+
+/// Shell Gaussians by default (`background_shell` in training configs).
+pub const DEFAULT_BACKGROUND_SHELL: usize = 1000;
 
 /// Shell radius in multiples of the farthest camera's distance from the cameras' centre...
 const CAMERA_RADIUS_FACTOR: f32 = 3.0;
@@ -47,6 +51,21 @@ pub fn background_shell_points(scene: &Scene, count: usize) -> Vec<Vec3> {
         .into_iter()
         .map(|direction| centre + radius * direction)
         .collect()
+}
+
+/// Appends one grey Gaussian with no object id per point (scales from the points' own
+/// spacing, as any initial Gaussians).
+pub fn append_points(model: &mut GaussianModel, points: &[Vec3]) {
+    let grey = vec![Vec3::splat(0.5); points.len()];
+    let added = crate::splat::init::gaussians_from_points(points, &grey);
+    model.means.extend(added.means);
+    model.log_scales.extend(added.log_scales);
+    model.rotations.extend(added.rotations);
+    model.opacity_logits.extend(added.opacity_logits);
+    model.sh_coefficients.extend(added.sh_coefficients);
+    model
+        .object_ids
+        .extend(std::iter::repeat_n([OBJECT_NONE; 3], points.len()));
 }
 
 /// `count` nearly evenly spaced unit vectors.
