@@ -5,7 +5,7 @@ mod gpu_support;
 
 use gpu_support::{gpu_context, new_encoder, seeded_rng, storage_buffer, submit};
 use rand::Rng;
-use segsplat::gpu::{GpuContext, RadixSort, WorkgroupSum};
+use segsplat::gpu::{DEFAULT_SMALL_SORT_LIMIT, GpuContext, RadixSort, WorkgroupSum};
 
 const SENTINEL: u32 = 0x5eed_5eed;
 
@@ -109,11 +109,18 @@ fn check_case(ctx: &GpuContext, sort: &mut RadixSort, case: &SortCase, count_off
 #[test]
 fn sort_matches_cpu_stable_sort_across_counts_and_key_bits() {
     let Some(ctx) = gpu_context() else { return };
-    // Every way of summing over a workgroup the adapter has, whichever it picks.
-    for sum in WorkgroupSum::supported(ctx) {
-        let mut sort = RadixSort::with_sum(ctx, sum).unwrap();
+    // Every way of summing over a workgroup the adapter has, whichever it picks, and both the
+    // multi-block passes (limit 0) and the one-workgroup sort (these capacities are under the
+    // default limit).
+    let paths = WorkgroupSum::supported(ctx)
+        .into_iter()
+        .flat_map(|sum| [(sum, 0), (sum, DEFAULT_SMALL_SORT_LIMIT)]);
+    for (sum, small_limit) in paths {
+        let mut sort = RadixSort::with_sum(ctx, sum)
+            .unwrap()
+            .with_small_sort_limit(small_limit);
         let mut rng = seeded_rng(3);
-        for count in [0usize, 1, 1000, 5000] {
+        for count in [0usize, 1, 63, 65, 1000, 5000] {
             for key_bits in [4u32, 10, 13, 32] {
                 let case = SortCase {
                     keys: random_keys(&mut rng, count, key_bits, 50),
@@ -124,6 +131,24 @@ fn sort_matches_cpu_stable_sort_across_counts_and_key_bits() {
                 check_case(ctx, &mut sort, &case, 0);
             }
         }
+    }
+}
+
+#[test]
+fn one_workgroup_sort_handles_its_limit_and_odd_pass_counts() {
+    let Some(ctx) = gpu_context() else { return };
+    let mut sort = RadixSort::new(ctx).unwrap();
+    let mut rng = seeded_rng(4);
+    // 5 bits take two passes, 9 three (an odd count ends with the copy back), 32 eight.
+    for key_bits in [5u32, 9, 32] {
+        let count = DEFAULT_SMALL_SORT_LIMIT as usize - 5;
+        let case = SortCase {
+            keys: random_keys(&mut rng, count, key_bits, 700),
+            count,
+            capacity: DEFAULT_SMALL_SORT_LIMIT as usize,
+            key_bits,
+        };
+        check_case(ctx, &mut sort, &case, 0);
     }
 }
 
@@ -147,7 +172,15 @@ fn sort_of_a_million_pairs_is_stable_beyond_one_pass_of_blocks() {
 #[test]
 fn sort_reads_count_at_an_unaligned_offset_and_clamps_to_capacity() {
     let Some(ctx) = gpu_context() else { return };
-    let mut sort = RadixSort::new(ctx).unwrap();
+    for small_limit in [0, DEFAULT_SMALL_SORT_LIMIT] {
+        let mut sort = RadixSort::new(ctx)
+            .unwrap()
+            .with_small_sort_limit(small_limit);
+        unaligned_count_and_clamp(ctx, &mut sort);
+    }
+}
+
+fn unaligned_count_and_clamp(ctx: &GpuContext, sort: &mut RadixSort) {
     let mut rng = seeded_rng(9);
     let case = SortCase {
         keys: random_keys(&mut rng, 3000, 12, 200),
@@ -156,7 +189,7 @@ fn sort_reads_count_at_an_unaligned_offset_and_clamps_to_capacity() {
         key_bits: 12,
     };
     // 4 * 301 = 1204 is not a multiple of the 256-byte storage offset alignment.
-    check_case(ctx, &mut sort, &case, 4 * 301);
+    check_case(ctx, sort, &case, 4 * 301);
 
     // A count above the capacity sorts `capacity` elements.
     let keys = random_keys(&mut rng, 2048, 8, 100);
@@ -187,7 +220,16 @@ fn sort_reads_count_at_an_unaligned_offset_and_clamps_to_capacity() {
 #[test]
 fn two_sorts_in_one_encoder_compose_like_depth_then_tile() {
     let Some(ctx) = gpu_context() else { return };
-    let mut sort = RadixSort::new(ctx).unwrap();
+    // Both paths at 20k (over the default small-sort limit, so raised for the second).
+    for small_limit in [0, u32::MAX] {
+        let mut sort = RadixSort::new(ctx)
+            .unwrap()
+            .with_small_sort_limit(small_limit);
+        depth_then_tile(ctx, &mut sort);
+    }
+}
+
+fn depth_then_tile(ctx: &GpuContext, sort: &mut RadixSort) {
     let mut rng = seeded_rng(13);
     let count = 20_000usize;
     // First by a 32-bit "depth", then stably by a 10-bit "tile": the result is ordered by

@@ -485,7 +485,7 @@ async fn a_camera_rig_is_segmented_by_propagation_along_each_camera() {
             &scene_id,
             "segment_then_splat",
             serde_json::json!({
-                "steps": 40, "checkpoint_every": 0,
+                "steps": 40, "checkpoint_every": 0, "random_init_count": 20000,
                 "object_loss": {"objects_per_level": 1},
                 "deformation": {
                     "field": {"depth": 4, "width": 64, "skip_after": 2}, "warm_up_steps": 20

@@ -235,7 +235,14 @@ fn a_short_dynamic_job_trains_its_field_with_default_schedules() {
     let mut trainer = Trainer::new(ctx, &scene, config, Some(initial())).expect("trainer");
     let schedule = trainer.schedule().deformation.expect("dynamic schedule");
     assert_eq!(schedule.warm_up_steps, 6);
-    assert!(trainer.schedule().warnings().is_empty());
+    // A 60-step job is too short for default densification (a warning says so), not for the field.
+    let warnings = trainer.schedule().warnings();
+    assert!(
+        !warnings
+            .iter()
+            .any(|warning| warning.contains("deformation")),
+        "{warnings:?}"
+    );
     let parameters = |trainer: &Trainer| -> Vec<f32> {
         trainer
             .checkpoint()

@@ -12,4 +12,4 @@ pub use context::{AdapterFilter, AdapterReport, GpuContext, GpuError};
 pub use kernel::Kernel;
 pub use profiler::{KernelProfile, KernelProfiler};
 pub use scan::{ExclusiveScan, WorkgroupSum};
-pub use sort::RadixSort;
+pub use sort::{DEFAULT_SMALL_SORT_LIMIT, RadixSort};

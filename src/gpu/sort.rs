@@ -9,6 +9,10 @@
 //! The count comes from a buffer an earlier kernel wrote (e.g. a scan total): a one-thread plan
 //! kernel turns it into every element/block count and indirect dispatch size, so recording a sort
 //! never needs a CPU read-back. Scratch buffers are sized for `capacity` and reused.
+//!
+//! Sorts whose capacity is at most the small-sort limit ([`DEFAULT_SMALL_SORT_LIMIT`]) run in one
+//! dispatch instead (`radix_sort_small.wgsl`: one workgroup, every pass): a small scene's 32-bit
+//! depth sort is otherwise 25 dispatches, and each costs more than sorting a few thousand keys.
 
 use std::collections::HashMap;
 use std::num::NonZeroU64;
@@ -38,6 +42,11 @@ const SORT_PLAN: &str = include_str!("../../shaders/radix_sort_plan.wgsl");
 const SORT_HISTOGRAM: &str = include_str!("../../shaders/radix_sort_histogram.wgsl");
 const SORT_SCATTER: &str = include_str!("../../shaders/radix_sort_scatter.wgsl");
 const SORT_COPY: &str = include_str!("../../shaders/radix_sort_copy.wgsl");
+const SORT_SMALL: &str = include_str!("../../shaders/radix_sort_small.wgsl");
+
+/// Capacities up to this sort in one workgroup and one dispatch (see the module doc). At 16k
+/// elements one workgroup's thread walks 256 keys a pass.
+pub const DEFAULT_SMALL_SORT_LIMIT: u32 = 16_384;
 
 /// Buffers one sort needs besides the caller's, sized for `capacity` elements.
 #[derive(Debug)]
@@ -62,6 +71,9 @@ pub struct RadixSort {
     histogram: Kernel,
     scatter: Kernel,
     copy: Kernel,
+    small: Kernel,
+    /// Capacities up to this take the one-workgroup sort; 0 never does.
+    small_limit: u32,
     scratch: Option<SortScratch>,
     /// Uniforms (shift, digit mask) of each pass, by `key_bits`.
     pass_params: HashMap<u32, Vec<wgpu::Buffer>>,
@@ -92,9 +104,18 @@ impl RadixSort {
                 "radix_scatter",
             )?,
             copy: kernel("radix_sort_copy", &[SORT_COMMON, SORT_COPY], "copy_sorted")?,
+            small: kernel("radix_sort_small", &[SORT_SMALL], "small_sort")?,
+            small_limit: DEFAULT_SMALL_SORT_LIMIT,
             scratch: None,
             pass_params: HashMap::new(),
         })
+    }
+
+    /// The same sort with another small-sort limit (0: always the multi-block passes; tests use
+    /// it to run both paths on the same cases).
+    pub fn with_small_sort_limit(mut self, limit: u32) -> Self {
+        self.small_limit = limit;
+        self
     }
 
     /// Allocates scratch for sorts of up to `capacity` elements, failing when a buffer would not
@@ -182,6 +203,18 @@ impl RadixSort {
         else {
             return;
         };
+        if capacity <= self.small_limit {
+            let target = SmallSortTarget {
+                keys,
+                values,
+                count_buffer,
+                count_offset,
+                capacity,
+                key_bits,
+            };
+            self.record_small(ctx, encoder, scratch, &target);
+            return;
+        }
 
         self.record_plan(ctx, encoder, scratch, count_buffer, count_offset, capacity);
         let histogram_scan = ScanLevels {
@@ -266,43 +299,112 @@ impl RadixSort {
         count_offset: u64,
         capacity: u32,
     ) {
-        let alignment = u64::from(ctx.limits.min_storage_buffer_offset_alignment).max(4);
-        let window_offset = count_offset - count_offset % alignment;
-        let count_index = ((count_offset - window_offset) / 4) as u32;
-        let plan_params = [count_index, capacity, scratch.scan_levels as u32, 0];
-        let plan_params = ctx
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("radix sort plan params"),
-                contents: bytemuck::cast_slice(&plan_params),
-                usage: wgpu::BufferUsages::UNIFORM,
-            });
-        let count_window = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-            buffer: count_buffer,
-            offset: window_offset,
-            size: NonZeroU64::new(count_offset - window_offset + 4),
-        });
+        let window = CountWindow::new(ctx, count_buffer, count_offset);
+        let plan_params = [window.index, capacity, scratch.scan_levels as u32, 0];
+        let plan_params = uniform_words(ctx, "radix sort plan params", &plan_params);
         let resources = [
-            count_window,
+            window.binding(),
             plan_params.as_entire_binding(),
             scratch.sort_info.as_entire_binding(),
             scratch.dispatch_args.as_entire_binding(),
         ];
-        let entries: Vec<wgpu::BindGroupEntry> = resources
-            .into_iter()
-            .enumerate()
-            .map(|(binding, resource)| wgpu::BindGroupEntry {
-                binding: binding as u32,
-                resource,
-            })
-            .collect();
-        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("radix sort plan"),
-            layout: &self.plan.pipeline.get_bind_group_layout(0),
-            entries: &entries,
-        });
+        let bind_group = bind_resources(ctx, "radix sort plan", &self.plan, resources);
         self.plan.dispatch(encoder, &bind_group, [1, 1, 1]);
     }
+
+    /// Records the one-workgroup sort of every pass (`radix_sort_small.wgsl`).
+    fn record_small(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        scratch: &SortScratch,
+        target: &SmallSortTarget<'_>,
+    ) {
+        let window = CountWindow::new(ctx, target.count_buffer, target.count_offset);
+        let params = [window.index, target.capacity, target.key_bits, 0];
+        let params = uniform_words(ctx, "radix sort small params", &params);
+        let resources = [
+            window.binding(),
+            params.as_entire_binding(),
+            target.keys.as_entire_binding(),
+            target.values.as_entire_binding(),
+            scratch.keys.as_entire_binding(),
+            scratch.values.as_entire_binding(),
+        ];
+        let bind_group = bind_resources(ctx, "radix sort small", &self.small, resources);
+        self.small.dispatch(encoder, &bind_group, [1, 1, 1]);
+    }
+}
+
+/// What a one-workgroup sort sorts (the arguments of [`RadixSort::encode`]).
+struct SmallSortTarget<'a> {
+    keys: &'a wgpu::Buffer,
+    values: &'a wgpu::Buffer,
+    count_buffer: &'a wgpu::Buffer,
+    count_offset: u64,
+    capacity: u32,
+    key_bits: u32,
+}
+
+/// The aligned window of a buffer that holds a u32 count, and the count's index in it: the
+/// whole buffer may exceed a storage binding, and a binding's offset must be aligned.
+struct CountWindow<'a> {
+    buffer: &'a wgpu::Buffer,
+    offset: u64,
+    size: u64,
+    index: u32,
+}
+
+impl<'a> CountWindow<'a> {
+    fn new(ctx: &GpuContext, buffer: &'a wgpu::Buffer, count_offset: u64) -> Self {
+        let alignment = u64::from(ctx.limits.min_storage_buffer_offset_alignment).max(4);
+        let offset = count_offset - count_offset % alignment;
+        Self {
+            buffer,
+            offset,
+            size: count_offset - offset + 4,
+            index: ((count_offset - offset) / 4) as u32,
+        }
+    }
+
+    fn binding(&self) -> wgpu::BindingResource<'a> {
+        wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+            buffer: self.buffer,
+            offset: self.offset,
+            size: NonZeroU64::new(self.size),
+        })
+    }
+}
+
+fn uniform_words(ctx: &GpuContext, label: &str, words: &[u32]) -> wgpu::Buffer {
+    ctx.device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: bytemuck::cast_slice(words),
+            usage: wgpu::BufferUsages::UNIFORM,
+        })
+}
+
+/// A bind group of `kernel`'s layout with `resources` at bindings 0, 1, ...
+fn bind_resources<'a, const N: usize>(
+    ctx: &GpuContext,
+    label: &str,
+    kernel: &Kernel,
+    resources: [wgpu::BindingResource<'a>; N],
+) -> wgpu::BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry> = resources
+        .into_iter()
+        .enumerate()
+        .map(|(binding, resource)| wgpu::BindGroupEntry {
+            binding: binding as u32,
+            resource,
+        })
+        .collect();
+    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout: &kernel.pipeline.get_bind_group_layout(0),
+        entries: &entries,
+    })
 }
 
 /// (shift, digit mask) uniforms for each pass over the low `key_bits` bits; the last pass' mask
