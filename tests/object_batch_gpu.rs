@@ -76,6 +76,9 @@ fn buffer(ctx: &GpuContext, data: &[[f32; 4]]) -> wgpu::Buffer {
         })
 }
 
+/// Parameter gradients and the |d mean2d| statistic, as `GpuGaussianGrads::download` gives them.
+type Grads = (GaussianModel, Vec<[f32; 2]>);
+
 struct Case {
     model: GaussianModel,
     camera: RenderCamera,
@@ -102,11 +105,7 @@ impl Case {
 }
 
 /// Images of each slot and the step's gradients, rendering every object separately.
-fn separate(
-    ctx: &GpuContext,
-    variant: RasterVariant,
-    case: &Case,
-) -> (Vec<Vec<[f32; 4]>>, (GaussianModel, Vec<[f32; 2]>)) {
+fn separate(ctx: &GpuContext, variant: RasterVariant, case: &Case) -> (Vec<Vec<[f32; 4]>>, Grads) {
     let mut renderer = Renderer::with_variant(ctx, variant).unwrap();
     // Room for every slot's intersections: these tests are about batching, not overflow.
     renderer.set_intersection_capacity(1 << 20);
@@ -144,11 +143,7 @@ fn separate(
 
 /// The same step batched as the trainer records it: the full render and its backward, then the
 /// object slots on top of it.
-fn batched(
-    ctx: &GpuContext,
-    variant: RasterVariant,
-    case: &Case,
-) -> (Vec<Vec<[f32; 4]>>, (GaussianModel, Vec<[f32; 2]>)) {
+fn batched(ctx: &GpuContext, variant: RasterVariant, case: &Case) -> (Vec<Vec<[f32; 4]>>, Grads) {
     let mut renderer = Renderer::with_variant(ctx, variant).unwrap();
     // Room for every slot's intersections: these tests are about batching, not overflow.
     renderer.set_intersection_capacity(1 << 20);
@@ -179,7 +174,6 @@ fn batched(
             ctx,
             &mut encoder,
             &gaussians,
-            &base,
             &batch,
             &slot_grads,
             &mut grads,
@@ -194,11 +188,7 @@ fn batched(
 /// Largest difference of each Gaussian's parameter gradients, relative to the largest magnitude
 /// in that Gaussian's gradient (floor 1e-3), and of the |d mean2d| statistic, relative to itself.
 /// Float atomics add in a different order in the two paths, so bits may differ.
-fn assert_gradients_match(
-    batched: &(GaussianModel, Vec<[f32; 2]>),
-    separate: &(GaussianModel, Vec<[f32; 2]>),
-    tolerance: f64,
-) {
+fn assert_gradients_match(batched: &Grads, separate: &Grads, tolerance: f64) {
     let batched_parameters = ReferenceGaussians::from_model(&batched.0);
     let separate_parameters = ReferenceGaussians::from_model(&separate.0);
     let mut nonzero = 0;

@@ -54,9 +54,11 @@ impl ObjectSlot {
 }
 
 /// The object renders of one batch: slot `s`'s image is pixels `[s P, (s + 1) P)` of
-/// [`ObjectBatchOutput::images`]. Dropping it returns its buffers to the renderer's pool.
+/// [`ObjectBatchOutput::images`]. Borrows the full render it builds on (its projection stays in
+/// use until the batch's backward). Dropping it returns its buffers to the renderer's pool.
 #[derive(Debug)]
-pub struct ObjectBatchOutput {
+pub struct ObjectBatchOutput<'b> {
+    base: &'b RenderOutput,
     workspace: Option<RenderWorkspace>,
     pool: Arc<WorkspacePool>,
     pub camera: RenderCamera,
@@ -64,7 +66,7 @@ pub struct ObjectBatchOutput {
     pub gaussian_count: u32,
 }
 
-impl Drop for ObjectBatchOutput {
+impl Drop for ObjectBatchOutput<'_> {
     fn drop(&mut self) {
         if let Some(workspace) = self.workspace.take() {
             self.pool.give_back(workspace);
@@ -72,7 +74,7 @@ impl Drop for ObjectBatchOutput {
     }
 }
 
-impl ObjectBatchOutput {
+impl ObjectBatchOutput<'_> {
     fn workspace(&self) -> &RenderWorkspace {
         // Only `drop` takes the workspace out.
         self.workspace
@@ -118,14 +120,14 @@ impl Renderer {
     /// Records the renders of `slots` (each its object alone, on black) for `base`'s camera,
     /// reusing `base`'s projection, colours and depth order. `base` must be an unfiltered
     /// forward pass of the same `gaussians`, recorded earlier into this encoder or submitted.
-    pub fn forward_objects<'g>(
+    pub fn forward_objects<'g, 'b>(
         &mut self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
         gaussians: impl Into<GaussianView<'g>>,
-        base: &RenderOutput,
+        base: &'b RenderOutput,
         slots: &[ObjectSlot],
-    ) -> Result<ObjectBatchOutput, RenderError> {
+    ) -> Result<ObjectBatchOutput<'b>, RenderError> {
         let gaussians: GaussianView<'_> = gaussians.into();
         check_batch(base, gaussians, slots)?;
         let camera = base.camera;
@@ -177,6 +179,7 @@ impl Renderer {
             .rasterize_forward
             .dispatch(encoder, &rasterize, [tiles_x, tiles_y, k]);
         Ok(ObjectBatchOutput {
+            base,
             workspace: Some(workspace),
             pool: Arc::clone(&self.pool),
             camera,
@@ -291,15 +294,14 @@ impl Renderer {
 
     /// Records the backward of every slot of `batch` given `grad_images` (d loss / d image, slot
     /// after slot, as [`ObjectBatchOutput::images`]) and ADDS the summed parameter gradients
-    /// into `grads`. Overwrites `base`'s screen-space gradients: record `base`'s own backward
-    /// before this.
+    /// into `grads`. Overwrites the full render's screen-space gradients: record that render's
+    /// own backward before this.
     pub fn backward_objects<'g>(
         &mut self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
         gaussians: impl Into<GaussianView<'g>>,
-        base: &RenderOutput,
-        batch: &ObjectBatchOutput,
+        batch: &ObjectBatchOutput<'_>,
         grad_images: &wgpu::Buffer,
         grads: &mut GpuGaussianGrads,
     ) -> Result<(), RenderError> {
@@ -322,7 +324,7 @@ impl Renderer {
         if count == 0 {
             return Ok(());
         }
-        let shared = base.workspace();
+        let shared = batch.base.workspace();
         let workspace = batch.workspace();
         encoder.clear_buffer(&shared.grad_projected, 0, None);
         let [tiles_x, tiles_y] = batch.camera.tile_grid();

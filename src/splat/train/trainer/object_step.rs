@@ -161,7 +161,6 @@ impl Trainer {
             &self.ctx,
             encoder,
             scene,
-            base,
             &batch,
             grad_images,
             &mut self.grads,
