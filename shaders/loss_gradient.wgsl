@@ -6,6 +6,7 @@
 
 @group(0) @binding(4) var<storage, read> row_partials: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> rendered_grad: array<vec4<f32>>;
+@group(0) @binding(6) var<storage, read> tile_distance: array<u32>;
 
 fn partials_input(pixel: u32) -> Partials {
     let base = pixel * 3u;
@@ -28,6 +29,14 @@ fn loss_gradient(@builtin(global_invocation_id) id: vec3<u32>) {
     let x = i32(id.x);
     let y = i32(id.y * LOSS_RUN);
     if !inside(x, y) {
+        return;
+    }
+    if !tile_in_reach(x, y, 1u) {
+        // Beyond the reach of content the gradient is exactly zero (the images and all the
+        // moments around are zero; sign(0) = 0).
+        for (var k = 0; k < i32(LOSS_RUN) && y + k < i32(params.height); k++) {
+            rendered_grad[pixel_index(x, y + k)] = vec4<f32>(0.0);
+        }
         return;
     }
     let run = filter_partials_run(x, y, vec2<i32>(0, 1), y, i32(params.height));

@@ -4,6 +4,7 @@
 // LOSS_RUN pixels of a row.
 
 @group(0) @binding(4) var<storage, read_write> row_moments: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read> tile_distance: array<u32>;
 
 struct Moments {
     r: vec3<f32>,
@@ -41,7 +42,7 @@ fn store_moments(x: i32, y: i32, m: Moments) {
 fn filter_moments_horizontal(@builtin(global_invocation_id) id: vec3<u32>) {
     let x = i32(id.x * LOSS_RUN);
     let y = i32(id.y);
-    if !inside(x, y) {
+    if !inside(x, y) || !tile_in_reach(x, y, 4u) {
         return;
     }
     var m0 = no_moments();

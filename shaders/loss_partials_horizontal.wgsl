@@ -4,6 +4,7 @@
 
 @group(0) @binding(1) var<storage, read> ssim_partials: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read_write> row_partials: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read> tile_distance: array<u32>;
 
 fn partials_input(pixel: u32) -> Partials {
     let base = pixel * 3u;
@@ -23,7 +24,7 @@ fn store_partials(x: i32, y: i32, sum: Partials) {
 fn filter_partials_horizontal(@builtin(global_invocation_id) id: vec3<u32>) {
     let x = i32(id.x * LOSS_RUN);
     let y = i32(id.y);
-    if !inside(x, y) {
+    if !inside(x, y) || !tile_in_reach(x, y, 2u) {
         return;
     }
     let run = filter_partials_run(x, y, vec2<i32>(1, 0), x, i32(params.width));

@@ -41,11 +41,11 @@ fn rasterize_backward(
     @builtin(local_invocation_id) local: vec3<u32>,
     @builtin(local_invocation_index) local_index: u32,
 ) {
-    let tile = group.y * uniforms.tile_grid.x + group.x;
+    let tile = slot_tile(group);
     let pixel = group.xy * TILE_SIZE + local.xy;
     let inside = pixel.x < uniforms.image_size.x && pixel.y < uniforms.image_size.y;
     let centre = vec2<f32>(pixel) + 0.5;
-    let pixel_index = pixel.y * uniforms.image_size.x + pixel.x;
+    let pixel_index = slot_pixel_index(group.z, pixel);
 
     var t_final = 1.0;
     var contributed = 0u;

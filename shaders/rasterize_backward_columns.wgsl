@@ -25,12 +25,12 @@ struct PixelWalk {
     behind: vec3<f32>,
 }
 
-fn pixel_walk(pixel: vec2<u32>) -> PixelWalk {
+fn pixel_walk(slot: u32, pixel: vec2<u32>) -> PixelWalk {
     var t_final = 1.0;
     var contributed = 0u;
     var v_out = vec4<f32>(0.0);
     if pixel.x < uniforms.image_size.x && pixel.y < uniforms.image_size.y {
-        let index = pixel.y * uniforms.image_size.x + pixel.x;
+        let index = slot_pixel_index(slot, pixel);
         t_final = final_transmittance[index];
         contributed = last_contributor[index];
         v_out = grad_image[index];
@@ -77,14 +77,14 @@ fn rasterize_backward(
     @builtin(subgroup_invocation_id) lane: u32,
     @builtin(subgroup_size) lanes: u32,
 ) {
-    let tile = group.y * uniforms.tile_grid.x + group.x;
+    let tile = slot_tile(group);
     let column = vec2<u32>(local_index % TILE_SIZE, local_index / TILE_SIZE);
     let first_pixel = group.xy * TILE_SIZE + vec2<u32>(column.x, column.y * PIXELS);
     let centre_x = f32(first_pixel.x) + 0.5;
-    var walk0 = pixel_walk(first_pixel);
-    var walk1 = pixel_walk(first_pixel + vec2<u32>(0u, 1u));
-    var walk2 = pixel_walk(first_pixel + vec2<u32>(0u, 2u));
-    var walk3 = pixel_walk(first_pixel + vec2<u32>(0u, 3u));
+    var walk0 = pixel_walk(group.z, first_pixel);
+    var walk1 = pixel_walk(group.z, first_pixel + vec2<u32>(0u, 1u));
+    var walk2 = pixel_walk(group.z, first_pixel + vec2<u32>(0u, 2u));
+    var walk3 = pixel_walk(group.z, first_pixel + vec2<u32>(0u, 3u));
     let most = max(max(walk0.contributed, walk1.contributed), max(walk2.contributed, walk3.contributed));
     let block = subgroup_block(
         vec2<f32>(centre_x, walk0.centre_y),

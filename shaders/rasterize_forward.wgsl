@@ -48,7 +48,7 @@ fn rasterize_forward(
     @builtin(local_invocation_id) local: vec3<u32>,
     @builtin(local_invocation_index) local_index: u32,
 ) {
-    let tile = group.y * uniforms.tile_grid.x + group.x;
+    let tile = slot_tile(group);
     let pixel = group.xy * TILE_SIZE + local.xy;
     let inside = pixel.x < uniforms.image_size.x && pixel.y < uniforms.image_size.y;
     let centre = vec2<f32>(pixel) + 0.5;
@@ -100,7 +100,7 @@ fn rasterize_forward(
         workgroupBarrier();
     }
     if inside {
-        let index = pixel.y * uniforms.image_size.x + pixel.x;
+        let index = slot_pixel_index(group.z, pixel);
         image[index] = vec4<f32>(rgb + transmittance * uniforms.background.xyz, 1.0 - transmittance);
         final_transmittance[index] = transmittance;
         last_contributor[index] = contributed;

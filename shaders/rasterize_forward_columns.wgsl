@@ -49,9 +49,9 @@ fn composite(pixel: PixelComposite, splat: LaneSplat, position: u32, live: ptr<f
     return next;
 }
 
-fn write_pixel(pixel: vec2<u32>, composited: PixelComposite) {
+fn write_pixel(slot: u32, pixel: vec2<u32>, composited: PixelComposite) {
     if pixel.x < uniforms.image_size.x && pixel.y < uniforms.image_size.y {
-        let index = pixel.y * uniforms.image_size.x + pixel.x;
+        let index = slot_pixel_index(slot, pixel);
         let t = composited.transmittance;
         image[index] = vec4<f32>(composited.rgb + t * uniforms.background.xyz, 1.0 - t);
         final_transmittance[index] = t;
@@ -68,7 +68,7 @@ fn rasterize_forward(
     @builtin(subgroup_invocation_id) lane: u32,
     @builtin(subgroup_size) lanes: u32,
 ) {
-    let tile = group.y * uniforms.tile_grid.x + group.x;
+    let tile = slot_tile(group);
     let column = vec2<u32>(local_index % TILE_SIZE, local_index / TILE_SIZE);
     let first_pixel = group.xy * TILE_SIZE + vec2<u32>(column.x, column.y * PIXELS);
     let start = tile_ranges[2u * tile];
@@ -109,12 +109,12 @@ fn rasterize_forward(
             p7 = composite(p7, splat, position, &live);
         }
     }
-    write_pixel(first_pixel, p0);
-    write_pixel(first_pixel + vec2<u32>(0u, 1u), p1);
-    write_pixel(first_pixel + vec2<u32>(0u, 2u), p2);
-    write_pixel(first_pixel + vec2<u32>(0u, 3u), p3);
-    write_pixel(first_pixel + vec2<u32>(0u, 4u), p4);
-    write_pixel(first_pixel + vec2<u32>(0u, 5u), p5);
-    write_pixel(first_pixel + vec2<u32>(0u, 6u), p6);
-    write_pixel(first_pixel + vec2<u32>(0u, 7u), p7);
+    write_pixel(group.z, first_pixel, p0);
+    write_pixel(group.z, first_pixel + vec2<u32>(0u, 1u), p1);
+    write_pixel(group.z, first_pixel + vec2<u32>(0u, 2u), p2);
+    write_pixel(group.z, first_pixel + vec2<u32>(0u, 3u), p3);
+    write_pixel(group.z, first_pixel + vec2<u32>(0u, 4u), p4);
+    write_pixel(group.z, first_pixel + vec2<u32>(0u, 5u), p5);
+    write_pixel(group.z, first_pixel + vec2<u32>(0u, 6u), p6);
+    write_pixel(group.z, first_pixel + vec2<u32>(0u, 7u), p7);
 }

@@ -353,3 +353,54 @@ fn identical_images_have_zero_loss_and_gradient() {
         .fold(0.0f32, |m, g| m.max(g.abs()));
     assert!(worst < 1e-6, "gradient {worst}");
 }
+
+#[test]
+fn gpu_object_loss_skipping_empty_tiles_matches_cpu_reference() {
+    let Some(ctx) = gpu_context() else { return };
+    let mut loss = RenderLoss::new(ctx).unwrap();
+    let mut rng = seeded_rng(9);
+    // 11 x 8 loss tiles (the last column and row partial): the rendered object sits top left,
+    // its mask bottom right, so most tiles are beyond every pass's reach of content and are
+    // skipped, some only by the later passes.
+    let (width, height) = (170, 121);
+    let (image, target) = test_images(&mut rng, width, height);
+    let near = |p: usize, cx: f64, cy: f64, r: f64| {
+        let (x, y) = ((p % width) as f64 - cx, (p / width) as f64 - cy);
+        x * x + y * y < r * r
+    };
+    let rendered: Vec<Rgb> = image
+        .iter()
+        .enumerate()
+        .map(|(p, v)| {
+            if near(p, 20.0, 18.0, 9.0) {
+                *v
+            } else {
+                [0.0; 3]
+            }
+        })
+        .collect();
+    let ids: Vec<u32> = (0..width * height)
+        .map(|p| if near(p, 140.0, 95.0, 12.0) { 7 } else { 1 })
+        .collect();
+    let masked_target: Vec<Rgb> = target
+        .iter()
+        .zip(&ids)
+        .map(|(t, &id)| if id == 7 { *t } else { [0.0; 3] })
+        .collect();
+    let (cpu, cpu_grad) = cpu_loss(&rendered, &masked_target, width, height);
+    let gpu = gpu_loss(
+        ctx,
+        &mut loss,
+        &rendered,
+        &target,
+        Some((&ids, 7)),
+        width,
+        height,
+        0.5,
+        3,
+    );
+    assert_matches_cpu(&gpu, 3, 0.5, cpu, &cpu_grad, "sparse masked 170x121");
+    // Far from both objects the gradient is written, and exactly zero.
+    let far = 60 * width + 90;
+    assert_eq!(gpu.grad[far], [0.0; 4]);
+}

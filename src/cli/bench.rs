@@ -55,6 +55,11 @@ pub struct BenchArgs {
     /// `m` for `--object-loss`.
     #[arg(long, default_value_t = 3)]
     pub objects_per_level: u32,
+    /// Render each object of `--object-loss` separately (its own projection, depth sort and
+    /// backward: the path before batching) rather than batched on the step's full render, to
+    /// compare the two in one build.
+    #[arg(long, requires = "object_loss")]
+    pub separate_object_renders: bool,
     /// Also train with the deformation field moving the Gaussians from step 0 (no warm-up),
     /// after a static run with the same Gaussians, resolution, steps and seed, and report the
     /// field's cost (`deformation` in the report; the other figures are the run with the
@@ -80,6 +85,8 @@ pub struct BenchArgs {
 #[derive(Serialize)]
 struct ObjectLossReport {
     objects_per_level: u32,
+    /// `batched` (on the step's full render) or `separate` (`--separate-object-renders`).
+    renders: &'static str,
     /// `user` or `classical`.
     masks: &'static str,
     /// Objects per level (small, middle, large).
@@ -94,6 +101,7 @@ fn object_loss_trainer(
     mut config: TrainConfig,
     initial: Option<GaussianModel>,
     objects_per_level: u32,
+    separate_renders: bool,
 ) -> anyhow::Result<(Trainer, ObjectLossReport)> {
     use segsplat::pipeline::segment_then_splat::association::{
         AssociationOptions, generated_view_masks,
@@ -134,7 +142,7 @@ fn object_loss_trainer(
     };
     let mask_seconds = started.elapsed().as_secs_f64();
     let options = SegmentedTrainingOptions::default();
-    let trainer = match initial {
+    let mut trainer = match initial {
         // Random Gaussians carry no ids: the object loss then renders empty objects, which
         // still costs the renders it measures.
         Some(model) => {
@@ -144,11 +152,17 @@ fn object_loss_trainer(
         }
         None => segmented_trainer_from_view_masks(ctx, scene, config, &masks, &options)?,
     };
+    trainer.set_separate_object_renders(separate_renders);
     let objects = segsplat::scene::Level::ALL.map(|level| masks.object_count(level));
     Ok((
         trainer,
         ObjectLossReport {
             objects_per_level,
+            renders: if separate_renders {
+                "separate"
+            } else {
+                "batched"
+            },
             masks: source,
             objects,
             mask_seconds,
@@ -368,8 +382,14 @@ fn bench_trainer(
     args: &BenchArgs,
 ) -> anyhow::Result<(Trainer, Option<ObjectLossReport>)> {
     if args.object_loss {
-        let (trainer, report) =
-            object_loss_trainer(ctx, scene, config, initial, args.objects_per_level)?;
+        let (trainer, report) = object_loss_trainer(
+            ctx,
+            scene,
+            config,
+            initial,
+            args.objects_per_level,
+            args.separate_object_renders,
+        )?;
         Ok((trainer, Some(report)))
     } else {
         Ok((Trainer::new(ctx, scene, config, initial)?, None))

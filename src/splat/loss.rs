@@ -8,6 +8,10 @@
 //!
 //! The same kernels give the Segment-then-Splat object loss: with an [`ObjectMask`] the target is
 //! `target * (object_ids[p] == object_id)`.
+//! An object's render and its mask usually cover a small part of the image, and where both are
+//! zero over the SSIM window's reach the loss and its gradient are exactly zero: object losses first
+//! mark the 16x16 tiles with content and each tile's distance to it (two small passes), and the
+//! four passes skip the tiles beyond their reach (`loss_skip.wgsl`), writing zero gradients there.
 //!
 //! Outputs, for one call: `weight * L` written to one slot of a small loss-values buffer (so a
 //! training step records several losses without reading any back; the caller sums slots when it
@@ -44,6 +48,9 @@ const LOSS_PARTIALS_RUN: &str = include_str!("../../shaders/loss_partials_run.wg
 const LOSS_PARTIALS_HORIZONTAL: &str = include_str!("../../shaders/loss_partials_horizontal.wgsl");
 const LOSS_GRADIENT: &str = include_str!("../../shaders/loss_gradient.wgsl");
 const LOSS_REDUCE: &str = include_str!("../../shaders/loss_reduce.wgsl");
+const LOSS_SKIP: &str = include_str!("../../shaders/loss_skip.wgsl");
+const LOSS_CONTENT: &str = include_str!("../../shaders/loss_content.wgsl");
+const LOSS_DISTANCE: &str = include_str!("../../shaders/loss_distance.wgsl");
 
 #[derive(Debug, thiserror::Error)]
 pub enum LossError {
@@ -147,6 +154,9 @@ struct LossScratch {
     ssim_partials: wgpu::Buffer,
     row_partials: wgpu::Buffer,
     loss_partials: wgpu::Buffer,
+    /// Per tile: content flag, then distance in tiles to content (object losses).
+    tile_content: wgpu::Buffer,
+    tile_distance: wgpu::Buffer,
 }
 
 /// Fused L1 + D-SSIM loss, forward and backward (see the module doc).
@@ -157,6 +167,10 @@ pub struct RenderLoss {
     partials_horizontal: Kernel,
     gradient: Kernel,
     reduce: Kernel,
+    /// Object losses: which tiles hold content and how far each tile is from it, so the passes
+    /// skip tiles whose loss and gradient are exactly zero.
+    tile_content: Kernel,
+    tile_distance: Kernel,
     /// Bound as the object ids when no mask is given.
     no_mask: wgpu::Buffer,
     scratch: Option<LossScratch>,
@@ -168,7 +182,15 @@ impl RenderLoss {
         let kernel = |label, sources: &[&str], entry| {
             validated(ctx, label, || Kernel::new(ctx, label, sources, entry, &[]))
         };
-        let with_inputs = |source| [constants.as_str(), LOSS_COMMON, LOSS_INPUTS, source];
+        let with_inputs = |source| {
+            [
+                constants.as_str(),
+                LOSS_COMMON,
+                LOSS_SKIP,
+                LOSS_INPUTS,
+                source,
+            ]
+        };
         let plain = |source| [constants.as_str(), LOSS_COMMON, source];
         Ok(Self {
             moments_horizontal: kernel(
@@ -186,6 +208,7 @@ impl RenderLoss {
                 &[
                     constants.as_str(),
                     LOSS_COMMON,
+                    LOSS_SKIP,
                     LOSS_PARTIALS_RUN,
                     LOSS_PARTIALS_HORIZONTAL,
                 ],
@@ -196,6 +219,7 @@ impl RenderLoss {
                 &[
                     constants.as_str(),
                     LOSS_COMMON,
+                    LOSS_SKIP,
                     LOSS_INPUTS,
                     LOSS_PARTIALS_RUN,
                     LOSS_GRADIENT,
@@ -203,6 +227,16 @@ impl RenderLoss {
                 "loss_gradient",
             )?,
             reduce: kernel("loss_reduce", &plain(LOSS_REDUCE), "reduce_loss")?,
+            tile_content: kernel(
+                "loss_tile_content",
+                &[constants.as_str(), LOSS_COMMON, LOSS_INPUTS, LOSS_CONTENT],
+                "loss_tile_content",
+            )?,
+            tile_distance: kernel(
+                "loss_tile_distance",
+                &[constants.as_str(), LOSS_COMMON, LOSS_SKIP, LOSS_DISTANCE],
+                "loss_tile_distance",
+            )?,
             no_mask: ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("loss no mask"),
                 size: 16,
@@ -252,6 +286,8 @@ impl RenderLoss {
             ssim_partials: storage("loss ssim partials", pixels * PARTIALS_BYTES_PER_PIXEL),
             row_partials: storage("loss row partials", pixels * PARTIALS_BYTES_PER_PIXEL),
             loss_partials: storage("loss partial sums", tiles * 4),
+            tile_content: storage("loss tile content", tiles * 4),
+            tile_distance: storage("loss tile distance", tiles * 4),
         });
         Ok(())
     }
@@ -301,6 +337,26 @@ impl RenderLoss {
             });
         let object_ids = target_mask.map_or(&self.no_mask, |mask| mask.object_ids);
         let inputs = [&params, rendered, target, object_ids];
+        if target_mask.is_some() {
+            let bind = self.tile_content.bind(
+                ctx,
+                &[
+                    inputs[0],
+                    inputs[1],
+                    inputs[2],
+                    inputs[3],
+                    &scratch.tile_content,
+                ],
+            );
+            self.tile_content.dispatch(encoder, &bind, groups);
+            let bind = self.tile_distance.bind(
+                ctx,
+                &[&params, &scratch.tile_content, &scratch.tile_distance],
+            );
+            let tiles = groups[0] * groups[1];
+            self.tile_distance
+                .dispatch(encoder, &bind, [tiles.div_ceil(64), 1, 1]);
+        }
 
         let bind = self.moments_horizontal.bind(
             ctx,
@@ -310,6 +366,7 @@ impl RenderLoss {
                 inputs[2],
                 inputs[3],
                 &scratch.row_moments,
+                &scratch.tile_distance,
             ],
         );
         self.moments_horizontal.dispatch(encoder, &bind, groups);
@@ -323,12 +380,18 @@ impl RenderLoss {
                 &scratch.row_moments,
                 &scratch.ssim_partials,
                 &scratch.loss_partials,
+                &scratch.tile_distance,
             ],
         );
         self.per_pixel.dispatch(encoder, &bind, groups);
         let bind = self.partials_horizontal.bind(
             ctx,
-            &[&params, &scratch.ssim_partials, &scratch.row_partials],
+            &[
+                &params,
+                &scratch.ssim_partials,
+                &scratch.row_partials,
+                &scratch.tile_distance,
+            ],
         );
         self.partials_horizontal.dispatch(encoder, &bind, groups);
         let bind = self.gradient.bind(
@@ -340,6 +403,7 @@ impl RenderLoss {
                 inputs[3],
                 &scratch.row_partials,
                 outputs.rendered_grad,
+                &scratch.tile_distance,
             ],
         );
         self.gradient.dispatch(encoder, &bind, groups);

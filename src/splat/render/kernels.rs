@@ -12,6 +12,10 @@ const TILE_COUNT_IN_DEPTH_ORDER: &str =
 const TILE_BUDGET: &str = include_str!("../../../shaders/tile_budget.wgsl");
 const TILE_EMIT: &str = include_str!("../../../shaders/tile_emit.wgsl");
 const TILE_FOOTPRINT: &str = include_str!("../../../shaders/tile_footprint.wgsl");
+const RENDER_SLOTS: &str = include_str!("../../../shaders/render_slots.wgsl");
+const OBJECT_TILE_COUNT: &str = include_str!("../../../shaders/object_tile_count.wgsl");
+const TILE_EMIT_SPLAT: &str = include_str!("../../../shaders/tile_emit_splat.wgsl");
+const OBJECT_TILE_EMIT: &str = include_str!("../../../shaders/object_tile_emit.wgsl");
 const TILE_RANGES: &str = include_str!("../../../shaders/tile_ranges.wgsl");
 const RASTERIZE_BATCH: &str = include_str!("../../../shaders/rasterize_batch.wgsl");
 const RASTERIZE_LANE_CHUNK: &str = include_str!("../../../shaders/rasterize_lane_chunk.wgsl");
@@ -42,6 +46,8 @@ pub struct RenderKernels {
     pub tile_count_in_depth_order: Kernel,
     pub tile_budget: Kernel,
     pub tile_emit: Kernel,
+    pub object_tile_count: Kernel,
+    pub object_tile_emit: Kernel,
     pub tile_ranges: Kernel,
     pub rasterize_forward: Kernel,
     pub rasterize_backward: Kernel,
@@ -163,8 +169,18 @@ impl RenderKernels {
             tile_budget: build("tile_budget", &[COMMON, TILE_BUDGET], "tile_budget")?,
             tile_emit: build(
                 "tile_emit",
-                &[COMMON, TILE_FOOTPRINT, TILE_EMIT],
+                &[COMMON, TILE_FOOTPRINT, TILE_EMIT_SPLAT, TILE_EMIT],
                 "tile_emit",
+            )?,
+            object_tile_count: build(
+                "object_tile_count",
+                &[COMMON, OBJECT_TILE_COUNT],
+                "object_tile_count",
+            )?,
+            object_tile_emit: build(
+                "object_tile_emit",
+                &[COMMON, TILE_FOOTPRINT, TILE_EMIT_SPLAT, OBJECT_TILE_EMIT],
+                "object_tile_emit",
             )?,
             tile_ranges: build(
                 "tile_ranges",
@@ -177,6 +193,7 @@ impl RenderKernels {
                     COMMON,
                     TILE_FOOTPRINT,
                     RASTERIZE_FORWARD_COMMON,
+                    RENDER_SLOTS,
                     walk,
                     forward_body,
                 ],
@@ -189,6 +206,7 @@ impl RenderKernels {
                     COMMON,
                     TILE_FOOTPRINT,
                     RASTERIZE_BACKWARD_COMMON,
+                    RENDER_SLOTS,
                     walk,
                     GRAD_FRAGMENT,
                     grad_emit,

@@ -25,15 +25,21 @@
 //! screen-space gradients), then `project_backward.wgsl` (geometry) and `sh_backward.wgsl`
 //! (colour), which ADD into [`GpuGaussianGrads`](crate::splat::GpuGaussianGrads).
 //!
+//! Object renders of one camera (the Segment-then-Splat object loss) batch on top of that
+//! camera's full render, sharing its projection, depth order and projection backward
+//! ([`Renderer::forward_objects`], module `object_batch`).
+//!
 //! No CPU read-back happens in `forward` or `backward`: counts stay on the GPU and
 //! intersection-dependent work is dispatched indirectly. See [`Renderer`] for the capacity policy.
 
 mod kernels;
+mod object_batch;
 mod renderer;
 mod uniforms;
 mod workspace;
 
 pub use kernels::{RASTER_KERNEL_ENV, RasterVariant};
+pub use object_batch::{ObjectBatchError, ObjectBatchOutput, ObjectSlot};
 pub use renderer::{CapacityReport, RenderError, RenderOutput, Renderer};
 pub use uniforms::RenderUniforms;
 pub use workspace::GRAD_STRIDE;

@@ -34,6 +34,8 @@ pub enum RenderError {
     CapacityNotConverging { attempts: usize },
     #[error("camera image is empty ({width}x{height})")]
     EmptyImage { width: u32, height: u32 },
+    #[error(transparent)]
+    ObjectBatch(#[from] super::object_batch::ObjectBatchError),
     #[error(
         "a render needs {needed} tile intersections but one storage binding holds at most {limit}; \
          lower the resolution or the Gaussian count"
@@ -67,8 +69,8 @@ const RENDER_ATTEMPTS: usize = 3;
 /// buffers to the renderer's pool.
 #[derive(Debug)]
 pub struct RenderOutput {
-    workspace: Option<RenderWorkspace>,
-    pool: Arc<WorkspacePool>,
+    pub(super) workspace: Option<RenderWorkspace>,
+    pub(super) pool: Arc<WorkspacePool>,
     pub camera: RenderCamera,
     pub settings: RenderSettings,
     pub gaussian_count: u32,
@@ -83,7 +85,7 @@ impl Drop for RenderOutput {
 }
 
 impl RenderOutput {
-    fn workspace(&self) -> &RenderWorkspace {
+    pub(super) fn workspace(&self) -> &RenderWorkspace {
         // Only `drop` takes the workspace out.
         self.workspace
             .as_ref()
@@ -145,12 +147,12 @@ impl RenderOutput {
 /// 1.5x the peak once the peak passes 80% and reports whether any render overflowed, so an
 /// overflow is never silent.
 pub struct Renderer {
-    kernels: RenderKernels,
-    scan: ExclusiveScan,
-    sort: RadixSort,
-    pool: Arc<WorkspacePool>,
+    pub(super) kernels: RenderKernels,
+    pub(super) scan: ExclusiveScan,
+    pub(super) sort: RadixSort,
+    pub(super) pool: Arc<WorkspacePool>,
     /// One u32: running maximum of unclamped intersection counts since the last sync.
-    peak_intersections: wgpu::Buffer,
+    pub(super) peak_intersections: wgpu::Buffer,
     intersection_capacity: u32,
     /// Smallest capacity any render used since the last sync.
     smallest_capacity_used: Option<u32>,
@@ -200,7 +202,7 @@ impl Renderer {
         self.pool.retire_smaller_than(self.intersection_capacity);
     }
 
-    fn max_intersections(ctx: &GpuContext) -> u64 {
+    pub(super) fn max_intersections(ctx: &GpuContext) -> u64 {
         ctx.limits.max_storage_buffer_binding_size / 4
     }
 
@@ -222,26 +224,14 @@ impl Renderer {
         }
         let gaussians: GaussianView<'_> = gaussians.into();
         let count = gaussians.count;
-        let limit = Self::max_intersections(ctx);
-        let wanted = (count * INITIAL_INTERSECTIONS_PER_GAUSSIAN) as u64;
-        let capacity = (self.intersection_capacity as u64)
-            .max(wanted)
-            .min(limit)
-            .min(u32::MAX as u64) as u32;
-        self.intersection_capacity = capacity;
         let [tiles_x, tiles_y] = camera.tile_grid();
-        let size = WorkspaceSize {
-            gaussians: gaussians.capacity.max(1),
-            pixels: camera.pixel_count(),
-            tiles: (tiles_x * tiles_y) as usize,
-            intersections: capacity,
-        };
-        let workspace = self.pool.take(ctx, size)?;
+        let workspace = self.take_workspace(
+            ctx,
+            gaussians,
+            camera.pixel_count(),
+            (tiles_x * tiles_y) as usize,
+        )?;
         let workspace_capacity = workspace.size.intersections;
-        self.smallest_capacity_used = Some(
-            self.smallest_capacity_used
-                .map_or(workspace_capacity, |c| c.min(workspace_capacity)),
-        );
         let uniforms = RenderUniforms::new(camera, settings, count as u32, workspace_capacity);
         self.upload_uniforms(ctx, encoder, &workspace, &uniforms);
         encoder.clear_buffer(&workspace.tile_ranges, 0, None);
@@ -280,9 +270,40 @@ impl Renderer {
         })
     }
 
+    /// A pooled workspace for a render of `gaussians` over `pixels` and `tiles` (all slots of a
+    /// batched render), with the current intersection capacity, recorded for the next sync.
+    pub(super) fn take_workspace(
+        &mut self,
+        ctx: &GpuContext,
+        gaussians: GaussianView<'_>,
+        pixels: usize,
+        tiles: usize,
+    ) -> Result<RenderWorkspace, RenderError> {
+        let limit = Self::max_intersections(ctx);
+        let wanted = (gaussians.count * INITIAL_INTERSECTIONS_PER_GAUSSIAN) as u64;
+        let capacity = (self.intersection_capacity as u64)
+            .max(wanted)
+            .min(limit)
+            .min(u32::MAX as u64) as u32;
+        self.intersection_capacity = capacity;
+        let size = WorkspaceSize {
+            gaussians: gaussians.capacity.max(1),
+            pixels,
+            tiles,
+            intersections: capacity,
+        };
+        let workspace = self.pool.take(ctx, size)?;
+        let workspace_capacity = workspace.size.intersections;
+        self.smallest_capacity_used = Some(
+            self.smallest_capacity_used
+                .map_or(workspace_capacity, |c| c.min(workspace_capacity)),
+        );
+        Ok(workspace)
+    }
+
     /// Writes the uniforms and the Gaussian count through the encoder (not `queue.write_buffer`),
     /// so several renders recorded into one encoder each see their own values.
-    fn upload_uniforms(
+    pub(super) fn upload_uniforms(
         &self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
@@ -474,8 +495,24 @@ impl Renderer {
         );
         k.rasterize_backward
             .dispatch(encoder, &rasterize, [tiles_x, tiles_y, 1]);
+        self.encode_projection_backward(ctx, encoder, gaussians, workspace, count as u32, grads);
+        Ok(())
+    }
+
+    /// The backward of the projection (geometry, then colour) from `workspace.grad_projected`,
+    /// adding into `grads`. Runs once per set of rasterize backwards that share the projection.
+    pub(super) fn encode_projection_backward(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        gaussians: GaussianView<'_>,
+        workspace: &RenderWorkspace,
+        count: u32,
+        grads: &mut GpuGaussianGrads,
+    ) {
+        let k = &self.kernels;
         let per_gaussian = workgroups_2d(
-            workgroups_for(count as u32, 256),
+            workgroups_for(count, 256),
             ctx.limits.max_compute_workgroups_per_dimension,
         );
         let p = gaussians;
@@ -517,7 +554,6 @@ impl Renderer {
             ],
         );
         k.sh_backward.dispatch(encoder, &colour, per_gaussian);
-        Ok(())
     }
 
     /// Reads the peak intersection count of the renders since the last sync (one small

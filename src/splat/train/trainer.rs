@@ -8,7 +8,9 @@
 //! on the CPU (every 100 steps; see `splat::densify`).
 
 mod dynamics;
+mod object_separate;
 mod object_step;
+mod partial_filter;
 
 use std::collections::BTreeSet;
 use std::time::Instant;
@@ -139,6 +141,9 @@ pub struct Trainer {
     steps_at_start: u32,
     /// The deformation field of a dynamic scene.
     dynamics: Option<dynamics::Dynamics>,
+    /// Object renders one by one instead of batched (the reference path).
+    separate_object_renders: bool,
+    object_buffers: object_step::ObjectBuffers,
 }
 
 /// The initial model for a scene: its sparse points, or random points in the cameras' bounds.
@@ -256,6 +261,8 @@ impl Trainer {
             started: Instant::now(),
             steps_at_start: 0,
             dynamics: None,
+            separate_object_renders: false,
+            object_buffers: object_step::ObjectBuffers::default(),
         };
         trainer.rng = ChaCha8Rng::seed_from_u64(trainer.config.seed);
         if let Some(deformation) = trainer.config.deformation.clone() {
@@ -389,8 +396,9 @@ impl Trainer {
             count,
             [camera.width, camera.height],
         );
+        // The object renders reuse the full render's projection and depth order.
+        self.encode_object_losses(&mut encoder, view_index, sh_degree, &output)?;
         drop(output);
-        self.encode_object_losses(&mut encoder, view_index, sh_degree)?;
         self.encode_deform_backward_and_step(&mut encoder, step)?;
         self.encode_adam(&mut encoder, step, count, sh_degree)?;
         self.ctx.queue.submit([encoder.finish()]);

@@ -1,17 +1,13 @@
-//! The trainer's Segment-then-Splat extension: object renders inside each step, and the
-//! partial-mask filter (see [`crate::splat::train::object_loss`]).
+//! The trainer's Segment-then-Splat extension: the object renders inside each step (see
+//! [`crate::splat::train::object_loss`]), batched on the step's full render
+//! ([`Renderer::forward_objects`](crate::splat::render::Renderer::forward_objects)). The
+//! separate per-object renders they replace stay as the reference (`object_separate.rs`).
 
 use super::{TrainError, Trainer};
 use crate::scene::Level;
 use crate::splat::loss::{LossImages, LossOutputs, ObjectMask};
-use crate::splat::train::object_loss::{
-    ObjectTargets, SkippedPair, rendered_mask_iou, sample_objects,
-};
-use crate::splat::{ObjectFilter, RenderSettings};
-
-/// Object renders recorded per submission while filtering partial masks (bounds the number of
-/// render workspaces alive at once).
-const PARTIAL_FILTER_BATCH: usize = 16;
+use crate::splat::render::{ObjectSlot, RenderOutput};
+use crate::splat::train::object_loss::{ObjectTargets, SkippedPair, sample_objects};
 
 #[derive(Debug, thiserror::Error)]
 pub enum ObjectTargetsError {
@@ -65,20 +61,21 @@ impl Trainer {
         self.skipped_pairs.iter().copied().collect()
     }
 
-    /// Records the object renders of one step: for each active level, `m` objects of the view
-    /// rendered alone on black, each with its own loss slot, backward adding into the gradients.
-    pub(super) fn encode_object_losses(
-        &mut self,
-        encoder: &mut wgpu::CommandEncoder,
-        view_index: usize,
-        sh_degree: u32,
-    ) -> Result<(), TrainError> {
+    /// Renders each step's objects separately (the path before batching: every object
+    /// re-projected, re-sorted and back-propagated alone) rather than batched on the step's full
+    /// render. Same gradients up to float-atomic order; for tests and benchmarks.
+    pub fn set_separate_object_renders(&mut self, separate: bool) {
+        self.separate_object_renders = separate;
+    }
+
+    /// This step's object slots: for each active level, `m` objects of the view (not skipped
+    /// by the partial-mask filter), drawn from the trainer's RNG.
+    fn sample_object_slots(&mut self, view_index: usize) -> Vec<ObjectSlot> {
         let (Some(config), Some(targets)) = (&self.config.object_loss, &self.object_targets) else {
-            return Ok(());
+            return Vec::new();
         };
         let masks = &targets.views[view_index];
-        let view = &self.views.train[view_index];
-        let mut slot = 1;
+        let mut slots = Vec::new();
         for level in config.active_levels(self.step, self.config.steps) {
             let skipped = &self.skipped_pairs;
             let objects = sample_objects(
@@ -93,147 +90,111 @@ impl Trainer {
                 },
                 &mut self.rng,
             );
-            for object_id in objects {
-                let settings = RenderSettings {
-                    filter: ObjectFilter::Object {
-                        level,
-                        id: object_id,
-                    },
-                    background: [0.0; 3],
-                    sh_degree,
-                };
-                let scene = super::dynamics::render_view(&self.gaussians, &self.dynamics);
-                let output =
-                    self.renderer
-                        .forward(&self.ctx, encoder, scene, &view.camera, &settings)?;
-                self.loss.encode(
-                    &self.ctx,
-                    encoder,
-                    &LossImages {
-                        rendered: output.image(),
-                        target: &view.target,
-                        target_mask: Some(ObjectMask {
-                            object_ids: &masks.ids[level.index()],
-                            object_id,
-                        }),
-                        width: view.camera.width,
-                        height: view.camera.height,
-                    },
-                    config.weight,
-                    &LossOutputs {
-                        rendered_grad: &self.grad_image,
-                        loss_values: &self.loss_values,
-                        loss_slot: slot,
-                    },
-                )?;
-                self.renderer.backward(
-                    &self.ctx,
-                    encoder,
-                    scene,
-                    &output,
-                    &self.grad_image,
-                    &mut self.grads,
-                )?;
-                slot += 1;
-            }
+            slots.extend(objects.into_iter().map(|id| ObjectSlot { level, id }));
         }
-        Ok(())
+        slots
     }
 
-    /// Whether the partial-mask filter runs after `step`.
-    pub(super) fn partial_filter_due(&self, step: u32) -> bool {
-        match (&self.config.object_loss, &self.object_targets) {
-            (Some(config), Some(_)) => step == config.partial_filter_step(self.config.steps),
-            _ => false,
+    /// Records the object renders of one step: this step's object slots, each rendered alone on
+    /// black with its own loss slot, on top of `base` (the step's full render, whose backward is
+    /// already recorded), backward adding into the gradients.
+    pub(super) fn encode_object_losses(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        view_index: usize,
+        sh_degree: u32,
+        base: &RenderOutput,
+    ) -> Result<(), TrainError> {
+        let slots = self.sample_object_slots(view_index);
+        if slots.is_empty() {
+            return Ok(());
         }
-    }
-
-    /// Renders every (object, view) pair alone and leaves out those whose rendered mask
-    /// (alpha > 0.5) has IoU below the threshold with the 2D mask: that mask shows the object
-    /// only in part (occluded or cut), and fitting it would carve the object. Runs once, at the
-    /// configured point of training; its read-backs are the one CPU round trip it costs.
-    pub(super) fn filter_partial_masks(&mut self, sh_degree: u32) -> Result<(), TrainError> {
+        if self.separate_object_renders {
+            return self.encode_separate_object_losses(encoder, view_index, sh_degree, &slots);
+        }
+        let camera = self.views.train[view_index].camera;
+        self.object_buffers
+            .reserve(&self.ctx, camera.pixel_count(), slots.len());
         let (Some(config), Some(targets)) = (&self.config.object_loss, &self.object_targets) else {
             return Ok(());
         };
-        let threshold = config.partial_iou_threshold;
-        let pairs: Vec<SkippedPair> = collect_pairs(targets);
-        let mut newly_skipped = Vec::new();
-        // Dynamic scenes: the geometry is deformed to each view's time before its renders.
-        let mut deformed_time = None;
-        for batch in pairs.chunks(PARTIAL_FILTER_BATCH) {
-            let mut encoder =
-                self.ctx
-                    .device
-                    .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                        label: Some("partial mask filter"),
-                    });
-            let mut outputs = Vec::with_capacity(batch.len());
-            for pair in batch {
-                let settings = RenderSettings {
-                    filter: ObjectFilter::Object {
-                        level: pair.level,
-                        id: pair.object_id,
-                    },
-                    background: [0.0; 3],
-                    sh_degree,
-                };
-                let view = &self.views.train[pair.train_view];
-                let camera = view.camera;
-                if self.dynamics.is_some() && deformed_time != Some(view.time) {
-                    super::dynamics::deform_to(
-                        &self.ctx,
-                        self.step,
-                        &mut self.dynamics,
-                        &self.gaussians,
-                        &mut encoder,
-                        view.time,
-                    )?;
-                    deformed_time = Some(view.time);
-                }
-                outputs.push(self.renderer.forward(
-                    &self.ctx,
-                    &mut encoder,
-                    super::dynamics::render_view(&self.gaussians, &self.dynamics),
-                    &camera,
-                    &settings,
-                )?);
-            }
-            self.ctx.queue.submit([encoder.finish()]);
-            for (pair, output) in batch.iter().zip(&outputs) {
-                let image = output.read_image(&self.ctx)?;
-                let ids = &targets.views[pair.train_view].ids_cpu[pair.level.index()];
-                let alpha = image.iter().take(ids.len()).map(|pixel| pixel[3]);
-                if rendered_mask_iou(alpha, ids, pair.object_id) < threshold {
-                    newly_skipped.push(*pair);
-                }
-            }
+        let (Some(image), Some(grad_images)) =
+            (&self.object_buffers.image, &self.object_buffers.grad_images)
+        else {
+            return Ok(());
+        };
+        let masks = &targets.views[view_index];
+        let view = &self.views.train[view_index];
+        let scene = super::dynamics::render_view(&self.gaussians, &self.dynamics);
+        let batch = self
+            .renderer
+            .forward_objects(&self.ctx, encoder, scene, base, &slots)?;
+        let bytes = batch.slot_image_bytes();
+        for (index, slot) in slots.iter().enumerate() {
+            // The loss kernels read and write whole images: each slot goes through one
+            // image-sized buffer (copies, not dispatches).
+            let offset = index as u64 * bytes;
+            encoder.copy_buffer_to_buffer(batch.images(), offset, image, 0, bytes);
+            self.loss.encode(
+                &self.ctx,
+                encoder,
+                &LossImages {
+                    rendered: image,
+                    target: &view.target,
+                    target_mask: Some(ObjectMask {
+                        object_ids: &masks.ids[slot.level.index()],
+                        object_id: slot.id,
+                    }),
+                    width: camera.width,
+                    height: camera.height,
+                },
+                config.weight,
+                &LossOutputs {
+                    rendered_grad: &self.grad_image,
+                    loss_values: &self.loss_values,
+                    loss_slot: 1 + index as u32,
+                },
+            )?;
+            encoder.copy_buffer_to_buffer(&self.grad_image, 0, grad_images, offset, bytes);
         }
-        tracing::info!(
-            checked = pairs.len(),
-            skipped = newly_skipped.len(),
-            "partial-mask filter"
-        );
-        self.skipped_pairs.extend(newly_skipped);
+        self.renderer.backward_objects(
+            &self.ctx,
+            encoder,
+            scene,
+            &batch,
+            grad_images,
+            &mut self.grads,
+        )?;
         Ok(())
     }
 }
 
-fn collect_pairs(targets: &ObjectTargets) -> Vec<SkippedPair> {
-    targets
-        .views
-        .iter()
-        .enumerate()
-        .flat_map(|(train_view, masks)| {
-            Level::ALL.into_iter().flat_map(move |level| {
-                masks.present[level.index()]
-                    .iter()
-                    .map(move |&object_id| SkippedPair {
-                        train_view,
-                        level,
-                        object_id,
-                    })
-            })
-        })
-        .collect()
+/// The step's object images and their loss gradients, grown on demand (a trainer without the
+/// object loss never allocates them).
+#[derive(Debug, Default)]
+pub(super) struct ObjectBuffers {
+    /// One slot's image, as the loss reads it.
+    image: Option<wgpu::Buffer>,
+    /// Every slot's d loss / d image, slot after slot, as the batched backward reads them.
+    grad_images: Option<wgpu::Buffer>,
+}
+
+impl ObjectBuffers {
+    fn reserve(&mut self, ctx: &crate::gpu::GpuContext, pixels: usize, slots: usize) {
+        let image_bytes = pixels as u64 * 16;
+        grow(ctx, &mut self.image, "object image", image_bytes);
+        grow(
+            ctx,
+            &mut self.grad_images,
+            "object grad images",
+            image_bytes * slots as u64,
+        );
+    }
+}
+
+fn grow(ctx: &crate::gpu::GpuContext, buffer: &mut Option<wgpu::Buffer>, label: &str, bytes: u64) {
+    if buffer.as_ref().is_some_and(|b| b.size() >= bytes) {
+        return;
+    }
+    *buffer = Some(super::storage_buffer(ctx, label, bytes));
 }
