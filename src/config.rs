@@ -50,6 +50,7 @@ pub struct Config {
     pub workers: WorkersConfig,
     pub models: ModelsConfig,
     pub query: QueryConfig,
+    pub storage: StorageConfig,
     pub log: LogConfig,
 }
 
@@ -66,7 +67,28 @@ impl Default for Config {
             workers: WorkersConfig::default(),
             models: ModelsConfig::default(),
             query: QueryConfig::default(),
+            storage: StorageConfig::default(),
             log: LogConfig::default(),
+        }
+    }
+}
+
+/// Reclaiming leftovers of killed processes (`jobs::temp_sweep`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct StorageConfig {
+    /// A temporary file whose writer cannot be told dead (another host, an old name) is removed
+    /// once untouched this long.
+    pub temp_max_age_secs: u64,
+    /// How often the sweep runs after the one at start.
+    pub sweep_interval_secs: u64,
+}
+
+impl Default for StorageConfig {
+    fn default() -> Self {
+        Self {
+            temp_max_age_secs: 86_400,
+            sweep_interval_secs: 600,
         }
     }
 }
@@ -87,6 +109,10 @@ pub struct LimitsConfig {
     pub max_unpacked_bytes: u64,
     /// Most files an archive may hold.
     pub max_files: u64,
+    /// Most pixels one uploaded frame image may have (read from its header before decoding).
+    pub max_image_pixels: u64,
+    /// Most pixels an upload's frame images may have together.
+    pub max_total_pixels: u64,
 }
 
 impl Default for LimitsConfig {
@@ -95,6 +121,8 @@ impl Default for LimitsConfig {
             max_upload_bytes: 2 << 30,
             max_unpacked_bytes: 8 << 30,
             max_files: 100_000,
+            max_image_pixels: 100_000_000,
+            max_total_pixels: 20_000_000_000,
         }
     }
 }
@@ -124,10 +152,22 @@ pub struct JobsConfig {
     pub lease_secs: f64,
     /// How often a worker renews its lease; well under `lease_secs`.
     pub heartbeat_secs: f64,
-    /// Claims per job before it fails for good.
+    /// Claims per job before it fails for good, counting those that ended in an error and lease
+    /// expiries without a new checkpoint.
     pub max_attempts: u32,
+    /// Lease expiries after which the job had saved a newer checkpoint (the process died while
+    /// the job progressed) before it fails for good; they do not count against `max_attempts`.
+    pub max_lease_expiries: u32,
     /// How often an idle worker looks for work (it is also woken when a job is queued here).
     pub poll_interval_ms: u64,
+    /// Largest `steps` a job config may ask for.
+    pub max_steps: u64,
+    /// Largest `max_gaussians`, `random_init_count` and `background_shell` a job config may ask
+    /// for.
+    pub max_gaussians: u64,
+    /// Keep a succeeded job's checkpoints (off: deleted once it succeeds; they only serve a
+    /// resume and can be hundreds of MB).
+    pub keep_final_checkpoint: bool,
 }
 
 impl Default for JobsConfig {
@@ -136,7 +176,11 @@ impl Default for JobsConfig {
             lease_secs: 60.0,
             heartbeat_secs: 10.0,
             max_attempts: 3,
+            max_lease_expiries: 10,
             poll_interval_ms: 1000,
+            keep_final_checkpoint: false,
+            max_steps: 1_000_000,
+            max_gaussians: 10_000_000,
         }
     }
 }
@@ -152,6 +196,12 @@ pub struct WorkersConfig {
     pub adapters: AdapterFilter,
     /// Workers without a GPU, for job kinds that do not need one.
     pub cpu_slots: u32,
+    /// A stable name for this process's workers (lease owners are `{instance_id}/{slot}`). A
+    /// process starting under it re-queues that name's running jobs at once instead of waiting
+    /// for their leases to run out, so it must be unique among processes sharing a data dir.
+    /// Unset: `{host}-pid{pid}-{random}`, and a stopped process's jobs on the same host are
+    /// re-queued as soon as it is seen to be gone.
+    pub instance_id: Option<String>,
 }
 
 impl Default for WorkersConfig {
@@ -161,6 +211,7 @@ impl Default for WorkersConfig {
             slots_per_adapter: 1,
             adapters: AdapterFilter::default(),
             cpu_slots: 0,
+            instance_id: None,
         }
     }
 }
@@ -366,8 +417,19 @@ impl Config {
         if self.jobs.max_attempts == 0 {
             return invalid("jobs.max_attempts", "must be >= 1");
         }
+        if self.storage.sweep_interval_secs == 0 {
+            return invalid("storage.sweep_interval_secs", "must be >= 1");
+        }
+        if self.jobs.max_lease_expiries == 0 {
+            return invalid("jobs.max_lease_expiries", "must be >= 1");
+        }
         if self.jobs.poll_interval_ms == 0 {
             return invalid("jobs.poll_interval_ms", "must be > 0");
+        }
+        if let Some(instance_id) = &self.workers.instance_id
+            && (instance_id.trim().is_empty() || instance_id.contains('/'))
+        {
+            return invalid("workers.instance_id", "must be non-empty and without '/'");
         }
         if self.workers.slots_per_adapter == 0 {
             return invalid("workers.slots_per_adapter", "must be >= 1");

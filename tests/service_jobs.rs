@@ -400,3 +400,268 @@ async fn shutdown_hands_running_jobs_back_and_the_next_run_resumes_from_the_chec
     );
     second.shutdown().await;
 }
+
+/// Claims the job as a worker that saves a checkpoint and then dies, and waits until the reaper
+/// has dealt with the expired lease.
+async fn crash_after_a_checkpoint(service: &TestService, job_id: &str, worker: &str) {
+    let database = service.service.database();
+    let claimed = database
+        .claim_job(worker, &[STEPS_KIND], 100)
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(claimed.id, job_id);
+    assert!(database.record_checkpoint(job_id, worker).await.unwrap());
+    let started = std::time::Instant::now();
+    while database.get_job(job_id).await.unwrap().unwrap().state == JobState::Running {
+        assert!(started.elapsed() < WAIT, "the lease never expired");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
+#[tokio::test]
+async fn crashes_after_progress_are_not_counted_as_attempts_but_are_bounded() {
+    let dir = tempfile::tempdir().unwrap();
+    let handler = StepsHandler::new();
+    let mut config = test_config(dir.path());
+    config.jobs.max_attempts = 3;
+    config.jobs.max_lease_expiries = 5;
+    config.workers.cpu_slots = 0;
+    let service = TestService::start(config, vec![Arc::new(handler.clone())]).await;
+    let scene_id = service.upload_test_scene().await;
+
+    // Three process crashes, each after a new checkpoint: still queued, no attempt used.
+    let job_id = service.create_job(&scene_id, STEPS_KIND, json!({})).await;
+    for crash in 0..3 {
+        crash_after_a_checkpoint(&service, &job_id, &format!("crashing-{crash}/0")).await;
+        let job = service.job(&job_id).await;
+        assert_eq!(job["state"], "queued", "{job}");
+        assert_eq!(job["attempts"], 0, "{job}");
+        assert_eq!(job["lease_expiries"], crash + 1, "{job}");
+        assert!(
+            job["error"]
+                .as_str()
+                .is_some_and(|error| error.contains("not counted as an attempt")),
+            "{job}"
+        );
+    }
+
+    // A job that crashes its worker every time still ends, naming the bound.
+    for crash in 3..5 {
+        crash_after_a_checkpoint(&service, &job_id, &format!("crashing-{crash}/0")).await;
+    }
+    let job = service.job(&job_id).await;
+    assert_eq!(job["state"], "failed", "{job}");
+    assert!(job["finished_at_ms"].is_i64(), "{job}");
+    let error = job["error"].as_str().unwrap();
+    assert!(error.contains("jobs.max_lease_expiries = 5"), "{error}");
+
+    // A running handler's checkpoints are noted on the job.
+    let worker = start_worker_process(dir.path(), &handler).await;
+    let job_id = service
+        .create_job(&scene_id, STEPS_KIND, json!({"steps": 200, "step_ms": 20}))
+        .await;
+    let started = std::time::Instant::now();
+    loop {
+        let job = service
+            .service
+            .database()
+            .get_job(&job_id)
+            .await
+            .unwrap()
+            .unwrap();
+        if job.state == JobState::Running && job.checkpointed_this_attempt {
+            break;
+        }
+        assert!(started.elapsed() < WAIT, "checkpoint never noted: {job:?}");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    service
+        .post_json(&format!("/v1/jobs/{job_id}/cancel"), json!({}))
+        .await;
+    service.wait_for_state(&job_id, "cancelled", WAIT).await;
+    worker.shutdown().await;
+    service.shutdown().await;
+}
+
+#[tokio::test]
+async fn a_restart_takes_back_its_own_and_dead_local_processes_jobs_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let handler = StepsHandler::new();
+    let hour_ms = 3_600_000;
+    let api = start_with(dir.path(), 0, &handler).await;
+    let scene_id = api.upload_test_scene().await;
+    let mut jobs = Vec::new();
+    for _ in 0..3 {
+        jobs.push(api.create_job(&scene_id, STEPS_KIND, json!({})).await);
+    }
+    api.shutdown().await;
+    // Processes that held the leases and are gone; the leases would last an hour. Claims take
+    // the oldest queued job, so the owners go in creation order.
+    let database = Database::open(&dir.path().join("segsplat.db"))
+        .await
+        .unwrap();
+    // A pid above the kernel's limit: a process on this host that is certainly gone.
+    let dead_local = format!("{}-pid4294967-0badf00d/0", segsplat::jobs::host_name());
+    let owners = ["box-1/0", dead_local.as_str(), "other-host-pid7-0badf00d/0"];
+    for (job_id, owner) in jobs.iter().zip(owners) {
+        let claimed = database
+            .claim_job(owner, &[STEPS_KIND], hour_ms)
+            .await
+            .unwrap()
+            .unwrap();
+        assert_eq!(&claimed.id, job_id);
+    }
+    database.close().await;
+    let (own, local, foreign) = (&jobs[0], &jobs[1], &jobs[2]);
+
+    let mut config = test_config(dir.path());
+    config.workers.instance_id = Some("box-1".to_string());
+    let service = TestService::start(config, vec![Arc::new(handler.clone())]).await;
+    for job_id in [own, local] {
+        let job = service.wait_for_state(job_id, "succeeded", WAIT).await;
+        assert_eq!(job["attempts"], 2, "{job}");
+    }
+    // Another host's lease is left to run out.
+    let job = service.job(foreign).await;
+    assert_eq!(job["state"], "running", "{job}");
+    assert_eq!(job["lease_owner"], "other-host-pid7-0badf00d/0", "{job}");
+    service.shutdown().await;
+}
+
+#[tokio::test]
+async fn a_succeeded_jobs_checkpoints_are_deleted_unless_kept() {
+    for keep in [false, true] {
+        let dir = tempfile::tempdir().unwrap();
+        let handler = StepsHandler::new();
+        let mut config = test_config(dir.path());
+        config.jobs.keep_final_checkpoint = keep;
+        let service = TestService::start(config, vec![Arc::new(handler.clone())]).await;
+        let scene_id = service.upload_test_scene().await;
+        let job_id = service.create_job(&scene_id, STEPS_KIND, json!({})).await;
+        service.wait_for_state(&job_id, "succeeded", WAIT).await;
+        // The deletion follows the recorded outcome; give it a moment.
+        let checkpoints = dir.path().join(format!("blobs/jobs/{job_id}/checkpoints"));
+        let started = std::time::Instant::now();
+        while !keep && !common::files_under(&checkpoints).is_empty() {
+            assert!(started.elapsed() < WAIT, "checkpoints kept");
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        tokio::time::sleep(Duration::from_millis(200)).await;
+        assert_eq!(
+            common::files_under(&checkpoints).is_empty(),
+            !keep,
+            "keep_final_checkpoint = {keep}: {:?}",
+            common::files_under(&checkpoints)
+        );
+        service.shutdown().await;
+    }
+}
+
+#[tokio::test]
+async fn a_start_reclaims_leftovers_of_stopped_processes_and_nothing_live() {
+    let dir = tempfile::tempdir().unwrap();
+    let tmp = dir.path().join("tmp");
+    let checkpoints = dir.path().join("blobs/jobs/j1/checkpoints");
+    std::fs::create_dir_all(&tmp).unwrap();
+    std::fs::create_dir_all(&checkpoints).unwrap();
+    let host = segsplat::jobs::host_name();
+    // A pid above the kernel's limit: a process on this host that is certainly gone.
+    let dead = format!("{host}-pid4294967");
+    let live = format!("{host}-pid{}", std::process::id());
+    let write = |path: std::path::PathBuf| {
+        std::fs::write(&path, b"partial").unwrap();
+        path
+    };
+    let unpack = tmp.join(format!("unpack-{dead}-Ab12Cd"));
+    std::fs::create_dir_all(unpack.join("images")).unwrap();
+    write(unpack.join("images/0.png"));
+    let removed = [
+        write(tmp.join(format!("upload-{dead}-Xy34Zw"))),
+        unpack,
+        {
+            let job_dir = tmp.join("job-0190aaaa-bbbb-7ccc-8ddd-eeeeffff0000-1");
+            std::fs::create_dir_all(&job_dir).unwrap();
+            job_dir
+        },
+        write(checkpoints.join(format!(".step.segsplat-tmp-{dead}-0123abcd"))),
+        {
+            // Another host's, untouched for two days.
+            let old = write(tmp.join("upload-elsewhere-pid7-Qw12Er"));
+            let two_days_ago = std::time::SystemTime::now() - Duration::from_secs(2 * 86_400);
+            std::fs::File::options()
+                .write(true)
+                .open(&old)
+                .unwrap()
+                .set_modified(two_days_ago)
+                .unwrap();
+            old
+        },
+    ];
+    let kept = [
+        write(tmp.join(format!("upload-{live}-Lv12Ab"))),
+        write(tmp.join("unpack-elsewhere-pid7-Fr12Sh")),
+        write(checkpoints.join(".step.segsplat-tmp-elsewhere-pid7-0123abcd")),
+        write(checkpoints.join("step")),
+    ];
+
+    let handler = StepsHandler::new();
+    let service = start_with(dir.path(), 0, &handler).await;
+    for path in &removed {
+        assert!(!path.exists(), "left behind: {}", path.display());
+    }
+    for path in &kept {
+        assert!(path.exists(), "removed: {}", path.display());
+    }
+    service.shutdown().await;
+}
+
+#[tokio::test]
+async fn training_configs_beyond_the_service_limits_or_meaningless_get_422() {
+    let dir = tempfile::tempdir().unwrap();
+    // Validation only: no GPU worker runs these jobs.
+    let service = TestService::start(
+        test_config(dir.path()),
+        vec![
+            Arc::new(segsplat::pipeline::ReconstructHandler),
+            Arc::new(segsplat::pipeline::SegmentThenSplatHandler),
+        ],
+    )
+    .await;
+    let scene_id = service.upload_test_scene().await;
+    let path = format!("/v1/scenes/{scene_id}/jobs");
+    let cases = [
+        (
+            "reconstruct",
+            json!({"steps": 4_294_967_295u64}),
+            "steps: 4294967295 is over this service's limit of 1000000 (jobs.max_steps)",
+        ),
+        (
+            "segment_then_splat",
+            json!({"steps": 100, "random_init_count": 20_000_000}),
+            "random_init_count: 20000000 is over this service's limit of 10000000 \
+             (jobs.max_gaussians)",
+        ),
+        (
+            "reconstruct",
+            json!({"learning_rates": {"opacity": -0.05}}),
+            "learning_rates.opacity: must be a finite number >= 0",
+        ),
+        (
+            "reconstruct",
+            json!({"learning_rates": {"sh_rest_divisor": 0.0}}),
+            "learning_rates.sh_rest_divisor",
+        ),
+    ];
+    for (kind, config, message_part) in cases {
+        let (status, body) = service
+            .post_json(&path, json!({"kind": kind, "config": config}))
+            .await;
+        assert_eq!(status, 422, "{kind} {config}: {body}");
+        let message = body["error"]["message"].as_str().unwrap();
+        assert!(message.contains(message_part), "{message}");
+    }
+    let (_, jobs) = service.get_json("/v1/jobs").await;
+    assert_eq!(jobs["jobs"].as_array().unwrap().len(), 0, "{jobs}");
+    service.shutdown().await;
+}

@@ -174,6 +174,33 @@ async fn bearer_tokens_guard_rest_and_grpc_when_configured() {
         .metadata_mut()
         .insert("authorization", "Bearer s3cret".parse().unwrap());
     assert!(client.list_scenes(request).await.is_ok());
+
+    // Reflection describes the API: behind the token too.
+    use tonic_reflection::pb::v1::ServerReflectionRequest;
+    use tonic_reflection::pb::v1::server_reflection_client::ServerReflectionClient;
+    use tonic_reflection::pb::v1::server_reflection_request::MessageRequest;
+    let list_services = || {
+        tokio_stream::iter(vec![ServerReflectionRequest {
+            host: String::new(),
+            message_request: Some(MessageRequest::ListServices(String::new())),
+        }])
+    };
+    let mut reflection = ServerReflectionClient::new(channel.clone());
+    let denied = reflection
+        .server_reflection_info(list_services())
+        .await
+        .unwrap_err();
+    assert_eq!(denied.code(), tonic::Code::Unauthenticated);
+    let mut request = tonic::Request::new(list_services());
+    request
+        .metadata_mut()
+        .insert("authorization", "Bearer s3cret".parse().unwrap());
+    let mut answers = reflection
+        .server_reflection_info(request)
+        .await
+        .unwrap()
+        .into_inner();
+    assert!(answers.message().await.unwrap().is_some());
     service.shutdown().await;
 }
 

@@ -31,6 +31,22 @@ async fn assert_no_trace(service: &TestService, data_dir: &std::path::Path) {
     );
 }
 
+/// The stored files alone load and validate as the same dataset: nothing the loader reads was
+/// left out of the blob store.
+async fn assert_stored_scene_reloads(service: &TestService, data_dir: &std::path::Path, id: &str) {
+    let (_, body) = service.get_json(&format!("/v1/scenes/{id}")).await;
+    let files = data_dir.join("blobs/scenes").join(id).join("files");
+    let scene = segsplat::scene::load_scene(&files, &segsplat::scene::LoadOptions::default())
+        .unwrap_or_else(|error| panic!("{body}: stored files do not load: {error}"));
+    assert_eq!(
+        scene.frames.len() as u64,
+        body["frame_count"].as_u64().unwrap(),
+        "{body}"
+    );
+    segsplat::scene::validate_scene(&scene)
+        .unwrap_or_else(|error| panic!("{body}: stored files do not validate: {error}"));
+}
+
 #[tokio::test]
 async fn every_format_and_archive_kind_uploads() {
     let dir = tempfile::tempdir().unwrap();
@@ -106,6 +122,9 @@ async fn every_format_and_archive_kind_uploads() {
         serde_json::json!(["small"]),
         "{masked}"
     );
+    for id in &ids {
+        assert_stored_scene_reloads(&service, dir.path(), id).await;
+    }
     // The files are stored under the scene (the wrapping folder removed).
     let stored = files_under(&dir.path().join("blobs/scenes").join(&ids[1]).join("files"));
     assert!(
@@ -190,6 +209,9 @@ async fn dynamic_formats_upload_and_say_they_are_dynamic() {
             "{label}"
         );
         ids.push(body["id"].as_str().unwrap().to_string());
+    }
+    for id in &ids {
+        assert_stored_scene_reloads(&service, dir.path(), id).await;
     }
     // Frames decoded from the uploaded videos are stored with the scene.
     let stored = files_under(&dir.path().join("blobs/scenes").join(&ids[2]).join("files"));
@@ -409,5 +431,301 @@ async fn uploads_over_the_size_limits_get_413() {
     let (status, body) = service.upload(archive, "application/zip").await;
     assert_eq!(status, 413, "{body}");
     assert_no_trace(&service, dir.path()).await;
+    service.shutdown().await;
+}
+
+/// A client that hangs up while its upload is being ingested: the ingest still ends with a
+/// recorded scene (not files in the blob store that no scene points at).
+#[tokio::test]
+async fn client_disconnect_during_ingest_still_records_the_scene() {
+    use tokio::io::AsyncWriteExt;
+
+    let dir = tempfile::tempdir().unwrap();
+    let service = start(dir.path()).await;
+    // Enough files that the ingest is still running when the client hangs up.
+    let archive = archives::colmap_zip(SyntheticSpec {
+        frame_count: 16,
+        width: 64,
+        height: 48,
+        with_masks: Some(segsplat::scene::Level::ALL.to_vec()),
+        ..small_spec()
+    });
+    let addr = service.service.http_addr().unwrap();
+    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
+    let head = format!(
+        "POST /v1/scenes HTTP/1.1\r\nhost: {addr}\r\ncontent-type: application/zip\r\n\
+         content-length: {}\r\n\r\n",
+        archive.len()
+    );
+    stream.write_all(head.as_bytes()).await.unwrap();
+    stream.write_all(&archive).await.unwrap();
+    stream.flush().await.unwrap();
+    // Hang up as soon as the server starts unpacking (the body is then fully received).
+    let started = std::time::Instant::now();
+    while !entries_in(&dir.path().join("tmp")).iter().any(|path| {
+        path.file_name()
+            .is_some_and(|name| name.to_string_lossy().starts_with("unpack-"))
+    }) {
+        assert!(started.elapsed() < std::time::Duration::from_secs(30));
+        tokio::time::sleep(std::time::Duration::from_millis(1)).await;
+    }
+    drop(stream);
+
+    let started = std::time::Instant::now();
+    let scenes = loop {
+        let (_, body) = service.get_json("/v1/scenes").await;
+        let scenes = body["scenes"].as_array().cloned().unwrap_or_default();
+        if !scenes.is_empty() {
+            break scenes;
+        }
+        assert!(
+            started.elapsed() < std::time::Duration::from_secs(30),
+            "no scene recorded after the client hung up; blobs: {:?}",
+            files_under(&dir.path().join("blobs")).len()
+        );
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    };
+    assert_eq!(scenes.len(), 1);
+    let id = scenes[0]["id"].as_str().unwrap();
+    let stored = entries_in(&dir.path().join("blobs/scenes"));
+    assert_eq!(stored.len(), 1, "{stored:?}");
+    assert!(stored[0].ends_with(id), "{stored:?} vs {id}");
+    service.shutdown().await;
+}
+
+/// `zip_of(files)` with every occurrence of the bytes `from` in entry names (local headers and
+/// central directory) replaced by `to` of the same length: zip writers refuse the names these
+/// tests need (duplicates, invalid UTF-8).
+fn zip_with_patched_names(files: &[(String, Vec<u8>)], from: &[u8], to: &[u8]) -> Vec<u8> {
+    assert_eq!(from.len(), to.len());
+    let mut bytes = zip_of(files);
+    let mut at = 0;
+    while let Some(found) = bytes[at..].windows(from.len()).position(|w| w == from) {
+        let start = at + found;
+        bytes[start..start + from.len()].copy_from_slice(to);
+        at = start + from.len();
+    }
+    bytes
+}
+
+#[tokio::test]
+async fn archives_with_bad_entry_names_get_400_without_a_trace() {
+    let dir = tempfile::tempdir().unwrap();
+    let service = start(dir.path()).await;
+    let data_dir = dir.path().to_string_lossy().into_owned();
+    let mut files = colmap_files(small_spec(), ColmapEncoding::Text);
+    files.push(("notes-A.txt".to_string(), b"first".to_vec()));
+    files.push(("notes-B.txt".to_string(), b"second".to_vec()));
+    let duplicate = zip_with_patched_names(&files, b"notes-B", b"notes-A");
+    let invalid_utf8 = zip_with_patched_names(&files, b"notes-B", b"notes\xff\xfe");
+    let mut deep = colmap_files(small_spec(), ColmapEncoding::Text);
+    deep.push((format!("{}leaf.txt", "d/".repeat(3000)), b"deep".to_vec()));
+    let mut long = colmap_files(small_spec(), ColmapEncoding::Text);
+    long.push((format!("{}.txt", "n".repeat(300)), b"long".to_vec()));
+    let cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        (
+            "duplicate names",
+            duplicate,
+            "notes-A.txt: duplicate entry name",
+        ),
+        ("invalid UTF-8 name", invalid_utf8, "not valid UTF-8"),
+        (
+            "3000 nested folders",
+            zip_of(&deep),
+            "nested 3000 folders deep, at most 32",
+        ),
+        ("3000 nested folders in a tar", tar_of(&deep), "at most 32"),
+        ("a 304-byte name", zip_of(&long), "at most 255"),
+    ];
+    for (label, bytes, message_part) in cases {
+        let (status, body) = service.upload(bytes, "application/octet-stream").await;
+        assert_eq!(status, 400, "{label}: {body}");
+        let message = body["error"]["message"].as_str().unwrap_or_default();
+        assert!(message.contains(message_part), "{label}: {message}");
+        assert!(
+            !message.contains(&data_dir),
+            "{label}: server path in {message}"
+        );
+        assert!(message.len() < 400, "{label}: {message}");
+        assert_no_trace(&service, dir.path()).await;
+    }
+    service.shutdown().await;
+}
+
+/// The synthetic nerfstudio dataset with its `transforms.json` changed by `change`.
+fn nerfstudio_with(change: impl Fn(&mut serde_json::Value)) -> Vec<u8> {
+    let mut files = archives::dataset_files(|d| synthetic::write_nerfstudio(d, &small_spec()));
+    for (name, bytes) in files.iter_mut() {
+        if name == "transforms.json" {
+            let mut json: serde_json::Value = serde_json::from_slice(bytes).unwrap();
+            change(&mut json);
+            *bytes = serde_json::to_vec(&json).unwrap();
+        }
+    }
+    zip_of(&files)
+}
+
+/// Scales the 3x3 rotation part of the first frame's pose column-wise.
+fn scale_first_rotation(json: &mut serde_json::Value, columns: [f64; 3]) {
+    let matrix = &mut json["frames"][0]["transform_matrix"];
+    for row in 0..3 {
+        for (column, factor) in columns.iter().enumerate() {
+            let value = matrix[row][column].as_f64().unwrap();
+            matrix[row][column] = serde_json::json!(value * factor);
+        }
+    }
+}
+
+#[tokio::test]
+async fn invalid_cameras_are_refused_at_upload() {
+    let dir = tempfile::tempdir().unwrap();
+    let service = start(dir.path()).await;
+    let zero_quaternion = colmap_with(|files| {
+        for (name, bytes) in files.iter_mut() {
+            if name.ends_with("images.txt") {
+                let text = String::from_utf8(bytes.clone()).unwrap();
+                let mut done = false;
+                let lines: Vec<String> = text
+                    .lines()
+                    .map(|line| {
+                        if done || line.starts_with('#') || line.trim().is_empty() {
+                            return line.to_string();
+                        }
+                        done = true;
+                        let mut fields: Vec<&str> = line.split_whitespace().collect();
+                        fields[1..5].copy_from_slice(&["0", "0", "0", "0"]);
+                        fields.join(" ")
+                    })
+                    .collect();
+                *bytes = (lines.join("\n") + "\n").into_bytes();
+            }
+        }
+    });
+    let cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        (
+            "COLMAP all-zero rotation",
+            zip_of(&zero_quaternion),
+            "not a finite number",
+        ),
+        (
+            "nerfstudio non-orthonormal rotation",
+            nerfstudio_with(|json| scale_first_rotation(json, [2.0, 1.0, 1.0])),
+            "not orthonormal",
+        ),
+        (
+            "nerfstudio 1e-12-scaled pose",
+            nerfstudio_with(|json| scale_first_rotation(json, [1e-12; 3])),
+            "not invertible",
+        ),
+        (
+            "nerfstudio all-zero pose",
+            nerfstudio_with(|json| scale_first_rotation(json, [0.0; 3])),
+            "not invertible",
+        ),
+        (
+            "nerfstudio mirrored pose",
+            nerfstudio_with(|json| scale_first_rotation(json, [-1.0, 1.0, 1.0])),
+            "reflection",
+        ),
+        (
+            "nerfstudio zero focal length",
+            nerfstudio_with(|json| {
+                json["fl_x"] = serde_json::json!(0.0);
+                json["frames"][0]["fl_x"] = serde_json::json!(0.0);
+            }),
+            "focal lengths must be positive",
+        ),
+    ];
+    for (label, bytes, message_part) in cases {
+        let (status, body) = service.upload(bytes, "application/zip").await;
+        assert_eq!(status, 422, "{label}: {body}");
+        let message = body["error"]["message"].as_str().unwrap_or_default();
+        assert!(message.contains(message_part), "{label}: {message}");
+        assert_no_trace(&service, dir.path()).await;
+    }
+    service.shutdown().await;
+}
+
+#[tokio::test]
+async fn images_over_the_pixel_limits_get_413_naming_the_limit() {
+    // 2000x2000 of one colour: a few KB of PNG that decodes to 16 MB.
+    let mut big_png = Vec::new();
+    image::RgbImage::new(2000, 2000)
+        .write_to(
+            &mut std::io::Cursor::new(&mut big_png),
+            image::ImageFormat::Png,
+        )
+        .unwrap();
+    assert!(big_png.len() < 100_000);
+    let bomb = colmap_with(|files| {
+        for (name, bytes) in files.iter_mut() {
+            if name == "images/frame_0001.png" {
+                *bytes = big_png.clone();
+            }
+        }
+    });
+    // small_spec frames are 16x12 = 192 pixels, 768 in all.
+    let cases: Vec<(&str, Vec<u8>, u64, u64, &str)> = vec![
+        (
+            "a frame over the per-image limit",
+            zip_of(&bomb),
+            1_000_000,
+            u64::MAX,
+            "images/frame_0001.png: image is 2000x2000 = 4000000 pixels, over the limit of \
+             1000000 pixels per image (limits.max_image_pixels)",
+        ),
+        (
+            "frames over the total",
+            archives::colmap_zip(small_spec()),
+            1_000,
+            500,
+            "limits.max_total_pixels",
+        ),
+    ];
+    for (label, archive, per_image, total, message_part) in cases {
+        let dir = tempfile::tempdir().unwrap();
+        let mut config = test_config(dir.path());
+        config.limits.max_image_pixels = per_image;
+        config.limits.max_total_pixels = total;
+        let service = TestService::start(config, vec![]).await;
+        let (status, body) = service.upload(archive, "application/zip").await;
+        assert_eq!(status, 413, "{label}: {body}");
+        let message = body["error"]["message"].as_str().unwrap_or_default();
+        assert!(message.contains(message_part), "{label}: {message}");
+        assert_no_trace(&service, dir.path()).await;
+        service.shutdown().await;
+    }
+}
+
+#[tokio::test]
+async fn files_the_dataset_does_not_use_are_not_stored_and_are_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let service = start(dir.path()).await;
+    let mut files = colmap_files(small_spec(), ColmapEncoding::Text);
+    for index in 0..300 {
+        files.push((format!("junk/{index:04}.txt"), b"junk".to_vec()));
+        files.push((format!("stray_{index:04}.png"), b"not even a png".to_vec()));
+    }
+    let (status, body) = service.upload(zip_of(&files), "application/zip").await;
+    assert_eq!(status, 201, "{body}");
+    assert_eq!(body["ignored_file_count"], 600, "{body}");
+    let listed = body["ignored_files"].as_array().unwrap();
+    assert_eq!(listed.len(), 20, "{body}");
+    assert!(listed.iter().all(|name| {
+        let name = name.as_str().unwrap();
+        name.starts_with("junk/") || name.starts_with("stray_")
+    }));
+    let id = body["id"].as_str().unwrap();
+    let stored = files_under(&dir.path().join("blobs/scenes").join(id).join("files"));
+    assert!(
+        stored
+            .iter()
+            .all(|path| path.starts_with("sparse") || path.starts_with("images")),
+        "{stored:?}"
+    );
+    assert_stored_scene_reloads(&service, dir.path(), id).await;
+    // Read back, the scene still says what was left out.
+    let (_, read_back) = service.get_json(&format!("/v1/scenes/{id}")).await;
+    assert_eq!(read_back["ignored_file_count"], 600, "{read_back}");
     service.shutdown().await;
 }

@@ -1,13 +1,17 @@
 //! The blocking half of a scene upload: unpack the archive, detect and validate the dataset, and
 //! copy its files into the blob store. On any error everything written so far is removed.
 
+use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+use crate::scene::IGNORED_FILES_LISTED;
+use crate::scene::used_files::used_files;
 use crate::scene::{
-    ArchiveError, InputErrorClass, LoadOptions, SceneError, SceneSummary, UnpackLimits, load_scene,
-    unpack_archive, validate_scene,
+    ArchiveError, InputErrorClass, LoadOptions, PixelLimits, SceneError, SceneSummary,
+    UnpackLimits, load_scene, unpack_archive, validate_scene_within,
 };
+use crate::store::process_tag::process_tag;
 use crate::store::{BlobError, BlobStore};
 
 #[derive(Debug, thiserror::Error)]
@@ -42,6 +46,7 @@ pub struct IngestRequest {
     pub scratch_dir: PathBuf,
     pub limits: UnpackLimits,
     pub load_options: LoadOptions,
+    pub pixel_limits: PixelLimits,
     pub blobs: Arc<dyn BlobStore>,
     /// Where the files go: `{blob_prefix}/files/<relative path>`.
     pub blob_prefix: String,
@@ -61,7 +66,8 @@ pub fn ingest_scene(request: &IngestRequest) -> Result<SceneSummary, IngestError
 
 fn unpack_validate_store(request: &IngestRequest) -> Result<SceneSummary, IngestError> {
     let unpack_dir = tempfile::Builder::new()
-        .prefix("unpack-")
+        // Named after this process, so a restart's sweep knows when its writer is gone.
+        .prefix(&format!("unpack-{}-", process_tag()))
         .tempdir_in(&request.scratch_dir)
         .map_err(|source| IngestError::Io {
             context: format!(
@@ -73,12 +79,20 @@ fn unpack_validate_store(request: &IngestRequest) -> Result<SceneSummary, Ingest
     unpack_archive(&request.archive, unpack_dir.path(), &request.limits)?;
     // The loader looks through a single wrapping folder; `scene.root` is the dataset itself.
     let scene = load_scene(unpack_dir.path(), &request.load_options)?;
-    let summary = validate_scene(&scene)?;
-    store_tree(&scene.root, &scene.root, request)?;
+    let mut summary = validate_scene_within(&scene, &request.pixel_limits)?;
+    let used = used_files(&scene);
+    store_tree(&scene.root, &scene.root, &used, request, &mut summary)?;
     Ok(summary)
 }
 
-fn store_tree(root: &Path, dir: &Path, request: &IngestRequest) -> Result<(), IngestError> {
+/// Stores the files of `used` under `dir` and counts the rest into `summary` as ignored.
+fn store_tree(
+    root: &Path,
+    dir: &Path,
+    used: &BTreeSet<PathBuf>,
+    request: &IngestRequest,
+    summary: &mut SceneSummary,
+) -> Result<(), IngestError> {
     let io_error = |source| IngestError::Io {
         context: format!("cannot read unpacked folder {}", dir.display()),
         source,
@@ -88,11 +102,19 @@ fn store_tree(root: &Path, dir: &Path, request: &IngestRequest) -> Result<(), In
         let path = entry.path();
         let kind = entry.file_type().map_err(io_error)?;
         if kind.is_dir() {
-            store_tree(root, &path, request)?;
+            store_tree(root, &path, used, request, summary)?;
         } else if kind.is_file() {
-            let relative: Vec<String> = path
-                .strip_prefix(root)
-                .unwrap_or(&path)
+            let relative_path = path.strip_prefix(root).unwrap_or(&path);
+            if !used.contains(relative_path) {
+                summary.ignored_file_count += 1;
+                if summary.ignored_files.len() < IGNORED_FILES_LISTED {
+                    summary
+                        .ignored_files
+                        .push(relative_path.to_string_lossy().into_owned());
+                }
+                continue;
+            }
+            let relative: Vec<String> = relative_path
                 .components()
                 .map(|component| component.as_os_str().to_string_lossy().into_owned())
                 .collect();

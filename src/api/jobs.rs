@@ -12,8 +12,9 @@ use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
 use super::error::{ApiError, ApiResult, ErrorBody};
+use super::job_bounds::{check_adapter_fit, check_job_bounds};
 use super::state::AppState;
-use crate::store::jobs::{CancelOutcome, JobRecord, JobState};
+use crate::store::jobs::{AttemptBounds, CancelOutcome, JobRecord, JobState};
 
 /// How often an SSE stream re-reads the database when no wake-up arrives (events written by
 /// worker processes elsewhere).
@@ -41,6 +42,10 @@ pub struct JobResponse {
     pub config: serde_json::Value,
     pub attempts: u32,
     pub max_attempts: u32,
+    /// Lease expiries after the job had saved a newer checkpoint (the worker's process died
+    /// while the job progressed); not counted in `attempts`.
+    pub lease_expiries: u32,
+    pub max_lease_expiries: u32,
     pub cancel_requested: bool,
     pub error: Option<String>,
     /// Latest progress: stage, step, total_steps, metrics, eta_secs.
@@ -63,6 +68,8 @@ impl From<JobRecord> for JobResponse {
             config: job.config,
             attempts: job.attempts,
             max_attempts: job.max_attempts,
+            lease_expiries: job.lease_expiries,
+            max_lease_expiries: job.max_lease_expiries,
             cancel_requested: job.cancel_requested,
             error: job.error,
             progress: job.progress,
@@ -112,13 +119,28 @@ pub async fn create_job(
     let config = handler
         .validate_config(&request.config)
         .map_err(|message| ApiError::unprocessable(format!("config: {message}")))?;
+    check_job_bounds(&config, &state.config.jobs)
+        .map_err(|message| ApiError::unprocessable(format!("config: {message}")))?;
+    if handler.needs_gpu()
+        && let Some(scene) = state.database.get_scene(&scene_id).await?
+    {
+        check_adapter_fit(
+            &config,
+            scene.summary.sparse_point_count,
+            &state.workers.adapters,
+        )
+        .map_err(|message| ApiError::unprocessable(format!("config: {message}")))?;
+    }
     let job = state
         .database
         .insert_job(
             &scene_id,
             &request.kind,
             &config,
-            state.config.jobs.max_attempts,
+            AttemptBounds {
+                max_attempts: state.config.jobs.max_attempts,
+                max_lease_expiries: state.config.jobs.max_lease_expiries,
+            },
         )
         .await?
         .ok_or_else(|| ApiError::not_found(format!("scene {scene_id} not found")))?;

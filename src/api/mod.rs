@@ -6,6 +6,7 @@ pub mod error;
 mod exports;
 mod grpc;
 mod ingest;
+mod job_bounds;
 mod jobs;
 mod masks;
 mod metrics;
@@ -18,6 +19,7 @@ mod scenes;
 mod server;
 pub mod serving;
 mod state;
+mod upload_commit;
 
 pub use openapi::ApiDoc;
 pub use server::{RunningService, ServiceBuilder, ServiceError, ServiceMode};

@@ -11,10 +11,9 @@ use tokio::io::AsyncWriteExt;
 use utoipa::{IntoParams, ToSchema};
 
 use super::error::{ApiError, ApiResult, ErrorBody};
-use super::ingest::{IngestRequest, ingest_scene};
 use super::state::AppState;
-use crate::scene::{LoadOptions, UnpackLimits};
-use crate::store::now_ms;
+use super::upload_commit::ingest_and_record;
+use crate::store::process_tag::process_tag;
 use crate::store::scenes::{DeleteSceneError, SceneRecord};
 
 /// Raw upload bodies we accept; the archive kind itself is sniffed from the bytes.
@@ -44,6 +43,11 @@ pub struct SceneResponse {
     pub sparse_point_count: u64,
     /// Levels (`small`, `middle`, `large`) with user-provided masks.
     pub mask_levels: Vec<String>,
+    /// Files in the upload the dataset does not use (not cameras, frames, masks or the
+    /// format's own files); they were not stored.
+    pub ignored_file_count: u64,
+    /// The first 20 of them, relative to the dataset.
+    pub ignored_files: Vec<String>,
     pub created_at_ms: i64,
 }
 
@@ -67,6 +71,8 @@ impl From<&SceneRecord> for SceneResponse {
                 .iter()
                 .map(|level| level.name().to_string())
                 .collect(),
+            ignored_file_count: summary.ignored_file_count,
+            ignored_files: summary.ignored_files.clone(),
             created_at_ms: record.created_at_ms,
         }
     }
@@ -106,58 +112,21 @@ pub async fn upload_scene(
     tokio::fs::create_dir_all(&scratch_dir)
         .await
         .map_err(|error| {
-            ApiError::internal(format!("cannot create {}: {error}", scratch_dir.display()))
+            // The path is the server's business: logged, not returned.
+            tracing::error!(%error, path = %scratch_dir.display(), "cannot create the upload folder");
+            ApiError::internal("the server cannot create its upload folder")
         })?;
     let temp = tempfile::Builder::new()
-        .prefix("upload-")
+        // Named after this process, so a restart's sweep knows when its writer is gone.
+        .prefix(&format!("upload-{}-", process_tag()))
         .tempfile_in(&scratch_dir)
         .map_err(|error| ApiError::internal(format!("cannot create an upload file: {error}")))?;
     let uploaded_name = receive_upload(&state, request, temp.as_file()).await?;
-
-    let scene_id = uuid::Uuid::now_v7().to_string();
-    let blob_prefix = format!("scenes/{scene_id}");
-    let ingest = IngestRequest {
-        archive: temp.path().to_path_buf(),
-        scratch_dir,
-        limits: UnpackLimits {
-            max_unpacked_bytes: config.limits.max_unpacked_bytes,
-            max_files: config.limits.max_files,
-        },
-        load_options: LoadOptions {
-            background: config.scene.background,
-            video_frames: config.scene.video_frames.clone(),
-            ..LoadOptions::default()
-        },
-        blobs: state.blobs.clone(),
-        blob_prefix: blob_prefix.clone(),
-    };
-    let summary = tokio::task::spawn_blocking(move || ingest_scene(&ingest))
-        .await
-        .map_err(|error| ApiError::internal(format!("scene ingest crashed: {error}")))?
-        .map_err(|error| {
-            metrics::counter!("segsplat_scene_uploads_total", "outcome" => "rejected").increment(1);
-            ApiError::from_input_class(error.class(), error.to_string())
-        })?;
-    drop(temp);
-
-    let record = SceneRecord {
-        name: params
-            .name
-            .filter(|name| !name.trim().is_empty())
-            .or(uploaded_name)
-            .unwrap_or_else(|| scene_id.clone()),
-        id: scene_id,
-        summary,
-        blob_prefix: blob_prefix.clone(),
-        created_at_ms: now_ms(),
-    };
-    if let Err(error) = state.database.insert_scene(&record).await {
-        let blobs = state.blobs.clone();
-        let _ = tokio::task::spawn_blocking(move || blobs.delete_prefix(&blob_prefix)).await;
-        return Err(error.into());
-    }
-    metrics::counter!("segsplat_scene_uploads_total", "outcome" => "stored").increment(1);
-    tracing::info!(scene_id = %record.id, frames = record.summary.frame_count, "scene stored");
+    let name = params
+        .name
+        .filter(|name| !name.trim().is_empty())
+        .or(uploaded_name);
+    let record = ingest_and_record(state.clone(), temp, name).await?;
     let mut headers = HeaderMap::new();
     if let Ok(location) = format!("/v1/scenes/{}", record.id).parse() {
         headers.insert(header::LOCATION, location);

@@ -20,8 +20,8 @@ use super::serving::Serving;
 use super::state::{AppState, WorkerReadiness};
 use crate::config::Config;
 use crate::jobs::{
-    HandlerRegistry, JobEventBus, JobHandler, LeaseReaper, WorkerPool, WorkerPoolOptions,
-    WorkerSlot, open_adapters,
+    HandlerRegistry, JobEventBus, JobHandler, LeaseReaper, ProcessIdentity, SweepPlaces,
+    WorkerPool, WorkerPoolOptions, WorkerSlot, open_adapters, sweep_leftovers,
 };
 use crate::language::SharedTextEncoder;
 use crate::proto::scene_query_server::SceneQueryServer;
@@ -111,11 +111,38 @@ impl ServiceBuilder {
         let bus = JobEventBus::default();
         let job_queued = Arc::new(Notify::new());
         let shutdown = CancellationToken::new();
-        let instance = format!(
-            "{}-{}",
-            host_name(),
-            &uuid::Uuid::new_v4().simple().to_string()[..8]
-        );
+        let identity = ProcessIdentity::new(config.workers.instance_id.clone());
+        let instance = identity.instance().to_string();
+        // Jobs a previous life of this process (or a stopped process on this host) held are
+        // re-queued now rather than after their leases run out. A process without workers is
+        // not the one that held its instance id's leases (an API process sharing a config file
+        // with a worker), so it only takes back those of exited processes.
+        let workers_here = config.workers.enabled;
+        match database
+            .requeue_leases_of_gone_owners(|owner| {
+                if workers_here {
+                    identity.owned_by_a_previous_life(owner)
+                } else {
+                    identity.owned_by_a_stopped_local_process(owner)
+                }
+            })
+            .await
+        {
+            Ok(taken) => {
+                for lease in &taken {
+                    info!(job_id = %lease.job_id, owner = ?lease.previous_owner,
+                        state = lease.new_state.as_str(), "took back a stopped worker's job");
+                }
+            }
+            Err(error) => warn!(%error, "cannot take back stopped workers' jobs"),
+        }
+        // After taking jobs back, so their attempt folders count as stale.
+        let places = SweepPlaces {
+            scratch_dir: config.scratch_dir(),
+            blob_dir: config.blob_dir(),
+            max_age: Duration::from_secs(config.storage.temp_max_age_secs),
+        };
+        sweep_leftovers(&places, &database).await;
 
         let workers_enabled = config.workers.enabled;
         let (gpus, mut problems) = if workers_enabled && self.detect_gpus {
@@ -153,9 +180,16 @@ impl ServiceBuilder {
             problems,
         };
 
+        spawn_periodic_sweep(
+            places,
+            database.clone(),
+            Duration::from_secs(config.storage.sweep_interval_secs),
+            shutdown.clone(),
+        );
         let lease = Duration::from_secs_f64(config.jobs.lease_secs);
         let reaper = LeaseReaper::start(
             database.clone(),
+            identity.clone(),
             bus.clone(),
             job_queued.clone(),
             (lease / 4).clamp(Duration::from_millis(50), Duration::from_secs(5)),
@@ -288,6 +322,12 @@ async fn start_grpc(
         .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
         .build_v1()
         .map_err(|error| ServiceError::Reflection(error.to_string()))?;
+    // Reflection describes the whole API; with tokens set it needs one like every other call
+    // (health checks stay open for load balancers).
+    let reflection = tonic::service::interceptor::InterceptedService::new(
+        reflection,
+        grpc_interceptor(tokens.clone()),
+    );
     let scene_query = SceneQueryServer::with_interceptor(
         SceneQueryService::new(database, text_encoder, serving),
         grpc_interceptor(tokens),
@@ -310,11 +350,24 @@ async fn start_grpc(
     Ok((addr, task))
 }
 
-fn host_name() -> String {
-    std::env::var("HOSTNAME")
-        .ok()
-        .filter(|name| !name.is_empty())
-        .unwrap_or_else(|| "segsplat".to_string())
+/// Sweeps leftovers of stopped processes every `every` until `shutdown`.
+fn spawn_periodic_sweep(
+    places: SweepPlaces,
+    database: Database,
+    every: Duration,
+    shutdown: CancellationToken,
+) {
+    tokio::spawn(async move {
+        let mut ticker = tokio::time::interval(every);
+        // The first tick is immediate, and the sweep at start already ran.
+        ticker.tick().await;
+        loop {
+            tokio::select! {
+                _ = ticker.tick() => { sweep_leftovers(&places, &database).await; }
+                _ = shutdown.cancelled() => break,
+            }
+        }
+    });
 }
 
 /// A started service; stop it with [`RunningService::shutdown`].

@@ -77,7 +77,7 @@ impl AdapterFilter {
 }
 
 /// What an adapter offers, as logged at start and served by `/readyz`.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Default, Serialize)]
 pub struct AdapterReport {
     pub name: String,
     pub backend: String,

@@ -63,9 +63,12 @@ impl JobContext {
         job_output_prefix(&self.job_id)
     }
 
-    /// Saves a checkpoint atomically (blocking I/O).
+    /// Saves a checkpoint atomically (blocking I/O), and notes it in the job's row (a lease
+    /// that expires after a checkpoint is not counted as an attempt).
     pub fn save_checkpoint(&self, name: &str, bytes: &[u8]) -> Result<(), BlobError> {
-        self.blobs.put_bytes(&self.checkpoint_key(name), bytes)
+        self.blobs.put_bytes(&self.checkpoint_key(name), bytes)?;
+        self.progress.note_checkpoint();
+        Ok(())
     }
 
     /// The last saved checkpoint of that name, if any (blocking I/O).

@@ -5,15 +5,19 @@
 mod context;
 mod events;
 mod handler;
+mod identity;
 mod pool;
 mod progress;
+mod temp_sweep;
 mod worker;
 
 pub use context::{JobContext, job_output_prefix};
 pub use events::JobEventBus;
 pub use handler::{HandlerRegistry, JobFailure, JobHandler};
+pub use identity::{ProcessIdentity, host_name};
 pub use pool::{LeaseReaper, WorkerPool, WorkerPoolOptions, WorkerSlot, open_adapters};
 pub use progress::{Progress, ProgressReporter};
+pub use temp_sweep::{SweepPlaces, sweep_leftovers};
 
 #[derive(Debug, thiserror::Error)]
 pub enum JobsError {

@@ -99,7 +99,8 @@ impl WorkerPool {
     }
 }
 
-/// Periodically re-queues (or fails) jobs whose lease expired.
+/// Periodically re-queues (or fails) jobs whose lease expired or whose worker's process on this
+/// host has exited.
 pub struct LeaseReaper {
     shutdown: CancellationToken,
     task: JoinHandle<()>,
@@ -108,6 +109,7 @@ pub struct LeaseReaper {
 impl LeaseReaper {
     pub fn start(
         database: Database,
+        identity: super::ProcessIdentity,
         bus: JobEventBus,
         job_queued: Arc<Notify>,
         every: Duration,
@@ -121,7 +123,19 @@ impl LeaseReaper {
                     _ = ticker.tick() => {}
                     _ = stop.cancelled() => break,
                 }
-                match database.requeue_expired_leases().await {
+                let reaped = match database.requeue_expired_leases().await {
+                    Ok(mut expired) => database
+                        .requeue_leases_of_gone_owners(|owner| {
+                            identity.owned_by_a_stopped_local_process(owner)
+                        })
+                        .await
+                        .map(|gone| {
+                            expired.extend(gone);
+                            expired
+                        }),
+                    Err(error) => Err(error),
+                };
+                match reaped {
                     Ok(expired) => {
                         for lease in &expired {
                             warn!(job_id = %lease.job_id, owner = ?lease.previous_owner,

@@ -102,6 +102,24 @@ impl ProgressReporter {
         tokio::runtime::Handle::current().block_on(self.warn(stage, message))
     }
 
+    /// Notes in the job's row that this lease holder saved a checkpoint, so a lease expiry
+    /// after it counts as progress rather than an attempt. Fire and forget, callable from async
+    /// and blocking code alike: the note is an optimisation of retry accounting, and a lost one
+    /// only means that expiry counts as an attempt.
+    pub fn note_checkpoint(&self) {
+        let Ok(runtime) = tokio::runtime::Handle::try_current() else {
+            return;
+        };
+        let database = self.database.clone();
+        let job_id = self.job_id.clone();
+        let owner = self.lease_owner.clone();
+        runtime.spawn(async move {
+            if let Err(error) = database.record_checkpoint(&job_id, &owner).await {
+                tracing::warn!(%error, %job_id, "cannot note the job's checkpoint");
+            }
+        });
+    }
+
     fn estimate_eta(&self, progress: &Progress) -> Option<f64> {
         let mut clock = self.clock.lock().ok()?;
         let restart = clock.as_ref().is_none_or(|current| {

@@ -12,7 +12,7 @@ use super::{HandlerRegistry, JobContext, JobEventBus, JobFailure, ProgressReport
 use crate::config::JobsConfig;
 use crate::gpu::GpuContext;
 use crate::models::ModelsStatus;
-use crate::store::jobs::{AttemptOutcome, HeartbeatOutcome, JobRecord};
+use crate::store::jobs::{AttemptOutcome, HeartbeatOutcome, JobRecord, JobState};
 use crate::store::{BlobStore, Database};
 
 /// What every worker shares.
@@ -114,6 +114,10 @@ impl Worker {
                     elapsed_secs = started.elapsed().as_secs_f64(),
                     "attempt finished"
                 );
+                if finished.state == JobState::Succeeded && !self.shared.jobs.keep_final_checkpoint
+                {
+                    self.delete_checkpoints(&job.id).await;
+                }
             }
             Ok(None) => warn!(
                 outcome = outcome_label,
@@ -229,6 +233,19 @@ impl Worker {
                 AttemptOutcome::Retry(format!("job handler crashed: {join_error}"))
             }
         })
+    }
+
+    /// Removes a finished job's checkpoints: they only serve a resume, and the last one of a
+    /// training job can be hundreds of MB.
+    async fn delete_checkpoints(&self, job_id: &str) {
+        let blobs = self.shared.blobs.clone();
+        let prefix = format!("jobs/{job_id}/checkpoints");
+        let deleted = tokio::task::spawn_blocking(move || blobs.delete_prefix(&prefix)).await;
+        match deleted {
+            Ok(Ok(_)) => {}
+            Ok(Err(error)) => warn!(%error, "cannot delete the finished job's checkpoints"),
+            Err(error) => warn!(%error, "deleting the finished job's checkpoints crashed"),
+        }
     }
 
     /// Creates the scratch folder and finds (or fetches) the scene's files.

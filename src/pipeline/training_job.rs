@@ -6,6 +6,7 @@ use super::serving::{CAMERAS_FILE, LABELS_FILE, SCENE_FILE};
 use crate::jobs::{JobContext, JobFailure, Progress};
 use crate::scene::Scene;
 use crate::splat::GaussianModel;
+use crate::splat::model::ModelError;
 use crate::splat::train::{EvalReport, TrainError, TrainProgress, Trainer};
 
 pub fn fatal(error: impl std::fmt::Display) -> JobFailure {
@@ -19,10 +20,12 @@ pub fn retryable(error: impl std::fmt::Display) -> JobFailure {
 /// Bad config or data cannot succeed on retry; GPU and I/O trouble might.
 pub fn train_failure(error: TrainError) -> JobFailure {
     match error {
+        // A retry would fail the same way: the config or the data, not the moment, is wrong.
         TrainError::Config(_)
         | TrainError::Views(_)
         | TrainError::EmptyModel
-        | TrainError::ObjectTargets(_) => fatal(error),
+        | TrainError::ObjectTargets(_)
+        | TrainError::Model(ModelError::TooLargeForAdapter { .. }) => fatal(error),
         other => retryable(other),
     }
 }

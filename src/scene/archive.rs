@@ -10,6 +10,7 @@ mod entry_path;
 mod sink;
 mod sniff;
 mod tar_unpack;
+mod zip_names;
 mod zip_unpack;
 
 use std::fs::File;
@@ -54,6 +55,11 @@ pub enum ArchiveError {
     Corrupt(String),
     #[error("{entry}: unsafe path (absolute or escaping the archive root)")]
     UnsafePath { entry: String },
+    #[error("{entry}: {problem}")]
+    PathTooLong { entry: String, problem: String },
+    /// A zip entry name that is not valid UTF-8 or repeats an earlier one.
+    #[error("{0}")]
+    BadName(String),
     #[error("{entry}: links are not allowed in scene archives")]
     Link { entry: String },
     #[error("{entry}: {kind} entries are not allowed in scene archives (only files and folders)")]
@@ -76,6 +82,8 @@ impl ArchiveError {
             ArchiveError::UnsupportedKind => InputErrorClass::UnsupportedFormat,
             ArchiveError::Corrupt(_)
             | ArchiveError::UnsafePath { .. }
+            | ArchiveError::PathTooLong { .. }
+            | ArchiveError::BadName(_)
             | ArchiveError::Link { .. }
             | ArchiveError::SpecialFile { .. } => InputErrorClass::Malformed,
             ArchiveError::TooManyBytes { .. } | ArchiveError::TooManyFiles { .. } => {

@@ -9,6 +9,7 @@
 
 pub mod archive;
 pub mod blender;
+mod camera_checks;
 pub mod colmap;
 mod dataset_path;
 mod dataset_root;
@@ -19,6 +20,7 @@ pub mod nerfies;
 pub mod nerfstudio;
 pub mod neu3d;
 mod npy;
+pub mod pixel_limits;
 pub mod point_ply;
 pub mod sequence;
 pub mod synthetic;
@@ -26,6 +28,7 @@ pub mod synthetic_dynamic;
 pub mod synthetic_dynamic_formats;
 mod transforms_json;
 mod types;
+pub mod used_files;
 mod validate;
 pub mod video_frames;
 
@@ -33,8 +36,9 @@ pub use archive::{ArchiveError, UnpackLimits, UnpackStats, unpack_archive};
 pub use dataset_root::resolve_dataset_root;
 pub use images::{load_frame_rgb, scale_for_max_side, scaled_size};
 pub use masks::load_instance_mask;
+pub use pixel_limits::PixelLimits;
 pub use types::*;
-pub use validate::validate_scene;
+pub use validate::{validate_scene, validate_scene_within};
 
 use std::path::Path;
 
@@ -68,6 +72,9 @@ pub enum SceneError {
     UndecodableImage { file: String, message: String },
     #[error("{file}: {message}")]
     Inconsistent { file: String, message: String },
+    /// Over a configured bound on decoded image size ([`pixel_limits`]).
+    #[error("{file}: {message}")]
+    TooManyPixels { file: String, message: String },
     #[error("{file}: video cannot be decoded: {message}")]
     UndecodableVideo { file: String, message: String },
     /// The server lacks the video decoder program (a deployment problem, not the upload's).
@@ -87,6 +94,7 @@ impl SceneError {
     pub fn class(&self) -> InputErrorClass {
         match self {
             SceneError::UnknownFormat { .. } => InputErrorClass::UnsupportedFormat,
+            SceneError::TooManyPixels { .. } => InputErrorClass::TooLarge,
             SceneError::Parse { .. }
             | SceneError::MissingImage { .. }
             | SceneError::UndecodableImage { .. }
@@ -132,15 +140,16 @@ pub fn load_scene(root: &Path, options: &LoadOptions) -> Result<Scene, SceneErro
 }
 
 /// Every frame's camera must be one whose distortion [`distortion`] undoes (the COLMAP and
-/// nerfstudio loaders check this themselves with their own file names; this catches the rest).
+/// nerfstudio loaders check this themselves with their own file names; this catches the rest),
+/// with a rigid pose ([`camera_checks`]).
 fn check_lenses(scene: &Scene) -> Result<(), SceneError> {
     for frame in &scene.frames {
-        distortion::Lens::from_intrinsics(&frame.intrinsics).map_err(|message| {
-            SceneError::Parse {
+        distortion::Lens::from_intrinsics(&frame.intrinsics)
+            .and_then(|_| camera_checks::check_pose(&frame.world_from_camera))
+            .map_err(|message| SceneError::Parse {
                 file: frame.image_path.display().to_string(),
                 message: format!("camera of frame {}: {message}", frame.name),
-            }
-        })?;
+            })?;
     }
     Ok(())
 }

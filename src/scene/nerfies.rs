@@ -34,6 +34,8 @@ pub const CAMERA_DIR: &str = "camera";
 const METADATA_FILE: &str = "metadata.json";
 const SCENE_FILE: &str = "scene.json";
 const POINTS_FILE: &str = "points.npy";
+/// The dataset-level files besides the cameras (what an upload stores of them).
+pub const METADATA_FILES: [&str; 4] = [DATASET_FILE, METADATA_FILE, SCENE_FILE, POINTS_FILE];
 const RGB_DIR: &str = "rgb";
 
 /// Nerfies points carry no colour; grey keeps their initial Gaussians neutral.

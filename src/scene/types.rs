@@ -270,4 +270,13 @@ pub struct SceneSummary {
     /// formats existed, which were all static).
     #[serde(default)]
     pub time_count: u32,
+    /// Files in the upload the dataset does not use ([`super::used_files`]); not stored.
+    #[serde(default)]
+    pub ignored_file_count: u64,
+    /// The first of them (at most [`IGNORED_FILES_LISTED`]), relative to the dataset.
+    #[serde(default)]
+    pub ignored_files: Vec<String>,
 }
+
+/// How many ignored files a summary names.
+pub const IGNORED_FILES_LISTED: usize = 20;

@@ -5,11 +5,21 @@ use rayon::prelude::*;
 
 use super::images::{decode_image, size_mismatch};
 use super::masks::decode_mask;
+use super::pixel_limits::{PixelLimits, check_pixel_limits};
 use super::{Scene, SceneError, SceneSummary};
 
 /// Decodes every referenced image and mask and checks sizes and counts; returns the summary the
-/// upload endpoint replies with.
+/// upload endpoint replies with. Images are bounded by [`PixelLimits::default`].
 pub fn validate_scene(scene: &Scene) -> Result<SceneSummary, SceneError> {
+    validate_scene_within(scene, &PixelLimits::default())
+}
+
+/// [`validate_scene`] with these bounds on image size, checked from the headers before any
+/// image is decoded.
+pub fn validate_scene_within(
+    scene: &Scene,
+    limits: &PixelLimits,
+) -> Result<SceneSummary, SceneError> {
     if scene.frames.is_empty() {
         return Err(SceneError::Inconsistent {
             file: scene.root.display().to_string(),
@@ -17,6 +27,7 @@ pub fn validate_scene(scene: &Scene) -> Result<SceneSummary, SceneError> {
         });
     }
     check_points(scene)?;
+    check_pixel_limits(scene, limits)?;
     scene
         .frames
         .par_iter()
@@ -76,6 +87,8 @@ pub fn validate_scene(scene: &Scene) -> Result<SceneSummary, SceneError> {
             .map(|layout| layout.given_levels())
             .unwrap_or_default(),
         time_count: scene.frame_times().len() as u32,
+        ignored_file_count: 0,
+        ignored_files: Vec::new(),
     })
 }
 

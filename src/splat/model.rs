@@ -124,8 +124,14 @@ pub const SH_C0: f64 = 0.282_094_791_773_878_14;
 /// storage binding of this adapter: 2.2 million on lavapipe's 128 MiB. Capacity headroom is
 /// clamped to it, so a scene that fits is never refused for its growth room.
 pub fn max_gaussians_for_adapter(ctx: &GpuContext) -> usize {
+    max_gaussians_for_binding(ctx.limits.max_storage_buffer_binding_size) as usize
+}
+
+/// Most Gaussians whose largest per-Gaussian buffer fits a storage binding of `limit_bytes`
+/// (what [`max_gaussians_for_adapter`] computes from an open device; this from a report).
+pub fn max_gaussians_for_binding(limit_bytes: u64) -> u64 {
     let largest_bytes_per_gaussian = (SH_REST_COEFFICIENTS_PER_GROUP * 3 * 4) as u64;
-    (ctx.limits.max_storage_buffer_binding_size / largest_bytes_per_gaussian) as usize
+    limit_bytes / largest_bytes_per_gaussian
 }
 
 /// Usage of every per-Gaussian buffer: read/written by kernels, uploaded, read back, grown by copy.

@@ -9,7 +9,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// Marks in-progress writes; never part of a valid key, skipped by listings.
-const TEMP_MARKER: &str = ".segsplat-tmp-";
+pub const TEMP_MARKER: &str = ".segsplat-tmp-";
 
 #[derive(Debug, thiserror::Error)]
 pub enum BlobError {
@@ -91,8 +91,10 @@ impl LocalBlobStore {
             .file_name()
             .map(|name| name.to_string_lossy().into_owned())
             .unwrap_or_default();
+        // The writer's process tag lets a sweep tell a killed writer's leftovers from live ones.
         let temp_path = parent.join(format!(
-            ".{file_name}{TEMP_MARKER}{}",
+            ".{file_name}{TEMP_MARKER}{}-{}",
+            super::process_tag::process_tag(),
             uuid::Uuid::new_v4().simple()
         ));
         let result = (|| {

@@ -4,7 +4,7 @@
 //! the kinds a worker runs), which takes a lease owned by the worker and counts an attempt. The
 //! worker renews the lease by heartbeat; every later transition is conditional on the worker
 //! still owning the lease, so a worker that lost its lease cannot overwrite the job. Expired
-//! leases are re-queued (or failed past `max_attempts`) by [`Database::requeue_expired_leases`].
+//! leases are re-queued (or failed past their bounds) by `lease_reaping`.
 //! Every state change appends a `state` event to `job_events` in the same transaction.
 //!
 //! On Postgres the claim's inner select becomes `... LIMIT 1 FOR UPDATE SKIP LOCKED`.
@@ -68,6 +68,13 @@ pub struct JobRecord {
     /// Claims so far, including the running one.
     pub attempts: u32,
     pub max_attempts: u32,
+    /// Lease expiries after which the job had saved a newer checkpoint; they are not counted
+    /// as attempts.
+    pub lease_expiries: u32,
+    /// Such expiries before the job fails for good.
+    pub max_lease_expiries: u32,
+    /// Whether the current lease holder has saved a checkpoint.
+    pub checkpointed_this_attempt: bool,
     pub lease_owner: Option<String>,
     pub lease_expires_at_ms: Option<i64>,
     pub cancel_requested: bool,
@@ -112,6 +119,15 @@ pub enum CancelOutcome {
     NotFound,
 }
 
+/// When a job fails for good: `max_attempts` counts claims that ended in an error or a lease
+/// expiry without a new checkpoint; `max_lease_expiries` counts lease expiries after which the
+/// job had saved a newer checkpoint (the process died while the job progressed).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct AttemptBounds {
+    pub max_attempts: u32,
+    pub max_lease_expiries: u32,
+}
+
 /// A job whose lease expired and what became of it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ExpiredLease {
@@ -120,8 +136,8 @@ pub struct ExpiredLease {
     pub new_state: JobState,
 }
 
-const COLUMNS: &str = "id, scene_id, kind, state, config_json, attempts, max_attempts, \
-    lease_owner, lease_expires_at_ms, cancel_requested, error, progress_json, created_at_ms, \
+pub(super) const COLUMNS: &str = "id, scene_id, kind, state, config_json, attempts, max_attempts, \
+    lease_expiries, max_lease_expiries, checkpointed_this_attempt, lease_owner, lease_expires_at_ms, cancel_requested, error, progress_json, created_at_ms, \
     updated_at_ms, started_at_ms, finished_at_ms";
 
 fn corrupt(job_id: &str, what: &str, message: impl ToString) -> StoreError {
@@ -131,7 +147,7 @@ fn corrupt(job_id: &str, what: &str, message: impl ToString) -> StoreError {
     }
 }
 
-fn job_from_row(row: &SqliteRow) -> Result<JobRecord, StoreError> {
+pub(super) fn job_from_row(row: &SqliteRow) -> Result<JobRecord, StoreError> {
     let id: String = row.try_get("id")?;
     let state_text: String = row.try_get("state")?;
     let state = JobState::parse(&state_text)
@@ -146,6 +162,8 @@ fn job_from_row(row: &SqliteRow) -> Result<JobRecord, StoreError> {
         .map_err(|error| corrupt(&id, "progress", error))?;
     let attempts: i64 = row.try_get("attempts")?;
     let max_attempts: i64 = row.try_get("max_attempts")?;
+    let lease_expiries: i64 = row.try_get("lease_expiries")?;
+    let max_lease_expiries: i64 = row.try_get("max_lease_expiries")?;
     Ok(JobRecord {
         scene_id: row.try_get("scene_id")?,
         kind: row.try_get("kind")?,
@@ -153,6 +171,9 @@ fn job_from_row(row: &SqliteRow) -> Result<JobRecord, StoreError> {
         config,
         attempts: attempts.max(0) as u32,
         max_attempts: max_attempts.max(0) as u32,
+        lease_expiries: lease_expiries.max(0) as u32,
+        max_lease_expiries: max_lease_expiries.max(0) as u32,
+        checkpointed_this_attempt: row.try_get("checkpointed_this_attempt")?,
         lease_owner: row.try_get("lease_owner")?,
         lease_expires_at_ms: row.try_get("lease_expires_at_ms")?,
         cancel_requested: row.try_get("cancel_requested")?,
@@ -186,7 +207,7 @@ pub(super) async fn insert_event(
     Ok(id)
 }
 
-async fn insert_state_event(
+pub(super) async fn insert_state_event(
     transaction: &mut Transaction<'_, Sqlite>,
     job: &JobRecord,
 ) -> Result<i64, StoreError> {
@@ -206,22 +227,23 @@ impl Database {
         scene_id: &str,
         kind: &str,
         config: &serde_json::Value,
-        max_attempts: u32,
+        bounds: AttemptBounds,
     ) -> Result<Option<JobRecord>, StoreError> {
         let id = uuid::Uuid::now_v7().to_string();
         let now = now_ms();
         let mut transaction = self.pool().begin().await?;
         let row = sqlx::query(sqlx::AssertSqlSafe(format!(
             "INSERT INTO jobs (id, scene_id, kind, state, config_json, attempts, max_attempts, \
-             cancel_requested, created_at_ms, updated_at_ms) \
-             SELECT ?, ?, ?, 'queued', ?, 0, ?, FALSE, ?, ? \
+             max_lease_expiries, cancel_requested, created_at_ms, updated_at_ms) \
+             SELECT ?, ?, ?, 'queued', ?, 0, ?, ?, FALSE, ?, ? \
              WHERE EXISTS (SELECT 1 FROM scenes WHERE id = ?) RETURNING {COLUMNS}"
         )))
         .bind(&id)
         .bind(scene_id)
         .bind(kind)
         .bind(config.to_string())
-        .bind(i64::from(max_attempts))
+        .bind(i64::from(bounds.max_attempts))
+        .bind(i64::from(bounds.max_lease_expiries))
         .bind(now)
         .bind(now)
         .bind(scene_id)
@@ -318,7 +340,7 @@ impl Database {
         let placeholders = vec!["?"; kinds.len()].join(", ");
         let statement = format!(
             "UPDATE jobs SET state = 'running', lease_owner = ?, lease_expires_at_ms = ?, \
-             attempts = attempts + 1, updated_at_ms = ?, \
+             attempts = attempts + 1, checkpointed_this_attempt = FALSE, updated_at_ms = ?, \
              started_at_ms = COALESCE(started_at_ms, ?), error = NULL \
              WHERE id = (SELECT id FROM jobs WHERE state = 'queued' AND kind IN ({placeholders}) \
                          ORDER BY created_at_ms, id LIMIT 1) \
@@ -435,58 +457,19 @@ impl Database {
         row.as_ref().map(job_from_row).transpose()
     }
 
-    /// Re-queues running jobs whose lease ran out (their worker died or hung); past their
-    /// attempts they fail, and with a pending cancel they are cancelled.
-    pub async fn requeue_expired_leases(&self) -> Result<Vec<ExpiredLease>, StoreError> {
-        let now = now_ms();
-        let mut transaction = self.pool().begin().await?;
-        let expired: Vec<(String, Option<String>)> = sqlx::query_as(
-            "SELECT id, lease_owner FROM jobs WHERE state = 'running' AND lease_expires_at_ms < ?",
+    /// Notes that `owner`, still holding the lease, saved a checkpoint of the job: if this
+    /// attempt's lease later expires, the job made progress and the expiry is not counted as an
+    /// attempt. Returns false when `owner` no longer holds the lease.
+    pub async fn record_checkpoint(&self, job_id: &str, owner: &str) -> Result<bool, StoreError> {
+        let updated = sqlx::query(
+            "UPDATE jobs SET checkpointed_this_attempt = TRUE \
+             WHERE id = ? AND lease_owner = ? AND state = 'running'",
         )
-        .bind(now)
-        .fetch_all(&mut *transaction)
+        .bind(job_id)
+        .bind(owner)
+        .execute(self.pool())
         .await?;
-        let mut results = Vec::with_capacity(expired.len());
-        for (job_id, previous_owner) in expired {
-            let owner_text = previous_owner.as_deref().unwrap_or("unknown");
-            let row = sqlx::query(sqlx::AssertSqlSafe(format!(
-                "UPDATE jobs SET \
-                   state = CASE WHEN cancel_requested THEN 'cancelled' \
-                                WHEN attempts >= max_attempts THEN 'failed' \
-                                ELSE 'queued' END, \
-                   error = CASE WHEN cancel_requested THEN NULL \
-                                WHEN attempts >= max_attempts \
-                                  THEN 'lease expired on attempt ' || attempts || ' of ' || \
-                                       max_attempts || ' (worker ' || ? || ' stopped renewing); \
-                                       no attempts left' \
-                                ELSE 'lease expired (worker ' || ? || ' stopped renewing); \
-                                      re-queued' END, \
-                   finished_at_ms = CASE WHEN cancel_requested OR attempts >= max_attempts \
-                                         THEN ? ELSE NULL END, \
-                   lease_owner = NULL, lease_expires_at_ms = NULL, updated_at_ms = ? \
-                 WHERE id = ? AND state = 'running' AND lease_expires_at_ms < ? \
-                 RETURNING {COLUMNS}"
-            )))
-            .bind(owner_text)
-            .bind(owner_text)
-            .bind(now)
-            .bind(now)
-            .bind(&job_id)
-            .bind(now)
-            .fetch_optional(&mut *transaction)
-            .await?;
-            if let Some(row) = row {
-                let job = job_from_row(&row)?;
-                insert_state_event(&mut transaction, &job).await?;
-                results.push(ExpiredLease {
-                    job_id,
-                    previous_owner,
-                    new_state: job.state,
-                });
-            }
-        }
-        transaction.commit().await?;
-        Ok(results)
+        Ok(updated.rows_affected() > 0)
     }
 
     /// Cancels a queued job at once, or flags a running one for its worker.

@@ -7,7 +7,9 @@ mod database;
 mod error;
 pub mod events;
 pub mod jobs;
+mod lease_reaping;
 pub mod objects;
+pub mod process_tag;
 pub mod scenes;
 
 pub use blob::{BlobError, BlobStore, LocalBlobStore};

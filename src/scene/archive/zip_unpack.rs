@@ -6,6 +6,7 @@ use std::io::BufReader;
 
 use super::ArchiveError;
 use super::sink::DiskSink;
+use super::zip_names::check_entry_names;
 
 const FILE_TYPE_MASK: u32 = 0o170000;
 const REGULAR_FILE: u32 = 0o100000;
@@ -13,17 +14,18 @@ const DIRECTORY: u32 = 0o040000;
 const SYMLINK: u32 = 0o120000;
 
 pub fn unpack_zip(file: File, sink: &mut DiskSink<'_>) -> Result<(), ArchiveError> {
-    let mut archive = zip::ZipArchive::new(BufReader::new(file))
-        .map_err(|error| ArchiveError::Corrupt(error.to_string()))?;
+    let mut reader = BufReader::new(file);
+    check_entry_names(&mut reader)?;
+    let mut archive =
+        zip::ZipArchive::new(reader).map_err(|error| ArchiveError::Corrupt(error.to_string()))?;
     sink.check_announced_entries(archive.len() as u64)?;
     for index in 0..archive.len() {
         let mut entry = archive
             .by_index(index)
             .map_err(|error| ArchiveError::Corrupt(format!("entry {index}: {error}")))?;
-        let name = entry
-            .name()
-            .map_err(|error| ArchiveError::Corrupt(format!("entry {index}: {error}")))?
-            .into_owned();
+        // The raw bytes, which `check_entry_names` found to be UTF-8: the crate would decode a
+        // name without the UTF-8 flag as CP437.
+        let name = String::from_utf8_lossy(entry.name_raw()).into_owned();
         if entry.encrypted() {
             return Err(ArchiveError::Corrupt(format!(
                 "{name}: encrypted entries are not supported"

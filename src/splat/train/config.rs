@@ -115,6 +115,32 @@ impl TrainConfig {
         if self.background.iter().any(|c| !(0.0..=1.0).contains(c)) {
             return fail("background", "components must be within 0..=1");
         }
+        let rates = &self.learning_rates;
+        for (field, rate) in [
+            ("learning_rates.position_initial", rates.position_initial),
+            ("learning_rates.position_final", rates.position_final),
+            ("learning_rates.sh_dc", rates.sh_dc),
+            ("learning_rates.opacity", rates.opacity),
+            ("learning_rates.scale", rates.scale),
+            ("learning_rates.rotation", rates.rotation),
+        ] {
+            // A negative rate climbs the loss; NaN poisons every parameter.
+            if !(rate.is_finite() && rate >= 0.0) {
+                return fail(field, "must be a finite number >= 0");
+            }
+        }
+        if !(rates.sh_rest_divisor.is_finite() && rates.sh_rest_divisor > 0.0) {
+            return fail(
+                "learning_rates.sh_rest_divisor",
+                "must be a finite number > 0",
+            );
+        }
+        if rates.position_decay_steps == Some(0) {
+            return fail("learning_rates.position_decay_steps", "must be at least 1");
+        }
+        if !self.densify.gradient_threshold.is_finite() {
+            return fail("densify.gradient_threshold", "must be a finite number");
+        }
         if self.densify.gradient_threshold <= 0.0 {
             return fail("densify.gradient_threshold", "must be positive");
         }
