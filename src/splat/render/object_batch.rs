@@ -27,9 +27,7 @@ use wgpu::util::DeviceExt;
 
 use super::renderer::{RenderError, RenderOutput, Renderer};
 use super::uniforms::RenderUniforms;
-use super::workspace::{
-    INTERSECTION_COUNT_OFFSET, INTERSECTION_DISPATCH_OFFSET, RenderWorkspace, WorkspacePool,
-};
+use super::workspace::{RenderWorkspace, WorkspacePool};
 use crate::gpu::kernel::{workgroups_2d, workgroups_for};
 use crate::gpu::{GpuContext, GpuError};
 use crate::scene::Level;
@@ -263,33 +261,7 @@ impl Renderer {
             ],
         );
         k.object_tile_emit.dispatch(encoder, &emit, per_gaussian);
-        let keys = tiles_per_slot * slots.len() as u32;
-        let key_bits = (u32::BITS - (keys.max(2) - 1).leading_zeros()).max(1);
-        self.sort.encode(
-            ctx,
-            encoder,
-            &workspace.intersection_tiles,
-            &workspace.intersection_gaussians,
-            &workspace.counts,
-            INTERSECTION_COUNT_OFFSET,
-            workspace.size.intersections,
-            key_bits,
-        );
-        let k = &self.kernels;
-        let ranges = k.tile_ranges.bind(
-            ctx,
-            &[
-                &workspace.counts,
-                &workspace.intersection_tiles,
-                &workspace.tile_ranges,
-            ],
-        );
-        k.tile_ranges.dispatch_indirect(
-            encoder,
-            &ranges,
-            &workspace.counts,
-            INTERSECTION_DISPATCH_OFFSET,
-        );
+        self.encode_tile_ranges(ctx, encoder, workspace, tiles_per_slot * slots.len() as u32);
     }
 
     /// Records the backward of every slot of `batch` given `grad_images` (d loss / d image, slot

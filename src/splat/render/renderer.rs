@@ -417,8 +417,20 @@ impl Renderer {
             ],
         );
         k.tile_emit.dispatch(encoder, &emit, per_gaussian);
-        let tile_count = tiles_x * tiles_y;
-        let tile_key_bits = (u32::BITS - (tile_count.max(2) - 1).leading_zeros()).max(1);
+        self.encode_tile_ranges(ctx, encoder, workspace, tiles_x * tiles_y);
+    }
+
+    /// Steps 7-8 of the module doc: sorts the emitted (key, Gaussian) pairs stably by key
+    /// (`key_count` distinct keys: tiles, or (slot, tile) for an object batch) and writes each
+    /// key's range.
+    pub(super) fn encode_tile_ranges(
+        &mut self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        workspace: &RenderWorkspace,
+        key_count: u32,
+    ) {
+        let key_bits = (u32::BITS - (key_count.max(2) - 1).leading_zeros()).max(1);
         self.sort.encode(
             ctx,
             encoder,
@@ -427,7 +439,7 @@ impl Renderer {
             &workspace.counts,
             INTERSECTION_COUNT_OFFSET,
             workspace.size.intersections,
-            tile_key_bits,
+            key_bits,
         );
         let k = &self.kernels;
         let ranges = k.tile_ranges.bind(
