@@ -30,6 +30,12 @@ struct LossParams {
     loss_slot: u32,
     // Workgroups of the per-pixel loss kernel (one partial sum each).
     partial_count: u32,
+    // First pixel of the rendered image in `rendered`, and of the gradient in `rendered_grad`:
+    // a batch of object renders is one buffer of images back to back.
+    rendered_base: u32,
+    grad_base: u32,
+    padding0: u32,
+    padding1: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: LossParams;

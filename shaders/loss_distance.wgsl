@@ -1,10 +1,7 @@
 // Object losses only: for each tile, the Chebyshev distance in tiles to the nearest tile with
 // content (loss_content.wgsl), capped at LOSS_SKIP_CAP. One invocation per tile.
 //
-// The passes skip a tile beyond their reach (loss_skip.wgsl): a pixel's loss is non-zero only
-// within the window's radius (5 px) of content and its gradient within twice that, which one
-// tile (16 px) covers; each pass before the gradient reads its predecessor's outputs up to 5 px
-// away, so it must run one tile further out than the pass that reads it.
+// The passes skip the tiles beyond SKIP_REACH (loss_skip.wgsl says why that is exact).
 
 @group(0) @binding(1) var<storage, read> tile_content: array<u32>;
 @group(0) @binding(2) var<storage, read_write> tile_distance: array<u32>;

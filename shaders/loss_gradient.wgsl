@@ -20,7 +20,8 @@ fn store_gradient(x: i32, y: i32, sum: Partials) {
         let t = target_rgb(pixel);
         let dssim_dr = sum.d_mu.xyz + 2.0 * r * sum.d_rr.xyz + t * sum.d_rt.xyz;
         let grad = L1_WEIGHT * sign(r - t) - DSSIM_WEIGHT * dssim_dr;
-        rendered_grad[pixel] = vec4<f32>(params.weight * params.inv_value_count * grad, 0.0);
+        rendered_grad[params.grad_base + pixel] =
+            vec4<f32>(params.weight * params.inv_value_count * grad, 0.0);
     }
 }
 
@@ -31,11 +32,11 @@ fn loss_gradient(@builtin(global_invocation_id) id: vec3<u32>) {
     if !inside(x, y) {
         return;
     }
-    if !tile_in_reach(x, y, 1u) {
+    if !tile_in_reach(x, y, SKIP_REACH) {
         // Beyond the reach of content the gradient is exactly zero (the images and all the
         // moments around are zero; sign(0) = 0).
         for (var k = 0; k < i32(LOSS_RUN) && y + k < i32(params.height); k++) {
-            rendered_grad[pixel_index(x, y + k)] = vec4<f32>(0.0);
+            rendered_grad[params.grad_base + pixel_index(x, y + k)] = vec4<f32>(0.0);
         }
         return;
     }

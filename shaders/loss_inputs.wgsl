@@ -5,7 +5,7 @@
 @group(0) @binding(3) var<storage, read> target_object_ids: array<u32>;
 
 fn rendered_rgb(pixel: u32) -> vec3<f32> {
-    return rendered[pixel].xyz;
+    return rendered[params.rendered_base + pixel].xyz;
 }
 
 // The target, zeroed outside the object when a mask is in use (the Segment-then-Splat object loss).

@@ -42,7 +42,7 @@ fn store_moments(x: i32, y: i32, m: Moments) {
 fn filter_moments_horizontal(@builtin(global_invocation_id) id: vec3<u32>) {
     let x = i32(id.x * LOSS_RUN);
     let y = i32(id.y);
-    if !inside(x, y) || !tile_in_reach(x, y, 4u) {
+    if !inside(x, y) || !tile_in_reach(x, y, SKIP_REACH) {
         return;
     }
     var m0 = no_moments();

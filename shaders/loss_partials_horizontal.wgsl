@@ -24,7 +24,7 @@ fn store_partials(x: i32, y: i32, sum: Partials) {
 fn filter_partials_horizontal(@builtin(global_invocation_id) id: vec3<u32>) {
     let x = i32(id.x * LOSS_RUN);
     let y = i32(id.y);
-    if !inside(x, y) || !tile_in_reach(x, y, 2u) {
+    if !inside(x, y) || !tile_in_reach(x, y, SKIP_REACH) {
         return;
     }
     let run = filter_partials_run(x, y, vec2<i32>(1, 0), x, i32(params.width));

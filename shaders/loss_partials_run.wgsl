@@ -27,14 +27,18 @@ struct PartialsRun {
 }
 
 // `extent` is the image's size along `step` (width or height), `along` the run's first
-// coordinate on that axis.
+// coordinate on that axis. Inputs the previous pass skipped read as zero (loss_skip.wgsl).
 fn filter_partials_run(x: i32, y: i32, step: vec2<i32>, along: i32, extent: i32) -> PartialsRun {
+    let reach = run_reach(x, y, step, along, extent);
     var run = PartialsRun(no_partials(), no_partials(), no_partials(), no_partials());
     for (var j = 0; j < RUN_INPUTS; j++) {
         let offset = j - WINDOW_RADIUS;
         if along + offset >= 0 && along + offset < extent {
             let source = vec2<i32>(x, y) + offset * step;
-            let value = partials_input(pixel_index(source.x, source.y));
+            var value = no_partials();
+            if input_computed(reach, along + offset) {
+                value = partials_input(pixel_index(source.x, source.y));
+            }
             run.s0 = add_partials(run.s0, tap_weight(j), value);
             run.s1 = add_partials(run.s1, tap_weight(j - 1), value);
             run.s2 = add_partials(run.s2, tap_weight(j - 2), value);

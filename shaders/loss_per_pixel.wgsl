@@ -3,8 +3,9 @@
 //   d_mu = dssim/d(G*r), d_rr = dssim/d(G*r^2), d_rt = dssim/d(G*r*t)
 // (stored as three vec4, w = 0), and the pixel's unnormalised loss
 //   0.8 * sum_c |r - t| + 0.2 * sum_c (1 - ssim_c),
-// summed per workgroup in a fixed order (deterministic) into `loss_partials`. Each invocation
-// filters a run of LOSS_RUN pixels of a column.
+// one partial sum per invocation in `loss_partials` (loss_reduce.wgsl sums them in a fixed
+// order). Each invocation filters a run of LOSS_RUN pixels of a column. No workgroup memory or
+// barriers: a CPU adapter pays a barrier in every workgroup, and an object loss skips most.
 
 @group(0) @binding(4) var<storage, read> row_moments: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> ssim_partials: array<vec4<f32>>;
@@ -12,8 +13,6 @@
 @group(0) @binding(7) var<storage, read> tile_distance: array<u32>;
 
 const INVOCATIONS: u32 = LOSS_TILE * LOSS_TILE / LOSS_RUN;
-
-var<workgroup> invocation_losses: array<f32, INVOCATIONS>;
 
 // The moments as pass 1 packs them: (r.xyz, t.x) (t.yz, rr.xy) (rr.z, tt.xyz) (rt.xyz, 0).
 struct PackedMoments {
@@ -80,15 +79,17 @@ fn ssim_per_pixel(
     let x = i32(id.x);
     let y = i32(id.y * LOSS_RUN);
     var run_loss = 0.0;
-    // A skipped tile's loss is exactly zero; the reduction below still runs in every tile.
-    if inside(x, y) && tile_in_reach(x, y, 3u) {
+    // A skipped tile's loss is exactly zero.
+    if inside(x, y) && tile_in_reach(x, y, SKIP_REACH) {
+        // Row moments the first pass skipped are zero (loss_skip.wgsl).
+        let reach = run_reach(x, y, vec2<i32>(0, 1), y, i32(params.height));
         var m0 = no_packed_moments();
         var m1 = no_packed_moments();
         var m2 = no_packed_moments();
         var m3 = no_packed_moments();
         for (var j = 0; j < RUN_INPUTS; j++) {
             let sy = y + j - WINDOW_RADIUS;
-            if sy >= 0 && sy < i32(params.height) {
+            if sy >= 0 && sy < i32(params.height) && input_computed(reach, sy) {
                 let base = pixel_index(x, sy) * 4u;
                 let row = PackedMoments(
                     row_moments[base],
@@ -105,15 +106,5 @@ fn ssim_per_pixel(
         run_loss = ssim_pixel(x, y, m0) + ssim_pixel(x, y + 1, m1) + ssim_pixel(x, y + 2, m2)
             + ssim_pixel(x, y + 3, m3);
     }
-    invocation_losses[thread] = run_loss;
-    workgroupBarrier();
-    for (var stride = INVOCATIONS / 2u; stride > 0u; stride = stride >> 1u) {
-        if thread < stride {
-            invocation_losses[thread] += invocation_losses[thread + stride];
-        }
-        workgroupBarrier();
-    }
-    if thread == 0u {
-        loss_partials[workgroup.x + workgroup.y * workgroups.x] = invocation_losses[0];
-    }
+    loss_partials[(workgroup.x + workgroup.y * workgroups.x) * INVOCATIONS + thread] = run_loss;
 }

@@ -1,4 +1,4 @@
-// Sums the per-workgroup loss partials in a fixed order (deterministic) and writes
+// Sums the per-invocation loss partials (loss_per_pixel.wgsl) in a fixed order (deterministic) and writes
 // weight * sum / N to `loss_values[loss_slot]`.
 
 @group(0) @binding(1) var<storage, read> loss_partials: array<f32>;

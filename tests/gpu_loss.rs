@@ -143,6 +143,7 @@ fn gpu_loss(
     let loss_buffer = storage_buffer(ctx, "loss values", &[-1.0f32; 6]);
     let images = LossImages {
         rendered: &rendered_buffer,
+        rendered_index: 0,
         target: &target_buffer,
         target_mask: mask.map(|(_, object_id)| ObjectMask {
             object_ids: ids_buffer.as_ref().unwrap(),
@@ -153,6 +154,7 @@ fn gpu_loss(
     };
     let outputs = LossOutputs {
         rendered_grad: &grad_buffer,
+        grad_index: 0,
         loss_values: &loss_buffer,
         loss_slot: slot,
     };
@@ -388,6 +390,10 @@ fn gpu_object_loss_skipping_empty_tiles_matches_cpu_reference() {
         .map(|(t, &id)| if id == 7 { *t } else { [0.0; 3] })
         .collect();
     let (cpu, cpu_grad) = cpu_loss(&rendered, &masked_target, width, height);
+    // A full loss first leaves every intermediate buffer holding another image's values, as
+    // the object losses of a step find them: a pass that read a tile its predecessor skipped
+    // would read those.
+    gpu_loss(ctx, &mut loss, &image, &target, None, width, height, 1.0, 0);
     let gpu = gpu_loss(
         ctx,
         &mut loss,

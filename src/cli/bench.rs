@@ -77,9 +77,24 @@ pub struct BenchArgs {
     /// with GPU timestamps (`kernel_profile` in the report: ms per step by kernel).
     #[arg(long)]
     pub profile_kernels: Option<u32>,
+    /// A TOML file of training settings (the keys of a job's `train` config, e.g.
+    /// `max_sh_degree = 1` or `[densify]` values) to bench instead of the defaults; `--steps`,
+    /// `--max-resolution`, `--eval-split-every` and `--seed` still apply on top.
+    #[arg(long)]
+    pub train_config: Option<PathBuf>,
     /// Print one JSON object (otherwise a readable summary).
     #[arg(long)]
     pub json: bool,
+}
+
+/// The training settings of `--train-config`, or the defaults.
+fn base_train_config(args: &BenchArgs) -> anyhow::Result<TrainConfig> {
+    let Some(path) = &args.train_config else {
+        return Ok(TrainConfig::default());
+    };
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    toml::from_str(&text).with_context(|| format!("{} is no training config", path.display()))
 }
 
 #[derive(Serialize)]
@@ -430,7 +445,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         max_resolution: Some(args.max_resolution),
         eval_split_every: args.eval_split_every,
         seed: args.seed,
-        ..Default::default()
+        ..base_train_config(&args)?
     };
     let initial = match (&args.init_ply, args.init_random) {
         (Some(path), _) => Some(

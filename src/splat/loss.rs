@@ -36,6 +36,10 @@ pub const SSIM_WINDOW_SIGMA: f64 = 1.5;
 
 /// Pixels per side of the per-pixel kernels' workgroups (`LOSS_TILE` in `loss_common.wgsl`).
 const LOSS_TILE: u32 = 16;
+/// Pixels each per-pixel invocation filters (`LOSS_RUN` in `loss_common.wgsl`).
+const LOSS_RUN: u32 = 4;
+/// Invocations of a per-pixel workgroup, each writing one loss partial sum.
+const PER_PIXEL_INVOCATIONS: u32 = LOSS_TILE * LOSS_TILE / LOSS_RUN;
 /// Bytes per pixel of the scratch images: four vec4 of filtered moments, three of partials.
 const ROW_MOMENTS_BYTES_PER_PIXEL: u64 = 64;
 const PARTIALS_BYTES_PER_PIXEL: u64 = 48;
@@ -113,7 +117,10 @@ pub struct ObjectMask<'a> {
 /// RGB in xyz (w, the alpha, is ignored).
 #[derive(Debug, Clone, Copy)]
 pub struct LossImages<'a> {
+    /// Holds the rendered image as its `rendered_index`-th image of `width * height` pixels
+    /// (a batch of object renders is one buffer of images back to back).
     pub rendered: &'a wgpu::Buffer,
+    pub rendered_index: u32,
     pub target: &'a wgpu::Buffer,
     pub target_mask: Option<ObjectMask<'a>>,
     pub width: u32,
@@ -123,8 +130,10 @@ pub struct LossImages<'a> {
 /// Where one loss writes.
 #[derive(Debug, Clone, Copy)]
 pub struct LossOutputs<'a> {
-    /// Overwritten with `weight * dL/d(rendered)`, same layout as the rendered image (w = 0).
+    /// Its `grad_index`-th image of `width * height` pixels is overwritten with
+    /// `weight * dL/d(rendered)`, same layout as the rendered image (w = 0).
     pub rendered_grad: &'a wgpu::Buffer,
+    pub grad_index: u32,
     /// f32 slots; `loss_values[loss_slot]` is overwritten with `weight * L`.
     pub loss_values: &'a wgpu::Buffer,
     pub loss_slot: u32,
@@ -142,6 +151,9 @@ struct LossParams {
     inv_value_count: f32,
     loss_slot: u32,
     partial_count: u32,
+    rendered_base: u32,
+    grad_base: u32,
+    padding: [u32; 2],
 }
 
 /// Intermediate images for one image size; grown, never shrunk.
@@ -275,7 +287,8 @@ impl RenderLoss {
             ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
                 size,
-                usage: wgpu::BufferUsages::STORAGE,
+                // COPY_DST: the tile flags are cleared before each object loss.
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             })
         };
@@ -285,7 +298,10 @@ impl RenderLoss {
             row_moments: storage("loss row moments", pixels * ROW_MOMENTS_BYTES_PER_PIXEL),
             ssim_partials: storage("loss ssim partials", pixels * PARTIALS_BYTES_PER_PIXEL),
             row_partials: storage("loss row partials", pixels * PARTIALS_BYTES_PER_PIXEL),
-            loss_partials: storage("loss partial sums", tiles * 4),
+            loss_partials: storage(
+                "loss partial sums",
+                tiles * u64::from(PER_PIXEL_INVOCATIONS) * 4,
+            ),
             tile_content: storage("loss tile content", tiles * 4),
             tile_distance: storage("loss tile distance", tiles * 4),
         });
@@ -309,6 +325,7 @@ impl RenderLoss {
             target_mask,
             width,
             height,
+            ..
         } = *images;
         check_sizes(images, outputs)?;
         self.reserve(ctx, width, height)?;
@@ -324,7 +341,10 @@ impl RenderLoss {
             weight,
             inv_value_count: (1.0 / (f64::from(width) * f64::from(height) * 3.0)) as f32,
             loss_slot: outputs.loss_slot,
-            partial_count: groups[0] * groups[1],
+            partial_count: groups[0] * groups[1] * PER_PIXEL_INVOCATIONS,
+            rendered_base: images.rendered_index * width * height,
+            grad_base: outputs.grad_index * width * height,
+            padding: [0; 2],
         };
         // A buffer per call (not queue.write_buffer on a shared one) so several losses recorded
         // before one submit each keep their own parameters.
@@ -338,6 +358,7 @@ impl RenderLoss {
         let object_ids = target_mask.map_or(&self.no_mask, |mask| mask.object_ids);
         let inputs = [&params, rendered, target, object_ids];
         if target_mask.is_some() {
+            encoder.clear_buffer(&scratch.tile_content, 0, None);
             let bind = self.tile_content.bind(
                 ctx,
                 &[
@@ -423,9 +444,17 @@ fn check_sizes(images: &LossImages<'_>, outputs: &LossOutputs<'_>) -> Result<(),
         return Err(LossError::EmptyImage { width, height });
     }
     let mut required = vec![
-        ("rendered image", images.rendered, pixels * 16),
+        (
+            "rendered image",
+            images.rendered,
+            (u64::from(images.rendered_index) + 1) * pixels * 16,
+        ),
         ("target image", images.target, pixels * 16),
-        ("rendered gradient", outputs.rendered_grad, pixels * 16),
+        (
+            "rendered gradient",
+            outputs.rendered_grad,
+            (u64::from(outputs.grad_index) + 1) * pixels * 16,
+        ),
         (
             "loss values",
             outputs.loss_values,

@@ -367,6 +367,7 @@ impl Trainer {
             &mut encoder,
             &LossImages {
                 rendered: output.image(),
+                rendered_index: 0,
                 target: &view.target,
                 target_mask: None,
                 width: camera.width,
@@ -375,6 +376,7 @@ impl Trainer {
             1.0,
             &LossOutputs {
                 rendered_grad: &self.grad_image,
+                grad_index: 0,
                 loss_values: &self.loss_values,
                 loss_slot: 0,
             },
@@ -688,6 +690,7 @@ impl Trainer {
                         &mut encoder,
                         &LossImages {
                             rendered: output.image(),
+                            rendered_index: 0,
                             target: &view.target,
                             target_mask: None,
                             width: camera.width,
@@ -696,6 +699,7 @@ impl Trainer {
                         1.0,
                         &LossOutputs {
                             rendered_grad: &self.grad_image,
+                            grad_index: 0,
                             loss_values: &self.loss_values,
                             loss_slot: 0,
                         },

@@ -36,6 +36,7 @@ impl Trainer {
                 encoder,
                 &LossImages {
                     rendered: output.image(),
+                    rendered_index: 0,
                     target: &view.target,
                     target_mask: Some(ObjectMask {
                         object_ids: &masks.ids[slot.level.index()],
@@ -47,6 +48,7 @@ impl Trainer {
                 config.weight,
                 &LossOutputs {
                     rendered_grad: &self.grad_image,
+                    grad_index: 0,
                     loss_values: &self.loss_values,
                     loss_slot: 1 + index as u32,
                 },

@@ -118,9 +118,7 @@ impl Trainer {
         let (Some(config), Some(targets)) = (&self.config.object_loss, &self.object_targets) else {
             return Ok(());
         };
-        let (Some(image), Some(grad_images)) =
-            (&self.object_buffers.image, &self.object_buffers.grad_images)
-        else {
+        let Some(grad_images) = &self.object_buffers.grad_images else {
             return Ok(());
         };
         let masks = &targets.views[view_index];
@@ -129,17 +127,13 @@ impl Trainer {
         let batch = self
             .renderer
             .forward_objects(&self.ctx, encoder, scene, base, &slots)?;
-        let bytes = batch.slot_image_bytes();
-        for (index, slot) in slots.iter().enumerate() {
-            // The loss kernels read and write whole images: each slot goes through one
-            // image-sized buffer (copies, not dispatches).
-            let offset = index as u64 * bytes;
-            encoder.copy_buffer_to_buffer(batch.images(), offset, image, 0, bytes);
+        for (index, slot) in (0u32..).zip(&slots) {
             self.loss.encode(
                 &self.ctx,
                 encoder,
                 &LossImages {
-                    rendered: image,
+                    rendered: batch.images(),
+                    rendered_index: index,
                     target: &view.target,
                     target_mask: Some(ObjectMask {
                         object_ids: &masks.ids[slot.level.index()],
@@ -150,12 +144,12 @@ impl Trainer {
                 },
                 config.weight,
                 &LossOutputs {
-                    rendered_grad: &self.grad_image,
+                    rendered_grad: grad_images,
+                    grad_index: index,
                     loss_values: &self.loss_values,
-                    loss_slot: 1 + index as u32,
+                    loss_slot: 1 + index,
                 },
             )?;
-            encoder.copy_buffer_to_buffer(&self.grad_image, 0, grad_images, offset, bytes);
         }
         self.renderer.backward_objects(
             &self.ctx,
@@ -169,12 +163,10 @@ impl Trainer {
     }
 }
 
-/// The step's object images and their loss gradients, grown on demand (a trainer without the
-/// object loss never allocates them).
+/// The step's object loss gradients, grown on demand (a trainer without the object loss never
+/// allocates them).
 #[derive(Debug, Default)]
 pub(super) struct ObjectBuffers {
-    /// One slot's image, as the loss reads it.
-    image: Option<wgpu::Buffer>,
     /// Every slot's d loss / d image, slot after slot, as the batched backward reads them.
     grad_images: Option<wgpu::Buffer>,
 }
@@ -182,7 +174,6 @@ pub(super) struct ObjectBuffers {
 impl ObjectBuffers {
     fn reserve(&mut self, ctx: &crate::gpu::GpuContext, pixels: usize, slots: usize) {
         let image_bytes = pixels as u64 * 16;
-        grow(ctx, &mut self.image, "object image", image_bytes);
         grow(
             ctx,
             &mut self.grad_images,
