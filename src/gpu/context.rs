@@ -270,6 +270,33 @@ impl GpuContext {
         Ok(())
     }
 
+    /// A storage buffer of at least `bytes` (never empty, so it always binds) that can be copied
+    /// to and from, after checking that it fits one binding. Every GPU array of the engine is
+    /// one of these.
+    pub fn storage_buffer(&self, label: &str, bytes: u64) -> Result<wgpu::Buffer, GpuError> {
+        self.storage_buffer_with_usage(label, bytes, wgpu::BufferUsages::empty())
+    }
+
+    /// [`Self::storage_buffer`] with `extra` usages (e.g. `INDIRECT`).
+    pub fn storage_buffer_with_usage(
+        &self,
+        label: &str,
+        bytes: u64,
+        extra: wgpu::BufferUsages,
+    ) -> Result<wgpu::Buffer, GpuError> {
+        let bytes = bytes.max(16);
+        self.check_binding_size(label, bytes)?;
+        Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: bytes,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST
+                | extra,
+            mapped_at_creation: false,
+        }))
+    }
+
     /// Blocks until all submitted work is done.
     pub fn wait_idle(&self) -> Result<(), GpuError> {
         self.device.poll(wgpu::PollType::wait_indefinitely())?;

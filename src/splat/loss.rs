@@ -279,31 +279,19 @@ impl RenderLoss {
             ),
             None => (pixels, tiles),
         };
-        ctx.check_binding_size(
-            "render loss filtered moments",
-            pixels * ROW_MOMENTS_BYTES_PER_PIXEL,
-        )?;
-        let storage = |label, size| {
-            ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size,
-                // COPY_DST: the tile flags are cleared before each object loss.
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            })
-        };
+        let storage = |label, size| ctx.storage_buffer(label, size);
         self.scratch = Some(LossScratch {
             pixel_capacity: pixels,
             tile_capacity: tiles,
-            row_moments: storage("loss row moments", pixels * ROW_MOMENTS_BYTES_PER_PIXEL),
-            ssim_partials: storage("loss ssim partials", pixels * PARTIALS_BYTES_PER_PIXEL),
-            row_partials: storage("loss row partials", pixels * PARTIALS_BYTES_PER_PIXEL),
+            row_moments: storage("loss row moments", pixels * ROW_MOMENTS_BYTES_PER_PIXEL)?,
+            ssim_partials: storage("loss ssim partials", pixels * PARTIALS_BYTES_PER_PIXEL)?,
+            row_partials: storage("loss row partials", pixels * PARTIALS_BYTES_PER_PIXEL)?,
             loss_partials: storage(
                 "loss partial sums",
                 tiles * u64::from(PER_PIXEL_INVOCATIONS) * 4,
-            ),
-            tile_content: storage("loss tile content", tiles * 4),
-            tile_distance: storage("loss tile distance", tiles * 4),
+            )?,
+            tile_content: storage("loss tile content", tiles * 4)?,
+            tile_distance: storage("loss tile distance", tiles * 4)?,
         });
         Ok(())
     }

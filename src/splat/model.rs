@@ -134,11 +134,6 @@ pub fn max_gaussians_for_binding(limit_bytes: u64) -> u64 {
     limit_bytes / largest_bytes_per_gaussian
 }
 
-/// Usage of every per-Gaussian buffer: read/written by kernels, uploaded, read back, grown by copy.
-fn storage_usage() -> wgpu::BufferUsages {
-    wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC
-}
-
 /// Creates one per-Gaussian storage buffer after checking it fits one binding.
 fn create_per_gaussian(
     ctx: &GpuContext,
@@ -148,17 +143,11 @@ fn create_per_gaussian(
 ) -> Result<wgpu::Buffer, ModelError> {
     // Keep at least one word so empty scenes still bind.
     let bytes = (capacity.max(1) * words_per_gaussian * 4) as u64;
-    ctx.check_binding_size(label, bytes)
+    ctx.storage_buffer(label, bytes)
         .map_err(|reason| ModelError::TooLargeForAdapter {
             count: capacity,
             reason,
-        })?;
-    Ok(ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: bytes,
-        usage: storage_usage(),
-        mapped_at_creation: false,
-    }))
+        })
 }
 
 /// The per-parameter buffers shared by [`GpuGaussians`] and [`GpuGaussianGrads`].

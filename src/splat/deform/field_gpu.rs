@@ -60,16 +60,7 @@ struct Workspace {
 }
 
 fn storage_buffer(ctx: &GpuContext, label: &str, words: usize) -> Result<wgpu::Buffer, GpuError> {
-    let bytes = (words.max(1) * 4) as u64;
-    ctx.check_binding_size(label, bytes)?;
-    Ok(ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: bytes,
-        usage: wgpu::BufferUsages::STORAGE
-            | wgpu::BufferUsages::COPY_DST
-            | wgpu::BufferUsages::COPY_SRC,
-        mapped_at_creation: false,
-    }))
+    ctx.storage_buffer(label, words as u64 * 4)
 }
 
 /// The trainable field with its optimiser state.

@@ -15,16 +15,7 @@ pub struct DeformedGeometry {
 }
 
 fn buffer(ctx: &GpuContext, label: &str, words: usize) -> Result<wgpu::Buffer, GpuError> {
-    let bytes = (words.max(1) * 4) as u64;
-    ctx.check_binding_size(label, bytes)?;
-    Ok(ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: bytes,
-        usage: wgpu::BufferUsages::STORAGE
-            | wgpu::BufferUsages::COPY_DST
-            | wgpu::BufferUsages::COPY_SRC,
-        mapped_at_creation: false,
-    }))
+    ctx.storage_buffer(label, words as u64 * 4)
 }
 
 impl DeformedGeometry {

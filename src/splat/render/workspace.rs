@@ -58,17 +58,7 @@ fn storage(
     bytes: usize,
     extra: wgpu::BufferUsages,
 ) -> Result<wgpu::Buffer, GpuError> {
-    let bytes = (bytes.max(4)) as u64;
-    ctx.check_binding_size(label, bytes)?;
-    Ok(ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: bytes,
-        usage: wgpu::BufferUsages::STORAGE
-            | wgpu::BufferUsages::COPY_DST
-            | wgpu::BufferUsages::COPY_SRC
-            | extra,
-        mapped_at_creation: false,
-    }))
+    ctx.storage_buffer_with_usage(label, bytes as u64, extra)
 }
 
 impl RenderWorkspace {

@@ -27,15 +27,8 @@ pub struct DensifyAccumulators {
     capacity: usize,
 }
 
-fn storage(ctx: &GpuContext, label: &str, capacity: usize) -> wgpu::Buffer {
-    ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: (capacity.max(1) * 4) as u64,
-        usage: wgpu::BufferUsages::STORAGE
-            | wgpu::BufferUsages::COPY_SRC
-            | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    })
+fn storage(ctx: &GpuContext, label: &str, capacity: usize) -> Result<wgpu::Buffer, GpuError> {
+    ctx.storage_buffer(label, capacity as u64 * 4)
 }
 
 impl DensifyAccumulators {
@@ -55,9 +48,9 @@ impl DensifyAccumulators {
                 usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             }),
-            gradient_sums: storage(ctx, "densify.gradient_sums", capacity),
-            visible_counts: storage(ctx, "densify.visible_counts", capacity),
-            max_radii: storage(ctx, "densify.max_radii", capacity),
+            gradient_sums: storage(ctx, "densify.gradient_sums", capacity)?,
+            visible_counts: storage(ctx, "densify.visible_counts", capacity)?,
+            max_radii: storage(ctx, "densify.max_radii", capacity)?,
             capacity,
         })
     }

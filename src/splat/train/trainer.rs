@@ -33,7 +33,7 @@ use crate::splat::model::{
     GaussianModel, GaussianParameterBuffers, GpuGaussianGrads, GpuGaussians, ModelError,
     max_gaussians_for_adapter,
 };
-use crate::splat::render::{RenderError, Renderer};
+use crate::splat::render::{RenderError, RenderOutput, Renderer};
 use crate::splat::schedule::scene_extent;
 use crate::splat::train::config::{ConfigError, TrainConfig};
 use crate::splat::train::densify_stats::DensifyAccumulators;
@@ -204,17 +204,6 @@ fn camera_centers(scene: &Scene) -> Vec<Vec3> {
         .collect()
 }
 
-fn storage_buffer(ctx: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
-    ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: bytes.max(16),
-        usage: wgpu::BufferUsages::STORAGE
-            | wgpu::BufferUsages::COPY_SRC
-            | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    })
-}
-
 impl Trainer {
     /// Loads the views and uploads `model` (or the scene's initial model).
     pub fn new(
@@ -245,8 +234,8 @@ impl Trainer {
             renderer: Renderer::new(ctx)?,
             loss,
             adam: Adam::new(ctx, AdamSettings::default())?,
-            grad_image: storage_buffer(ctx, "grad image", pixels * 16),
-            loss_values: storage_buffer(ctx, "loss values", LOSS_SLOTS as u64 * 4),
+            grad_image: ctx.storage_buffer("grad image", pixels * 16)?,
+            loss_values: ctx.storage_buffer("loss values", LOSS_SLOTS as u64 * 4)?,
             ctx: ctx.clone(),
             schedule: TrainSchedule::resolve(&config),
             config,
@@ -354,41 +343,9 @@ impl Trainer {
         encoder.clear_buffer(&self.loss_values, 0, None);
         let view_time = self.views.train[view_index].time;
         let time = self.training_time(view_time);
-        self.encode_deform_for_step(&mut encoder, time)?;
+        let output = self.encode_view_render(&mut encoder, view_index, time, &settings, true)?;
         let ctx = &self.ctx;
-        let view = &self.views.train[view_index];
-        let camera = view.camera;
-        let scene = dynamics::render_view(&self.gaussians, &self.dynamics);
-        let output = self
-            .renderer
-            .forward(ctx, &mut encoder, scene, &camera, &settings)?;
-        self.loss.encode(
-            ctx,
-            &mut encoder,
-            &LossImages {
-                rendered: output.image(),
-                rendered_index: 0,
-                target: &view.target,
-                target_mask: None,
-                width: camera.width,
-                height: camera.height,
-            },
-            1.0,
-            &LossOutputs {
-                rendered_grad: &self.grad_image,
-                grad_index: 0,
-                loss_values: &self.loss_values,
-                loss_slot: 0,
-            },
-        )?;
-        self.renderer.backward(
-            ctx,
-            &mut encoder,
-            scene,
-            &output,
-            &self.grad_image,
-            &mut self.grads,
-        )?;
+        let camera = self.views.train[view_index].camera;
         let count = self.gaussians.count() as u32;
         self.accumulators.encode_accumulate(
             ctx,
@@ -412,6 +369,59 @@ impl Trainer {
             self.filter_partial_masks(sh_degree)?;
         }
         Ok(step)
+    }
+
+    /// Records what a step renders of training view `view_index` at `time`: the deformation
+    /// (dynamic scenes), the full render, and with `backward` its loss (loss slot 0) and the
+    /// loss's gradient added into `self.grads`. [`Self::train_step`] records its step with it
+    /// and [`Self::time_passes`] times it, so the timed passes are the step's.
+    fn encode_view_render(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        view_index: usize,
+        time: f32,
+        settings: &RenderSettings,
+        backward: bool,
+    ) -> Result<RenderOutput, TrainError> {
+        self.encode_deform_for_step(encoder, time)?;
+        let ctx = &self.ctx;
+        let view = &self.views.train[view_index];
+        let camera = view.camera;
+        let scene = dynamics::render_view(&self.gaussians, &self.dynamics);
+        let output = self
+            .renderer
+            .forward(ctx, encoder, scene, &camera, settings)?;
+        if !backward {
+            return Ok(output);
+        }
+        self.loss.encode(
+            ctx,
+            encoder,
+            &LossImages {
+                rendered: output.image(),
+                rendered_index: 0,
+                target: &view.target,
+                target_mask: None,
+                width: camera.width,
+                height: camera.height,
+            },
+            1.0,
+            &LossOutputs {
+                rendered_grad: &self.grad_image,
+                grad_index: 0,
+                loss_values: &self.loss_values,
+                loss_slot: 0,
+            },
+        )?;
+        self.renderer.backward(
+            ctx,
+            encoder,
+            scene,
+            &output,
+            &self.grad_image,
+            &mut self.grads,
+        )?;
+        Ok(output)
     }
 
     /// Adam over every parameter group, except SH bands above `sh_degree`: until the degree
@@ -653,9 +663,11 @@ impl Trainer {
         Ok(())
     }
 
-    /// Times the render passes on the training views without changing the model: forward alone,
-    /// and forward + loss + backward, each submitted and waited for (wall clock, so it includes
-    /// submission overhead). Returns (forward ms, backward-with-loss ms) averaged over `repeats`,
+    /// Times a step's render passes ([`Self::encode_view_render`]) on the training views without
+    /// changing the model: forward alone, and forward + loss + backward, each submitted and
+    /// waited for (wall clock, so it includes submission overhead). A dynamic scene's views are
+    /// rendered through the deformation at their own time (no time noise, which would draw from
+    /// the training's random numbers); the field's own backward is not timed. Returns (forward ms, backward-with-loss ms) averaged over `repeats`,
     /// after one untimed round (the first render of a trainer pays first-use costs, such as
     /// growing the intersection buffers, which would otherwise land in the forward figure).
     pub fn time_passes(&mut self, repeats: u32) -> Result<(f64, f64), TrainError> {
@@ -667,8 +679,8 @@ impl Trainer {
         let ctx = self.ctx.clone();
         let (mut forward_secs, mut full_secs) = (0.0, 0.0);
         for repeat in 0..=repeats.max(1) {
-            let view = &self.views.train[repeat as usize % self.views.train.len()];
-            let camera = view.camera;
+            let view_index = repeat as usize % self.views.train.len();
+            let time = self.views.train[view_index].time;
             for with_backward in [false, true] {
                 let started = Instant::now();
                 let mut encoder =
@@ -676,43 +688,16 @@ impl Trainer {
                         .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                             label: Some("timing"),
                         });
-                let output = self.renderer.forward(
-                    &ctx,
-                    &mut encoder,
-                    &self.gaussians,
-                    &camera,
-                    &settings,
-                )?;
                 if with_backward {
                     self.grads.encode_zero(&mut encoder);
-                    self.loss.encode(
-                        &ctx,
-                        &mut encoder,
-                        &LossImages {
-                            rendered: output.image(),
-                            rendered_index: 0,
-                            target: &view.target,
-                            target_mask: None,
-                            width: camera.width,
-                            height: camera.height,
-                        },
-                        1.0,
-                        &LossOutputs {
-                            rendered_grad: &self.grad_image,
-                            grad_index: 0,
-                            loss_values: &self.loss_values,
-                            loss_slot: 0,
-                        },
-                    )?;
-                    self.renderer.backward(
-                        &ctx,
-                        &mut encoder,
-                        &self.gaussians,
-                        &output,
-                        &self.grad_image,
-                        &mut self.grads,
-                    )?;
                 }
+                let _output = self.encode_view_render(
+                    &mut encoder,
+                    view_index,
+                    time,
+                    &settings,
+                    with_backward,
+                )?;
                 ctx.queue.submit([encoder.finish()]);
                 ctx.wait_idle()?;
                 let secs = started.elapsed().as_secs_f64();

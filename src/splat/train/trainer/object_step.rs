@@ -114,7 +114,7 @@ impl Trainer {
         }
         let camera = self.views.train[view_index].camera;
         self.object_buffers
-            .reserve(&self.ctx, camera.pixel_count(), slots.len());
+            .reserve(&self.ctx, camera.pixel_count(), slots.len())?;
         let (Some(config), Some(targets)) = (&self.config.object_loss, &self.object_targets) else {
             return Ok(());
         };
@@ -172,20 +172,17 @@ pub(super) struct ObjectBuffers {
 }
 
 impl ObjectBuffers {
-    fn reserve(&mut self, ctx: &crate::gpu::GpuContext, pixels: usize, slots: usize) {
-        let image_bytes = pixels as u64 * 16;
-        grow(
-            ctx,
-            &mut self.grad_images,
-            "object grad images",
-            image_bytes * slots as u64,
-        );
+    fn reserve(
+        &mut self,
+        ctx: &crate::gpu::GpuContext,
+        pixels: usize,
+        slots: usize,
+    ) -> Result<(), crate::gpu::GpuError> {
+        let bytes = pixels as u64 * 16 * slots as u64;
+        if self.grad_images.as_ref().is_some_and(|b| b.size() >= bytes) {
+            return Ok(());
+        }
+        self.grad_images = Some(ctx.storage_buffer("object grad images", bytes)?);
+        Ok(())
     }
-}
-
-fn grow(ctx: &crate::gpu::GpuContext, buffer: &mut Option<wgpu::Buffer>, label: &str, bytes: u64) {
-    if buffer.as_ref().is_some_and(|b| b.size() >= bytes) {
-        return;
-    }
-    *buffer = Some(super::storage_buffer(ctx, label, bytes));
 }
