@@ -13,7 +13,7 @@ pub mod train;
 use std::path::Path;
 
 use anyhow::Context;
-use segsplat::gpu::GpuContext;
+use segsplat::gpu::{GpuContext, KernelChoices};
 use segsplat::scene::{LoadOptions, Scene, load_scene};
 
 /// Loads a dataset directory (any supported format).
@@ -24,7 +24,9 @@ pub fn open_scene(dir: &Path) -> anyhow::Result<Scene> {
 
 /// The best GPU adapter (hardware first, software Vulkan otherwise).
 pub fn open_gpu() -> anyhow::Result<GpuContext> {
-    let ctx = GpuContext::new_default().context("no usable GPU adapter")?;
+    let ctx = GpuContext::new_default()
+        .context("no usable GPU adapter")?
+        .with_kernel_choices(kernel_choices_from_env()?);
     tracing::info!(
         adapter = %ctx.report.name,
         backend = %ctx.report.backend,
@@ -32,6 +34,26 @@ pub fn open_gpu() -> anyhow::Result<GpuContext> {
         "GPU ready"
     );
     Ok(ctx)
+}
+
+/// Kernel variants forced by `SEGSPLAT_RASTER_KERNEL` (`pixels` / `columns`) and
+/// `SEGSPLAT_GEMM_KERNEL` (`tiled` / `rows`), for comparing variants on one machine
+/// (docs/benchmarks.md). A value that names no variant is an error, not a silent default.
+fn kernel_choices_from_env() -> anyhow::Result<KernelChoices> {
+    fn forced<T: std::str::FromStr>(variable: &str) -> anyhow::Result<Option<T>>
+    where
+        T::Err: std::error::Error + Send + Sync + 'static,
+    {
+        match std::env::var(variable) {
+            Ok(value) => Ok(Some(value.parse().with_context(|| variable.to_string())?)),
+            Err(std::env::VarError::NotPresent) => Ok(None),
+            Err(error) => Err(error).with_context(|| variable.to_string()),
+        }
+    }
+    Ok(KernelChoices {
+        raster: forced("SEGSPLAT_RASTER_KERNEL")?,
+        gemm: forced("SEGSPLAT_GEMM_KERNEL")?,
+    })
 }
 
 /// Peak resident memory of this process in MiB (Linux `VmHWM`); on software adapters this

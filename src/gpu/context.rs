@@ -11,6 +11,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use serde::Serialize;
 
+use crate::gpu::kernel_choices::KernelChoices;
+
 use super::profiler::KernelProfiler;
 
 #[derive(Debug, thiserror::Error)]
@@ -41,7 +43,7 @@ pub enum GpuError {
     Unsupported(String),
 }
 
-/// Which adapters a worker may use. Empty fields match everything.
+/// Which adapters a worker may use, and how to open them. Empty fields match everything.
 #[derive(Debug, Clone, Default, serde::Deserialize, Serialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct AdapterFilter {
@@ -51,6 +53,9 @@ pub struct AdapterFilter {
     pub backends: Vec<String>,
     /// Include software (CPU) adapters. Used anyway when no hardware adapter matches.
     pub allow_software: Option<bool>,
+    /// Kernel variants to force on the opened adapters, for comparisons (default: each
+    /// adapter's own).
+    pub kernels: KernelChoices,
 }
 
 impl AdapterFilter {
@@ -175,6 +180,8 @@ pub struct GpuContext {
     /// Dispatches recorded by every kernel built on this context: for small scenes a step costs
     /// dispatch overhead more than arithmetic, so benchmarks report the count.
     pub dispatches: Arc<AtomicU64>,
+    /// Variants forced instead of the adapter's own (see [`KernelChoices`]).
+    pub kernel_choices: KernelChoices,
 }
 
 impl GpuContext {
@@ -196,7 +203,7 @@ impl GpuContext {
             });
         }
         let (adapter, _) = adapters.remove(0);
-        Self::from_adapter(&adapter)
+        Ok(Self::from_adapter(&adapter)?.with_kernel_choices(filter.kernels))
     }
 
     /// Any adapter at all; what tests and the CLI use.
@@ -233,6 +240,7 @@ impl GpuContext {
             features,
             profiler: None,
             dispatches: Arc::new(AtomicU64::new(0)),
+            kernel_choices: KernelChoices::default(),
         })
     }
 
@@ -251,6 +259,12 @@ impl GpuContext {
     pub fn has_float32_atomics(&self) -> bool {
         self.features
             .contains(wgpu::Features::SHADER_FLOAT32_ATOMIC)
+    }
+
+    /// This context with `choices` forced (the kernels built on it afterwards follow them).
+    pub fn with_kernel_choices(mut self, choices: KernelChoices) -> Self {
+        self.kernel_choices = choices;
+        self
     }
 
     pub fn has_subgroups(&self) -> bool {

@@ -173,22 +173,3 @@ pub fn workgroups_2d(groups: u32, max_per_dim: u32) -> [u32; 3] {
         [max_per_dim, groups.div_ceil(max_per_dim), 1]
     }
 }
-
-/// A kernel variant named by environment variable `variable` (one of `choices`' names), for
-/// comparing variants on one machine; `None` when it is unset, or (with a warning) names none.
-pub fn kernel_choice_from_env<T: Copy>(variable: &str, choices: &[(&str, T)]) -> Option<T> {
-    let value = std::env::var_os(variable)?;
-    let chosen = choices
-        .iter()
-        .find(|(name, _)| value.to_str() == Some(name))
-        .map(|&(_, choice)| choice);
-    if chosen.is_none() {
-        let names: Vec<&str> = choices.iter().map(|(name, _)| *name).collect();
-        tracing::warn!(
-            ?value,
-            ?names,
-            "{variable} names no kernel variant: ignored"
-        );
-    }
-    chosen
-}

@@ -3,6 +3,7 @@
 
 pub mod context;
 pub mod kernel;
+pub mod kernel_choices;
 pub mod profiler;
 pub mod scan;
 pub mod sort;
@@ -10,6 +11,7 @@ pub mod validation;
 
 pub use context::{AdapterFilter, AdapterReport, GpuContext, GpuError};
 pub use kernel::Kernel;
+pub use kernel_choices::{GemmLayout, KernelChoices, RasterLayout};
 pub use profiler::{KernelProfile, KernelProfiler};
 pub use scan::{ExclusiveScan, WorkgroupSum};
 pub use sort::{DEFAULT_SMALL_SORT_LIMIT, RadixSort};

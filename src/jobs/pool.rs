@@ -178,7 +178,7 @@ pub fn open_adapters(filter: &AdapterFilter) -> (Vec<Arc<GpuContext>>, Vec<Strin
     for (adapter, report) in adapters {
         log_adapter(&report);
         match GpuContext::from_adapter(&adapter) {
-            Ok(context) => contexts.push(Arc::new(context)),
+            Ok(context) => contexts.push(Arc::new(context.with_kernel_choices(filter.kernels))),
             Err(error) => {
                 warn!(adapter = %report.name, %error, "cannot open GPU adapter");
                 problems.push(format!("adapter {}: {error}", report.name));

@@ -2,7 +2,8 @@
 
 use wgpu::util::DeviceExt;
 
-use crate::gpu::kernel::{kernel_choice_from_env, workgroups_2d, workgroups_for};
+use crate::gpu::GemmLayout;
+use crate::gpu::kernel::{workgroups_2d, workgroups_for};
 use crate::gpu::validation::validated;
 use crate::gpu::{GpuContext, GpuError, Kernel};
 
@@ -133,19 +134,16 @@ pub enum GemmKernel {
     Rows,
 }
 
-/// Environment variable that overrides the adapter's GEMM kernel (`tiled` or `rows`), for
-/// comparing the two on one machine (docs/benchmarks.md).
-pub const GEMM_KERNEL_ENV: &str = "SEGSPLAT_GEMM_KERNEL";
-
 impl GemmKernel {
-    /// The kernel that suits the adapter, unless [`GEMM_KERNEL_ENV`] names one.
+    /// The kernel that suits the adapter, unless the context forces one
+    /// ([`crate::gpu::KernelChoices`]).
     pub fn for_adapter(ctx: &GpuContext) -> Self {
-        let named = [("tiled", Self::Tiled), ("rows", Self::Rows)];
-        kernel_choice_from_env(GEMM_KERNEL_ENV, &named).unwrap_or(if ctx.report.is_software {
-            Self::Rows
-        } else {
-            Self::Tiled
-        })
+        match ctx.kernel_choices.gemm {
+            Some(GemmLayout::Tiled) => Self::Tiled,
+            Some(GemmLayout::Rows) => Self::Rows,
+            None if ctx.report.is_software => Self::Rows,
+            None => Self::Tiled,
+        }
     }
 }
 

@@ -1,6 +1,6 @@
 //! The render pipelines, compiled once per device.
 
-use crate::gpu::kernel::kernel_choice_from_env;
+use crate::gpu::RasterLayout;
 use crate::gpu::validation::validated;
 use crate::gpu::{GpuContext, GpuError, Kernel};
 
@@ -55,10 +55,6 @@ pub struct RenderKernels {
     pub sh_backward: Kernel,
 }
 
-/// Environment variable that overrides the adapter's rasterize kernels (`pixels` or `columns`),
-/// for comparing the two on one machine (docs/benchmarks.md).
-pub const RASTER_KERNEL_ENV: &str = "SEGSPLAT_RASTER_KERNEL";
-
 /// Which rasterize kernels run: all give the same images and gradients.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RasterVariant {
@@ -79,12 +75,14 @@ pub enum RasterVariant {
 }
 
 impl RasterVariant {
-    /// The kernels that suit the adapter, unless [`RASTER_KERNEL_ENV`] names a layout. Columns
-    /// need subgroups: without them a request for columns gets pixels.
+    /// The kernels that suit the adapter, unless the context forces a layout
+    /// ([`crate::gpu::KernelChoices`]). Columns need subgroups: without them a request for
+    /// columns gets pixels.
     pub fn for_adapter(ctx: &GpuContext) -> Self {
-        let named = [("pixels", false), ("columns", true)];
-        let columns =
-            kernel_choice_from_env(RASTER_KERNEL_ENV, &named).unwrap_or(ctx.report.is_software);
+        let columns = match ctx.kernel_choices.raster {
+            Some(layout) => layout == RasterLayout::Columns,
+            None => ctx.report.is_software,
+        };
         match (columns, ctx.has_subgroups()) {
             (true, true) => Self::Columns,
             (true, false) => {

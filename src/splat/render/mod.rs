@@ -38,7 +38,7 @@ mod renderer;
 mod uniforms;
 mod workspace;
 
-pub use kernels::{RASTER_KERNEL_ENV, RasterVariant};
+pub use kernels::RasterVariant;
 pub use object_batch::{ObjectBatchError, ObjectBatchOutput, ObjectSlot};
 pub use renderer::{CapacityReport, RenderError, RenderOutput, Renderer};
 pub use uniforms::RenderUniforms;
