@@ -10,48 +10,6 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use crate::gpu::GpuContext;
 use crate::gpu::profiler::KernelProfiler;
 
-/// WGSL that gives every kernel `atomic_add_f32(buffer_index, value)`-style accumulation on the
-/// adapter at hand: native `atomic<f32>` where the device has `SHADER_FLOAT32_ATOMIC`, a
-/// compare-and-swap loop on `atomic<u32>` bit patterns where it does not.
-///
-/// The snippet defines `alias AtomicF32 = ...;` and `fn atomic_f32_add(p: ptr<storage, AtomicF32,
-/// read_write>, value: f32)`; kernels declare their accumulators as `array<AtomicF32>` and call it.
-pub fn float_atomic_prelude(ctx: &GpuContext) -> &'static str {
-    if ctx.has_float32_atomics() {
-        NATIVE_FLOAT_ATOMICS
-    } else {
-        CAS_FLOAT_ATOMICS
-    }
-}
-
-const NATIVE_FLOAT_ATOMICS: &str = r#"
-alias AtomicF32 = atomic<f32>;
-fn atomic_f32_add(p: ptr<storage, AtomicF32, read_write>, value: f32) {
-    atomicAdd(p, value);
-}
-fn atomic_f32_load(p: ptr<storage, AtomicF32, read_write>) -> f32 {
-    return atomicLoad(p);
-}
-"#;
-
-const CAS_FLOAT_ATOMICS: &str = r#"
-alias AtomicF32 = atomic<u32>;
-fn atomic_f32_add(p: ptr<storage, AtomicF32, read_write>, value: f32) {
-    var old = atomicLoad(p);
-    loop {
-        let new_bits = bitcast<u32>(bitcast<f32>(old) + value);
-        let result = atomicCompareExchangeWeak(p, old, new_bits);
-        if result.exchanged {
-            break;
-        }
-        old = result.old_value;
-    }
-}
-fn atomic_f32_load(p: ptr<storage, AtomicF32, read_write>) -> f32 {
-    return bitcast<f32>(atomicLoad(p));
-}
-"#;
-
 /// One compute pipeline.
 #[derive(Debug, Clone)]
 pub struct Kernel {

@@ -59,11 +59,6 @@ impl FrameMasks {
     }
 }
 
-/// Sorts by score, best first; ties keep their order (sort is stable).
-pub fn sort_by_score(masks: &mut [ScoredMask]) {
-    masks.sort_by(|a, b| b.score.total_cmp(&a.score));
-}
-
 /// Paints a level's masks into a row-major `width x height` id image: mask `i` of the slice gets
 /// id `i + 1`, 0 is no object, and every pixel belongs to at most one object.
 ///

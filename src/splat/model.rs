@@ -374,18 +374,6 @@ impl GpuGaussians {
     pub fn capacity(&self) -> usize {
         self.capacity
     }
-
-    /// Sets the live count after kernels appended or compacted Gaussians in place.
-    pub fn set_count(&mut self, count: usize) -> Result<(), ModelError> {
-        if count > self.capacity {
-            return Err(ModelError::OverCapacity {
-                count,
-                capacity: self.capacity,
-            });
-        }
-        self.count = count;
-        Ok(())
-    }
 }
 
 /// The buffers one render reads: a [`GpuGaussians`] as stored, or with its geometry swapped for

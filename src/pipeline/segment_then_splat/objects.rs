@@ -8,9 +8,7 @@ use crate::gpu::GpuContext;
 use crate::scene::Level;
 use crate::splat::model::{GaussianView, SH_C0};
 use crate::splat::render::{RenderError, Renderer};
-use crate::splat::{
-    GaussianModel, GpuGaussians, OBJECT_NONE, ObjectFilter, RenderCamera, RenderSettings,
-};
+use crate::splat::{GaussianModel, OBJECT_NONE, ObjectFilter, RenderCamera, RenderSettings};
 
 /// Gaussians at or below this opacity do not shape an object's centroid, bounds or colour: they
 /// are nearly invisible and often floaters left by optimisation.
@@ -171,23 +169,6 @@ pub fn visible_mask(object: &RenderedLayer, scene: &RenderedLayer) -> Vec<bool> 
                 && object_depth <= scene_depth * (1.0 + VISIBLE_DEPTH_TOLERANCE)
         })
         .collect()
-}
-
-/// Renders one object's full mask (alpha > 0.5) from `camera`.
-pub fn render_object_mask(
-    ctx: &GpuContext,
-    renderer: &mut Renderer,
-    gaussians: &GpuGaussians,
-    camera: &RenderCamera,
-    level: Level,
-    object_id: u32,
-) -> Result<Vec<bool>, RenderError> {
-    let filter = ObjectFilter::Object {
-        level,
-        id: object_id,
-    };
-    let object = render_layer(ctx, renderer, gaussians, camera, filter)?;
-    Ok(full_mask(&object))
 }
 
 #[cfg(test)]

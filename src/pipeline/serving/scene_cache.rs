@@ -140,17 +140,6 @@ impl SceneCache {
         }
     }
 
-    /// A cache on an already opened GPU (the CLI, tests).
-    pub fn with_gpu(budget_bytes: u64, ctx: Arc<GpuContext>) -> Result<Self, ServingError> {
-        let cache = Self::new(budget_bytes, || Err("unused".to_string()));
-        let renderer = Renderer::new(&ctx).map_err(|error| ServingError::Gpu(error.to_string()))?;
-        *lock(&cache.gpu) = Some(Arc::new(Gpu {
-            ctx,
-            renderer: Mutex::new(renderer),
-        }));
-        Ok(cache)
-    }
-
     pub fn stats(&self) -> CacheStats {
         let resident = lock(&self.resident);
         CacheStats {

@@ -3,8 +3,6 @@
 //! (`cameras.json`), and for a dynamic scene its deformation field (`deformation.json` and
 //! `deformation.bin`), from a job's blob prefix or from a local output folder.
 
-use std::path::Path;
-
 use super::ServingError;
 use super::cameras::{CAMERAS_FILE, SceneCamera};
 use crate::splat::GaussianModel;
@@ -39,20 +37,6 @@ impl TrainedScene {
                     location: prefix.to_string(),
                 },
                 other => ServingError::Storage(other.to_string()),
-            })
-        })
-    }
-
-    /// Loads the files from a local output folder (`segsplat train`, or a job's downloaded
-    /// output).
-    pub fn from_dir(dir: &Path) -> Result<Self, ServingError> {
-        Self::from_reader(|file| {
-            std::fs::read(dir.join(file)).map_err(|error| match error.kind() {
-                std::io::ErrorKind::NotFound => ServingError::MissingFile {
-                    file: file.to_string(),
-                    location: dir.display().to_string(),
-                },
-                _ => ServingError::Storage(format!("{}: {error}", dir.join(file).display())),
             })
         })
     }
