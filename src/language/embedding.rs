@@ -1,4 +1,4 @@
-//! Per-object language embeddings (METHOD.md stage 4): for every object at every level, the
+//! Per-object language embeddings (docs/method.md stage 4): for every object at every level, the
 //! L2-normalised mean over training views of the L2-normalised CLIP image embeddings of its
 //! masked square crop (image x mask on black, cut to the mask's box, padded to a square so the
 //! encoder's centre crop does not cut elongated objects).

@@ -1,5 +1,5 @@
 //! language: per-object CLIP embeddings, query scoring with granularity and the calibrated
-//! "no match", and the service's shared text encoder. See DESIGN.md and METHOD.md stage 4.
+//! "no match", and the service's shared text encoder. See docs/method.md, stage 4.
 
 pub mod embedding;
 pub mod query;

@@ -1,4 +1,4 @@
-//! Query scoring (METHOD.md stage 4): cosine of the text embedding with every object embedding,
+//! Query scoring (docs/method.md stage 4): cosine of the text embedding with every object embedding,
 //! a granularity policy, top-k, and a calibrated "no match" so a caller can hear that nothing in
 //! the scene fits the text.
 //!

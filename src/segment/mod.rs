@@ -1,5 +1,5 @@
 //! segment: mask generators (SAM-family automatic masks, classical fallback, user-provided),
-//! tracking, de-duplication and merging. See DESIGN.md and docs/segment.md.
+//! tracking, de-duplication and merging. See docs/segment.md.
 //!
 //! Every generator answers [`FrameMasks`]: per level (small, middle, large) a list of
 //! [`ScoredMask`]s, best first, as compact bitsets ([`BitMask`]) that convert to COCO RLE.

@@ -1,4 +1,4 @@
-//! Background Gaussians (METHOD.md stage 2, step 4): regions no mask covers and the sparse points
+//! Background Gaussians (docs/method.md stage 2, step 4): regions no mask covers and the sparse points
 //! miss (sky, far walls) need Gaussians of their own, with no object id, or training stretches
 //! object Gaussians over them. The released code drops 1000 points at the origin, inside the
 //! objects. These sit on a far sphere instead: centred on the cameras, beyond every camera and

@@ -1,5 +1,5 @@
-//! Stage 1 for posed static scenes without user masks (METHOD.md: "object identity can be
-//! carried across views by the 3D points that masks share"): a mask generator runs on every
+//! Stage 1 for posed static scenes without user masks (docs/method.md, stage 1: ids "carried by
+//! the 3D points that masks share"): a mask generator runs on every
 //! training view, and its per-view masks get one id per object across views, per level, from
 //! the sparse points they share.
 //!
@@ -58,7 +58,7 @@ pub struct AssociationOptions {
     /// hidden object's points on the synthetic scene).
     pub min_link_share: f32,
     /// A mask that links to nothing becomes an object only when it covers this many pixels at a
-    /// 1000-pixel-wide image, scaled with the pixel count (METHOD.md's 5000 px; 46 px at 96 px
+    /// 1000-pixel-wide image, scaled with the pixel count (docs/method.md's 5000 px; 46 px at 96 px
     /// wide). Smaller unlinked masks stay unlabelled.
     pub new_object_area_at_1000px: f64,
     /// A projected point (one without a track) counts for a mask only when at most this much
@@ -66,7 +66,7 @@ pub struct AssociationOptions {
     /// sit within 10% of their front, what they hide is farther; see `projected_visibility`).
     pub projected_depth_tolerance: f32,
     /// Two objects whose masks overlap with a pooled IoU above this in the views where both
-    /// appear are duplicates; the smaller is dropped (METHOD.md stage 1 step 4: 0.5).
+    /// appear are duplicates; the smaller is dropped (docs/method.md stage 1 step 4: 0.5).
     pub duplicate_iou: f64,
 }
 

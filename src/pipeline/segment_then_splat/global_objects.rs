@@ -25,7 +25,7 @@ pub(super) struct ObjectsFromGroups {
 }
 
 /// The objects the groups make. A group of one mask that links to nothing is a new object only
-/// when `min_new_area(view)` pixels or more (METHOD.md's uncovered-area rule: 5000 px at about
+/// when `min_new_area(view)` pixels or more (docs/method.md's uncovered-area rule: 5000 px at about
 /// 1000 px width); smaller ones are left unlabelled, since nothing but one view vouches for
 /// them and they are too small to matter.
 pub(super) fn objects_from_groups(
@@ -62,7 +62,7 @@ pub(super) fn objects_from_groups(
 
 /// Drops duplicates: two objects whose masks overlap with IoU above `max_iou`, pooled over the
 /// views where both appear (summed intersections over summed unions), are one object tracked
-/// twice; the smaller (fewer pixels over all views) goes, globally, as METHOD.md's stage 1 step 4
+/// twice; the smaller (fewer pixels over all views) goes, globally, as docs/method.md's stage 1 step 4
 /// says. Pairs are judged most-overlapping first; a dropped object drops nothing further.
 /// Returns the objects kept (in their order) and how many were dropped.
 ///

@@ -79,7 +79,7 @@ pub struct SegmentThenSplatConfig {
     pub object_floors: [usize; 3],
     /// Steps between checkpoints (0 = only at the end).
     pub checkpoint_every: u32,
-    /// Fields that follow the scene's size at run time (METHOD.md: 20k steps and one object
+    /// Fields that follow the scene's size at run time (docs/method.md: 20k steps and one object
     /// per level for scenes under 100 training views, else 40k and three; middle and large
     /// levels from step 5k and 10k). Filled on submission with the fields the config left out.
     pub scene_sized: SceneSizedFields,
@@ -428,7 +428,7 @@ fn sam_model(ctx: &JobContext) -> Option<SamModel> {
     SamModel::new(store).ok()
 }
 
-/// The "embed" stage: one CLIP embedding per object (METHOD.md stage 4, see
+/// The "embed" stage: one CLIP embedding per object (docs/method.md stage 4, see
 /// [`crate::language::embedding`]) from the training views at the training resolution and their
 /// masks, leaving out the pairs the partial-mask filter skipped. Without a CLIP image model it
 /// is skipped (logged and reported): the objects are still stored, and queries answer "no text

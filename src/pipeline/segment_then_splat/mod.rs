@@ -1,4 +1,4 @@
-//! The Segment-then-Splat pipeline (METHOD.md): masks per view at three levels, object ids on the
+//! The Segment-then-Splat pipeline (docs/method.md): masks per view at three levels, object ids on the
 //! initial points, training with the object loss, per-object language embeddings.
 
 pub mod association;

@@ -1,5 +1,5 @@
 //! Stage 1 by re-prompting, for captures whose views are a sequence rather than posed stills
-//! with shared 3D points (METHOD.md stage 1, steps 1-4): automatic masks on the first training
+//! with shared 3D points (docs/method.md stage 1, steps 1-4): automatic masks on the first training
 //! view, then every object carried to the next view by prompting the SAM decoder with its
 //! previous mask (`segment::propagation`), with new-object checks and duplicate drops every
 //! `stride` views. Identity comes from appearance, so neither poses nor sparse points are needed.

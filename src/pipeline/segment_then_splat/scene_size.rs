@@ -1,4 +1,4 @@
-//! Defaults that depend on the scene's size (METHOD.md stage 3): the released code trains small
+//! Defaults that depend on the scene's size (docs/method.md stage 3): the released code trains small
 //! scenes (a few dozen views, e.g. 3D-OVS) for 20k steps with one object per level per step and
 //! large ones (LERF-style captures of hundreds of frames) for 40k with three, with the middle and
 //! large levels joining after 5k and 10k steps in both. A job takes these for every field its
@@ -55,7 +55,7 @@ pub struct SceneSizedFields {
     pub objects_per_level: bool,
     /// `object_loss.middle_from` and `large_from`: 5k and 10k steps of the run.
     pub level_schedule: bool,
-    /// `deformation`: the deformation field (METHOD.md "Dynamic scenes") for scenes whose
+    /// `deformation`: the deformation field (docs/method.md "Dynamic scenes") for scenes whose
     /// frames carry times, none for static ones.
     pub deformation: bool,
     /// `background`: for scenes of RGBA images (Blender, D-NeRF), the colour they are composited

@@ -1,4 +1,4 @@
-//! Duplicate tracks (METHOD.md stage 1 step 4): two tracks of one level that follow the same
+//! Duplicate tracks (docs/method.md stage 1 step 4): two tracks of one level that follow the same
 //! object. Their whole masks (before overlaps were resolved, which would hide the overlap) are
 //! compared at every check frame where both were answered; the IoU pooled over those frames
 //! (summed intersections over summed unions) decides, so one bad frame neither makes nor breaks

@@ -1,4 +1,4 @@
-//! Stage 1's tracking for unposed or dynamic sequences (METHOD.md stage 1, steps 2-4), where no 3D
+//! Stage 1's tracking for unposed or dynamic sequences (docs/method.md stage 1, steps 2-4), where no 3D
 //! evidence can carry identity: every object's mask is carried from frame to frame by prompting a
 //! region segmenter (a SAM-family decoder) on the next frame with the previous mask.
 //!
@@ -82,22 +82,22 @@ pub enum PropagationError {
 /// The rules of propagation; every default is a choice stated here.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PropagationOptions {
-    /// Frames between checks (duplicates, new objects, re-anchoring); METHOD.md: 10.
+    /// Frames between checks (duplicates, new objects, re-anchoring); docs/method.md: 10.
     pub stride: usize,
     /// A new object must cover more than this many pixels at the sequence's full resolution
-    /// (METHOD.md: 5000) ...
+    /// (docs/method.md: 5000) ...
     pub new_object_min_area_at_full_res: f64,
     /// ... scaled by the square of this: frame pixels per full-resolution pixel along a side
     /// (0.5 when frames come at half size). Note `association` states its 5000 px at a
     /// 1000-pixel-wide image instead; callers that want that pass `width / 1000`.
     pub full_resolution_scale: f64,
     /// New objects are looked for when a level's uncovered share grew by more than this over its
-    /// ratchet threshold (METHOD.md: 0.01; see `new_objects`).
+    /// ratchet threshold (docs/method.md: 0.01; see `new_objects`).
     pub uncovered_growth: f64,
-    /// A candidate is new when more than this share of its area is uncovered (METHOD.md: 0.5).
+    /// A candidate is new when more than this share of its area is uncovered (docs/method.md: 0.5).
     pub new_object_uncovered_share: f64,
     /// Two tracks of one level whose IoU, pooled over the check frames where both were answered,
-    /// is above this are one object; the smaller is dropped everywhere (METHOD.md: 0.5).
+    /// is above this are one object; the smaller is dropped everywhere (docs/method.md: 0.5).
     pub duplicate_iou: f64,
     /// An answer whose predicted IoU is below this is no answer (0.5: SAM-family decoders put
     /// confident masks at 0.8-1; below one half the mask is a guess).

@@ -1,4 +1,4 @@
-//! New objects (METHOD.md stage 1 step 3): when a level's uncovered share grew since the last
+//! New objects (docs/method.md stage 1 step 3): when a level's uncovered share grew since the last
 //! look, new-object masks are generated on the frame and the candidates that mostly cover
 //! uncovered pixels become objects.
 

@@ -1,5 +1,5 @@
 //! How the deformation field trains: its shape, the warm-up, its learning-rate schedule and the
-//! annealed time noise (Deformable 3DGS's constants, METHOD.md "Dynamic scenes").
+//! annealed time noise (Deformable 3DGS's constants, docs/method.md "Dynamic scenes").
 
 use serde::{Deserialize, Serialize};
 

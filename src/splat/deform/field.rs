@@ -34,7 +34,7 @@ impl WarpKind {
     }
 }
 
-/// The field's architecture (METHOD.md "Dynamic scenes": 8 x 256, skip at 4, 10 frequencies).
+/// The field's architecture (docs/method.md "Dynamic scenes": 8 x 256, skip at 4, 10 frequencies).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct FieldShape {

@@ -1,4 +1,4 @@
-//! The Segment-then-Splat object loss (METHOD.md, stage 3): every step, for each active level,
+//! The Segment-then-Splat object loss (docs/method.md, stage 3): every step, for each active level,
 //! `m` objects present in the view's masks are rendered alone (only their Gaussians, on black)
 //! and compared with `image x mask` by the same fused L1 + D-SSIM loss as the full render. The
 //! levels join coarse-ward in stages (small; + middle; + large), and near the end of training the
