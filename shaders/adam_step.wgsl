@@ -3,7 +3,7 @@
 //   p -= step_size * m / (sqrt(v) / sqrt(1 - beta2^t) + epsilon),  step_size = lr / (1 - beta1^t)
 // Bias corrections are computed on the host in f64.
 
-const ADAM_WORKGROUP: u32 = 256u;
+// ADAM_WORKGROUP is prepended by the host (adam.rs).
 
 struct AdamParams {
     step_size: f32,

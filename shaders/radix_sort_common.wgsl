@@ -9,11 +9,10 @@
 // Histograms are bin-major, `histograms[bin * block_count + block]`, so their exclusive scan is,
 // for each (bin, block), where that block's elements of that bin go.
 
-const RADIX_BITS: u32 = 4u;
-const RADIX_BINS: u32 = 16u;
+// RADIX_BITS and SORT_BLOCK are prepended by the host (gpu/sort.rs).
+const RADIX_BINS: u32 = 1u << RADIX_BITS;
 const SORT_WORKGROUP: u32 = 128u;
-const SORT_ITEMS_PER_THREAD: u32 = 8u;
-const SORT_BLOCK: u32 = 1024u;
+const SORT_ITEMS_PER_THREAD: u32 = SORT_BLOCK / SORT_WORKGROUP;
 // Threads of workgroup_exclusive_sum (workgroup_sum_*.wgsl), used by the scatter.
 const SUM_THREADS: u32 = SORT_WORKGROUP;
 

@@ -6,7 +6,7 @@
 
 const MAX_GROUPS_PER_DIMENSION: u32 = 65535u;
 const COPY_WORKGROUP: u32 = 256u;
-const SCAN_BLOCK: u32 = 1024u;
+// SCAN_BLOCK is prepended by the host (gpu/scan.rs).
 const FIRST_LEVEL_COUNTS_INDEX: u32 = 2u;
 
 struct PlanParams {

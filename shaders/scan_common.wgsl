@@ -7,9 +7,9 @@
 // `level_counts[params.counts_index]` is how many inputs this level reads (reads beyond are 0),
 // `level_counts[params.counts_index + 1]` how many outputs it writes.
 
+// SCAN_BLOCK is prepended by the host (scan.rs).
 const SCAN_WORKGROUP: u32 = 256u;
-const SCAN_ITEMS_PER_THREAD: u32 = 4u;
-const SCAN_BLOCK: u32 = 1024u;
+const SCAN_ITEMS_PER_THREAD: u32 = SCAN_BLOCK / SCAN_WORKGROUP;
 
 struct ScanLevelParams {
     counts_index: u32,

@@ -117,6 +117,15 @@ impl Kernel {
     }
 }
 
+/// WGSL declarations of constants the host uses too, prepended to the kernels that need them,
+/// so each has one source: the Rust constant.
+pub fn wgsl_u32_constants(constants: &[(&str, u32)]) -> String {
+    constants
+        .iter()
+        .map(|(name, value)| format!("const {name}: u32 = {value}u;\n"))
+        .collect()
+}
+
 /// Workgroups needed to cover `items` with groups of `group_size` (at least one).
 pub fn workgroups_for(items: u32, group_size: u32) -> u32 {
     items.div_ceil(group_size).max(1)

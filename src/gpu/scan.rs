@@ -12,11 +12,11 @@ use std::sync::Mutex;
 
 use wgpu::util::DeviceExt;
 
-use crate::gpu::kernel::workgroups_2d;
+use crate::gpu::kernel::{wgsl_u32_constants, workgroups_2d};
 use crate::gpu::validation::validated;
 use crate::gpu::{GpuContext, GpuError, Kernel};
 
-/// Elements one workgroup scans (must match `SCAN_BLOCK` in `shaders/scan_common.wgsl`).
+/// Elements one workgroup scans (prepended to the scan kernels as `SCAN_BLOCK`).
 pub const SCAN_BLOCK_ELEMENTS: u32 = 1024;
 /// Levels the level-count layout has room for (1024^4 elements).
 pub(crate) const MAX_SCAN_LEVELS: usize = 4;
@@ -27,6 +27,11 @@ const FIRST_LEVEL_COUNTS_INDEX: u32 = 2;
 pub(crate) const LEVEL_COUNTS_LEN: usize = FIRST_LEVEL_COUNTS_INDEX as usize + 2 * MAX_SCAN_LEVELS;
 
 const SCAN_COMMON: &str = include_str!("../../shaders/scan_common.wgsl");
+
+/// `SCAN_BLOCK` for the scan kernels and the sort's plan kernel, from [`SCAN_BLOCK_ELEMENTS`].
+pub(crate) fn block_constant() -> String {
+    wgsl_u32_constants(&[("SCAN_BLOCK", SCAN_BLOCK_ELEMENTS)])
+}
 const WORKGROUP_SUM_SHARED: &str = include_str!("../../shaders/workgroup_sum_shared.wgsl");
 const WORKGROUP_SUM_SUBGROUPS: &str = include_str!("../../shaders/workgroup_sum_subgroups.wgsl");
 const SCAN_BLOCKS: &str = include_str!("../../shaders/scan_blocks.wgsl");
@@ -206,14 +211,14 @@ impl ExclusiveScan {
                 Kernel::new(
                     ctx,
                     "scan_blocks",
-                    &[SCAN_COMMON, sum.source(), SCAN_BLOCKS],
+                    &[&block_constant(), SCAN_COMMON, sum.source(), SCAN_BLOCKS],
                     "scan_blocks",
                     &[],
                 ),
                 Kernel::new(
                     ctx,
                     "add_block_offsets",
-                    &[SCAN_COMMON, SCAN_ADD],
+                    &[&block_constant(), SCAN_COMMON, SCAN_ADD],
                     "add_block_offsets",
                     &[],
                 ),

@@ -19,14 +19,16 @@ use std::num::NonZeroU64;
 
 use wgpu::util::DeviceExt;
 
+use crate::gpu::kernel::wgsl_u32_constants;
 use crate::gpu::scan::{
     LEVEL_COUNTS_LEN, MAX_SCAN_LEVELS, ScanDispatch, ScanLevels, ScanScratch, WorkgroupSum,
-    level_output_counts_without_total,
+    block_constant, level_output_counts_without_total,
 };
 use crate::gpu::validation::validated;
 use crate::gpu::{ExclusiveScan, GpuContext, GpuError, Kernel};
 
-/// Must match `radix_sort_common.wgsl`.
+/// Elements per sort block and key bits per pass, prepended to the sort kernels
+/// (`radix_sort_common.wgsl`) as `SORT_BLOCK` and `RADIX_BITS`.
 const SORT_BLOCK_ELEMENTS: u32 = 1024;
 const RADIX_BITS: u32 = 4;
 const RADIX_BINS: u32 = 1 << RADIX_BITS;
@@ -90,20 +92,32 @@ impl RadixSort {
         let kernel = |label, sources: &[&str], entry| {
             validated(ctx, label, || Kernel::new(ctx, label, sources, entry, &[]))
         };
+        let common = format!(
+            "{}{SORT_COMMON}",
+            wgsl_u32_constants(&[
+                ("RADIX_BITS", RADIX_BITS),
+                ("SORT_BLOCK", SORT_BLOCK_ELEMENTS),
+            ])
+        );
+        let common = common.as_str();
         Ok(Self {
             scan,
-            plan: kernel("radix_sort_plan", &[SORT_COMMON, SORT_PLAN], "plan_sort")?,
+            plan: kernel(
+                "radix_sort_plan",
+                &[&block_constant(), common, SORT_PLAN],
+                "plan_sort",
+            )?,
             histogram: kernel(
                 "radix_sort_histogram",
-                &[SORT_COMMON, SORT_HISTOGRAM],
+                &[common, SORT_HISTOGRAM],
                 "radix_histogram",
             )?,
             scatter: kernel(
                 "radix_sort_scatter",
-                &[SORT_COMMON, sum.source(), SORT_SCATTER],
+                &[common, sum.source(), SORT_SCATTER],
                 "radix_scatter",
             )?,
-            copy: kernel("radix_sort_copy", &[SORT_COMMON, SORT_COPY], "copy_sorted")?,
+            copy: kernel("radix_sort_copy", &[common, SORT_COPY], "copy_sorted")?,
             small: kernel("radix_sort_small", &[SORT_SMALL], "small_sort")?,
             small_limit: DEFAULT_SMALL_SORT_LIMIT,
             scratch: None,

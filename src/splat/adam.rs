@@ -10,12 +10,12 @@
 
 use wgpu::util::DeviceExt;
 
-use crate::gpu::kernel::workgroups_2d;
+use crate::gpu::kernel::{wgsl_u32_constants, workgroups_2d};
 use crate::gpu::validation::validated;
 use crate::gpu::{GpuContext, GpuError, Kernel};
 
 const ADAM_STEP: &str = include_str!("../../shaders/adam_step.wgsl");
-/// Must match `ADAM_WORKGROUP` in `adam_step.wgsl`.
+/// Invocations per workgroup, one element each (prepended to `adam_step.wgsl`).
 const ADAM_WORKGROUP: u32 = 256;
 
 #[derive(Debug, thiserror::Error)]
@@ -87,7 +87,8 @@ pub struct Adam {
 impl Adam {
     pub fn new(ctx: &GpuContext, settings: AdamSettings) -> Result<Self, AdamError> {
         let kernel = validated(ctx, "adam_step", || {
-            Kernel::new(ctx, "adam_step", &[ADAM_STEP], "adam_step", &[])
+            let constants = wgsl_u32_constants(&[("ADAM_WORKGROUP", ADAM_WORKGROUP)]);
+            Kernel::new(ctx, "adam_step", &[&constants, ADAM_STEP], "adam_step", &[])
         })?;
         Ok(Self { kernel, settings })
     }

@@ -4,7 +4,8 @@ use bytemuck::{Pod, Zeroable};
 
 use crate::splat::{ObjectFilter, RenderCamera, RenderSettings};
 
-/// Must match `RenderUniforms` in `shaders/project_common.wgsl` (160 bytes, std140-compatible).
+/// `RenderUniforms` of `shaders/project_common.wgsl` (160 bytes, std140-compatible); a test
+/// parses the shader and checks every field's offset and the size.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
 pub struct RenderUniforms {
@@ -60,8 +61,82 @@ impl RenderUniforms {
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+
     #[test]
     fn uniform_block_is_160_bytes() {
-        assert_eq!(std::mem::size_of::<super::RenderUniforms>(), 160);
+        assert_eq!(std::mem::size_of::<RenderUniforms>(), 160);
+    }
+
+    /// Offsets and size of the struct `name` as WGSL lays it out in `source`.
+    fn wgsl_layout(source: &str, name: &str) -> (Vec<(String, u32)>, u32) {
+        let module = naga::front::wgsl::parse_str(source).unwrap_or_else(|e| panic!("{e}"));
+        module
+            .types
+            .iter()
+            .find_map(|(_, ty)| match &ty.inner {
+                naga::TypeInner::Struct { members, span } if ty.name.as_deref() == Some(name) => {
+                    let offsets = members
+                        .iter()
+                        .map(|m| (m.name.clone().unwrap_or_default(), m.offset))
+                        .collect();
+                    Some((offsets, *span))
+                }
+                _ => None,
+            })
+            .unwrap_or_else(|| panic!("no struct {name}"))
+    }
+
+    #[test]
+    fn layout_matches_the_shader() {
+        let source = include_str!("../../../shaders/project_common.wgsl");
+        let (offsets, size) = wgsl_layout(source, "RenderUniforms");
+        let host = [
+            (
+                "camera_from_world",
+                std::mem::offset_of!(RenderUniforms, camera_from_world),
+            ),
+            (
+                "camera_position",
+                std::mem::offset_of!(RenderUniforms, camera_position),
+            ),
+            (
+                "background",
+                std::mem::offset_of!(RenderUniforms, background),
+            ),
+            ("focal", std::mem::offset_of!(RenderUniforms, focal)),
+            ("principal", std::mem::offset_of!(RenderUniforms, principal)),
+            (
+                "image_size",
+                std::mem::offset_of!(RenderUniforms, image_size),
+            ),
+            ("tile_grid", std::mem::offset_of!(RenderUniforms, tile_grid)),
+            ("near", std::mem::offset_of!(RenderUniforms, near)),
+            ("far", std::mem::offset_of!(RenderUniforms, far)),
+            ("sh_degree", std::mem::offset_of!(RenderUniforms, sh_degree)),
+            (
+                "gaussian_count",
+                std::mem::offset_of!(RenderUniforms, gaussian_count),
+            ),
+            (
+                "filter_level",
+                std::mem::offset_of!(RenderUniforms, filter_level),
+            ),
+            ("filter_id", std::mem::offset_of!(RenderUniforms, filter_id)),
+            (
+                "filter_enabled",
+                std::mem::offset_of!(RenderUniforms, filter_enabled),
+            ),
+            (
+                "intersection_capacity",
+                std::mem::offset_of!(RenderUniforms, intersection_capacity),
+            ),
+        ];
+        let host: Vec<(String, u32)> = host
+            .iter()
+            .map(|(name, offset)| (name.to_string(), *offset as u32))
+            .collect();
+        assert_eq!(offsets, host);
+        assert_eq!(size as usize, std::mem::size_of::<RenderUniforms>());
     }
 }
