@@ -7,6 +7,17 @@ export XDG_RUNTIME_DIR=${XDG_RUNTIME_DIR:-/tmp}
 # Two test threads through the environment, not `-- --test-threads=2`: the criterion benches
 # (run once each in test mode) have their own argument parser and reject that flag.
 export RUST_TEST_THREADS=${RUST_TEST_THREADS:-2}
+# Lints before anything is built for tests: formatting, then clippy with warnings as errors.
+if cargo fmt --version >/dev/null 2>&1; then
+    cargo fmt --check
+else
+    echo "skipping cargo fmt --check: rustfmt is not installed"
+fi
+if cargo clippy --version >/dev/null 2>&1; then
+    cargo clippy --locked --all-targets -- -D warnings
+else
+    echo "skipping cargo clippy: clippy is not installed"
+fi
 # Benches first (one quick pass each, to prove they still run), then every test target, so the
 # run ends on the test summary.
 cargo test --locked --benches

@@ -347,6 +347,7 @@ fn minor_version(version: &str) -> Option<u32> {
 
 /// Reads the library's version string (`OrtGetApiBase()->GetVersionString()`) before `ort`
 /// initialises it, so a too-old library is named with its version instead of failing later.
+#[allow(unsafe_code, clippy::mem_forget)]
 pub fn library_version(path: &Path) -> Result<String, ModelError> {
     let load_error = |reason: String| ModelError::LibraryLoad {
         path: path.to_path_buf(),
