@@ -10,6 +10,7 @@ use image::imageops::FilterType;
 use image::{DynamicImage, ImageReader, Rgb32FImage};
 
 use super::distortion::{Lens, undistort_rgb};
+use super::jpeg_scaled::decode_scaled;
 use super::{Frame, Scene, SceneError};
 
 /// Image size after scaling by `factor`, rounded, at least one pixel per side.
@@ -88,28 +89,76 @@ pub fn load_frame_rgb(
                 scene.frames.len()
             ),
         })?;
-    let decoded = decode_image(&scene.root, &frame.image_path)?;
-    let (width, height) = (decoded.width(), decoded.height());
-    if (width, height) != (frame.intrinsics.width, frame.intrinsics.height) {
-        return Err(size_mismatch(
-            &frame.image_path,
-            (width, height),
-            (frame.intrinsics.width, frame.intrinsics.height),
-        ));
-    }
-    let rgb = undistorted(frame, composite_on_background(decoded, scene.background))?;
+    let (width, height) = (frame.intrinsics.width, frame.intrinsics.height);
     let factor = max_side.map_or(1.0, |max_side| scale_for_max_side(width, height, max_side));
-    if factor >= 1.0 {
+    let target = scaled_size(width, height, factor);
+    // A pinhole frame used below full size: JPEGs decode at a DCT scale near that size. Lens
+    // distortion is undone at full resolution, so distorted frames decode in full.
+    let rgb = match decode_reduced(scene, frame, target, factor)? {
+        Some(reduced) => reduced,
+        None => {
+            let decoded = decode_image(&scene.root, &frame.image_path)?;
+            let actual = (decoded.width(), decoded.height());
+            if actual != (width, height) {
+                return Err(size_mismatch(&frame.image_path, actual, (width, height)));
+            }
+            undistorted(frame, composite_on_background(decoded, scene.background))?
+        }
+    };
+    if (rgb.width(), rgb.height()) == target {
         return Ok(rgb);
     }
-    let (scaled_width, scaled_height) = scaled_size(width, height, factor);
-    let mut resized =
-        image::imageops::resize(&rgb, scaled_width, scaled_height, FilterType::Lanczos3);
+    let mut resized = image::imageops::resize(&rgb, target.0, target.1, FilterType::Lanczos3);
     // Lanczos rings slightly past the input range at hard edges.
     for value in resized.iter_mut() {
         *value = value.clamp(0.0, 1.0);
     }
     Ok(resized)
+}
+
+/// The frame's image decoded at a reduced size covering `target`, when it is a JPEG of a
+/// pinhole camera used below full size; `None` to decode in full.
+fn decode_reduced(
+    scene: &Scene,
+    frame: &Frame,
+    target: (u32, u32),
+    factor: f64,
+) -> Result<Option<Rgb32FImage>, SceneError> {
+    if factor >= 1.0 || !frame_lens(frame)?.is_pinhole() || !is_jpeg(&scene.root, &frame.image_path)
+    {
+        return Ok(None);
+    }
+    let file = frame.image_path.display().to_string();
+    let reader = std::fs::File::open(scene.root.join(&frame.image_path)).map_err(|source| {
+        match source.kind() {
+            io::ErrorKind::NotFound => SceneError::MissingImage { file: file.clone() },
+            _ => SceneError::Io {
+                file: file.clone(),
+                source,
+            },
+        }
+    })?;
+    let Some(scaled) = decode_scaled(reader, target)
+        .map_err(|message| SceneError::UndecodableImage { file, message })?
+    else {
+        return Ok(None);
+    };
+    let expected = (frame.intrinsics.width, frame.intrinsics.height);
+    if scaled.full_size != expected {
+        return Err(size_mismatch(&frame.image_path, scaled.full_size, expected));
+    }
+    Ok(Some(composite_on_background(
+        scaled.image,
+        scene.background,
+    )))
+}
+
+/// Whether the file's first bytes are a JPEG's start-of-image marker.
+fn is_jpeg(root: &Path, relative_path: &Path) -> bool {
+    let mut start = [0u8; 3];
+    std::fs::File::open(root.join(relative_path))
+        .and_then(|mut file| io::Read::read_exact(&mut file, &mut start))
+        .is_ok_and(|()| start == [0xFF, 0xD8, 0xFF])
 }
 
 /// The lens of `frame`'s camera; errors name the frame's image.
