@@ -10,8 +10,8 @@ use std::time::Duration;
 use common::handlers::{STEPS_KIND, StepsHandler};
 use common::{TestService, test_config};
 use segsplat::api::{ServiceBuilder, ServiceMode};
-use segsplat::store::Database;
 use segsplat::store::jobs::JobState;
+use segsplat::store::{Caller, Database};
 use serde_json::json;
 
 const WAIT: Duration = Duration::from_secs(15);

@@ -12,8 +12,11 @@ use std::path::Path;
 use super::archive::UnpackLimits;
 use super::types::LoadOptions;
 
-/// Every target by name, for the corpus replay test and the fuzz runner script.
-pub const TARGETS: [(&str, fn(&[u8])); 8] = [
+/// One target: parse these client bytes, ignoring the outcome.
+pub type Target = fn(&[u8]);
+
+/// Every target by name, for the corpus replay test (`fuzz/fuzz_targets/` has one file each).
+pub const TARGETS: [(&str, Target); 8] = [
     ("colmap_binary", colmap_binary),
     ("colmap_text", colmap_text),
     ("ply", ply),

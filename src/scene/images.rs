@@ -10,7 +10,7 @@ use image::imageops::FilterType;
 use image::{DynamicImage, ImageReader, Rgb32FImage};
 
 use super::distortion::{Lens, undistort_rgb};
-use super::jpeg_scaled::decode_scaled;
+use super::jpeg_scaled::{ScaledJpeg, decode_scaled};
 use super::{Frame, Scene, SceneError};
 
 /// Image size after scaling by `factor`, rounded, at least one pixel per side.
@@ -128,19 +128,7 @@ fn decode_reduced(
     {
         return Ok(None);
     }
-    let file = frame.image_path.display().to_string();
-    let reader = std::fs::File::open(scene.root.join(&frame.image_path)).map_err(|source| {
-        match source.kind() {
-            io::ErrorKind::NotFound => SceneError::MissingImage { file: file.clone() },
-            _ => SceneError::Io {
-                file: file.clone(),
-                source,
-            },
-        }
-    })?;
-    let Some(scaled) = decode_scaled(reader, target)
-        .map_err(|message| SceneError::UndecodableImage { file, message })?
-    else {
+    let Some(scaled) = jpeg_at_scale(&scene.root, &frame.image_path, target) else {
         return Ok(None);
     };
     let expected = (frame.intrinsics.width, frame.intrinsics.height);
@@ -151,6 +139,33 @@ fn decode_reduced(
         scaled.image,
         scene.background,
     )))
+}
+
+/// The JPEG at `relative_path` decoded at the DCT scale nearest above `target`; `None` when it
+/// cannot be (not a JPEG, no smaller scale, a format or error of `jpeg-decoder`): callers then
+/// decode in full with the `image` crate, whose verdict and messages are the ones users see.
+fn jpeg_at_scale(root: &Path, relative_path: &Path, target: (u32, u32)) -> Option<ScaledJpeg> {
+    if !is_jpeg(root, relative_path) {
+        return None;
+    }
+    let reader = std::fs::File::open(root.join(relative_path)).ok()?;
+    decode_scaled(reader, target)
+        .inspect_err(|message| {
+            tracing::debug!(file = %relative_path.display(), %message, "scaled JPEG decode failed")
+        })
+        .ok()
+        .flatten()
+}
+
+/// Decodes the image at `relative_path` to prove it decodes, and returns its size: JPEGs at an
+/// eighth of their size (every coefficient is still entropy-decoded, so damage shows), other
+/// formats in full.
+pub(crate) fn decoded_size(root: &Path, relative_path: &Path) -> Result<(u32, u32), SceneError> {
+    if let Some(scaled) = jpeg_at_scale(root, relative_path, (1, 1)) {
+        return Ok(scaled.full_size);
+    }
+    let image = decode_image(root, relative_path)?;
+    Ok((image.width(), image.height()))
 }
 
 /// Whether the file's first bytes are a JPEG's start-of-image marker.
