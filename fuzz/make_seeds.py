@@ -1,6 +1,9 @@
 #!/usr/bin/env python3
 """Writes the small seed corpus under fuzz/corpus/<target>/ (committed; rerun to regenerate).
 
+frame_image's seeds are not written here (Python has no JPEG encoder): they were made with
+  ffmpeg -f lavfi -i testsrc=size=24x16 -frames:v 1 -q:v 5 baseline.jpg  (also gray.jpg, rgb.png)
+
 Multi-file targets take their files joined as scene::fuzz_entry::split_parts reads them: every
 file but the last is prefixed by its length as a little-endian u16.
 """

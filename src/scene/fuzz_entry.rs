@@ -16,7 +16,7 @@ use super::types::LoadOptions;
 pub type Target = fn(&[u8]);
 
 /// Every target by name, for the corpus replay test (`fuzz/fuzz_targets/` has one file each).
-pub const TARGETS: [(&str, Target); 8] = [
+pub const TARGETS: [(&str, Target); 9] = [
     ("colmap_binary", colmap_binary),
     ("colmap_text", colmap_text),
     ("ply", ply),
@@ -24,6 +24,7 @@ pub const TARGETS: [(&str, Target); 8] = [
     ("nerfies_json", nerfies_json),
     ("npy", npy),
     ("mask_png", mask_png),
+    ("frame_image", frame_image),
     ("archive", archive),
 ];
 
@@ -154,6 +155,23 @@ pub fn mask_png(data: &[u8]) {
         return;
     };
     let _ = super::masks::decode_mask(dir.path(), Path::new("mask.png"));
+}
+
+/// One frame image as an upload validates it: its header size within the default pixel bound
+/// (the service checks `limits.max_image_pixels` first), then decoded, JPEGs at 1/8 scale with
+/// `jpeg-decoder` and everything else (or what it refuses) in full with the `image` crate.
+pub fn frame_image(data: &[u8]) {
+    let Some(dir) = dataset(&[("frame.jpg", data)]) else {
+        return;
+    };
+    let path = Path::new("frame.jpg");
+    let Ok((width, height)) = super::images::image_size(dir.path(), path) else {
+        return;
+    };
+    if u64::from(width) * u64::from(height) > super::PixelLimits::default().max_image_pixels {
+        return;
+    }
+    let _ = super::images::decoded_size(dir.path(), path);
 }
 
 /// One upload archive (zip, tar or tar.gz, sniffed), unpacked under small limits.
