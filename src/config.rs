@@ -646,6 +646,24 @@ mod tests {
     }
 
     #[test]
+    fn tenant_tokens_from_the_environment() {
+        let config = Config::load(
+            None,
+            env(&[(
+                "SEGSPLAT_AUTH__TOKEN",
+                "[{token = \"k1\", tenant = \"acme\"}, {token = \"k2\", admin = true}]",
+            )]),
+            &ConfigOverrides::default(),
+        )
+        .unwrap();
+        assert_eq!(config.auth.token.len(), 2);
+        assert_eq!(config.auth.token[0].tenant_name(), "acme");
+        assert!(config.auth.token[1].admin);
+        assert_eq!(config.auth.token[1].tenant_name(), "default");
+        assert!(config.auth.enabled());
+    }
+
+    #[test]
     fn invalid_values_name_their_key() {
         let error = Config::load(
             None,
