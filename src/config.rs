@@ -93,11 +93,52 @@ impl Default for StorageConfig {
     }
 }
 
+/// Bearer tokens and the tenants they act for (`docs/service.md`, "Tenants"). With neither
+/// list set, authentication is off and every caller sees everything.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct AuthConfig {
-    /// Accepted bearer tokens. Empty turns authentication off.
+    /// Plain tokens: each acts for the `default` tenant, which also owns everything stored
+    /// before tenants existed (so a service upgraded with only these behaves as before).
     pub tokens: Vec<String>,
+    /// Tokens with a tenant and an admin flag: `[[auth.token]]` tables.
+    pub token: Vec<TenantToken>,
+}
+
+impl AuthConfig {
+    pub fn enabled(&self) -> bool {
+        !self.tokens.is_empty() || !self.token.is_empty()
+    }
+}
+
+/// One `[[auth.token]]`: the token, the tenant it acts for, and whether it sees every tenant.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TenantToken {
+    pub token: String,
+    /// Owner of what this token creates; required unless `admin` (then `default`).
+    #[serde(default)]
+    pub tenant: Option<String>,
+    /// Sees and touches every tenant's scenes and jobs.
+    #[serde(default)]
+    pub admin: bool,
+}
+
+impl TenantToken {
+    pub fn tenant_name(&self) -> &str {
+        self.tenant
+            .as_deref()
+            .unwrap_or(crate::store::DEFAULT_TENANT)
+    }
+}
+
+/// Tenant names: short, and safe in logs and file names.
+fn valid_tenant_name(name: &str) -> bool {
+    !name.is_empty()
+        && name.len() <= 64
+        && name
+            .bytes()
+            .all(|byte| byte.is_ascii_alphanumeric() || b"-_.".contains(&byte))
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -359,6 +400,41 @@ impl Config {
     }
 
     /// Checks every value that deserialization alone cannot, naming the key and the reason.
+    /// `[[auth.token]]`: a token, a valid tenant (required for non-admins), and no token
+    /// listed twice (it could not say which tenant it acts for).
+    fn validate_tenant_tokens(&self) -> Result<(), ConfigError> {
+        let invalid = |index: usize, reason: String| {
+            Err(ConfigError::Invalid {
+                key: format!("auth.token[{index}]"),
+                reason,
+            })
+        };
+        let mut seen: std::collections::HashSet<&str> =
+            self.auth.tokens.iter().map(|token| token.trim()).collect();
+        for (index, entry) in self.auth.token.iter().enumerate() {
+            if entry.token.trim().is_empty() {
+                return invalid(index, "token must not be empty".to_string());
+            }
+            if entry.tenant.is_none() && !entry.admin {
+                return invalid(index, "tenant is required unless admin = true".to_string());
+            }
+            if !valid_tenant_name(entry.tenant_name()) {
+                return invalid(
+                    index,
+                    "tenant must be 1 to 64 characters of A-Z, a-z, 0-9, '-', '_' or '.'"
+                        .to_string(),
+                );
+            }
+            if !seen.insert(entry.token.trim()) {
+                return invalid(
+                    index,
+                    "this token is listed twice in auth.tokens / auth.token".to_string(),
+                );
+            }
+        }
+        Ok(())
+    }
+
     pub fn validate(&self) -> Result<(), ConfigError> {
         fn invalid(key: &str, reason: &str) -> Result<(), ConfigError> {
             Err(ConfigError::Invalid {
@@ -372,6 +448,7 @@ impl Config {
         if self.auth.tokens.iter().any(|token| token.trim().is_empty()) {
             return invalid("auth.tokens", "tokens must not be empty strings");
         }
+        self.validate_tenant_tokens()?;
         if self.limits.max_upload_bytes == 0 {
             return invalid("limits.max_upload_bytes", "must be > 0");
         }
@@ -566,6 +643,24 @@ mod tests {
         assert_eq!(config.auth.tokens, vec!["secret".to_string()]);
         assert_eq!(config.grpc_addr.port(), 7000);
         assert_eq!(config.data_dir, PathBuf::from("./data"));
+    }
+
+    #[test]
+    fn tenant_tokens_from_the_environment() {
+        let config = Config::load(
+            None,
+            env(&[(
+                "SEGSPLAT_AUTH__TOKEN",
+                "[{token = \"k1\", tenant = \"acme\"}, {token = \"k2\", admin = true}]",
+            )]),
+            &ConfigOverrides::default(),
+        )
+        .unwrap();
+        assert_eq!(config.auth.token.len(), 2);
+        assert_eq!(config.auth.token[0].tenant_name(), "acme");
+        assert!(config.auth.token[1].admin);
+        assert_eq!(config.auth.token[1].tenant_name(), "default");
+        assert!(config.auth.enabled());
     }
 
     #[test]

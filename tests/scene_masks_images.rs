@@ -216,6 +216,54 @@ fn frame_rgb_downscales_and_intrinsics_follow() {
     assert!((mean(&full) - mean(&small)).abs() < 0.03);
 }
 
+/// JPEG frames used below full size decode at a DCT scale (issue 19 item 7): same size and
+/// picture as decoding in full and resizing, and a damaged or mis-sized JPEG still fails.
+#[test]
+fn jpeg_frames_decode_at_a_reduced_scale_like_the_full_decode() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = SyntheticSpec {
+        width: 320,
+        height: 240,
+        frame_count: 2,
+        image_format: synthetic::SyntheticImageFormat::Jpeg,
+        ..SyntheticSpec::default()
+    };
+    synthetic::write_colmap(dir.path(), &spec, ColmapEncoding::Binary).unwrap();
+    let scene = load_scene(dir.path(), &LoadOptions::default()).unwrap();
+    validate_scene(&scene).unwrap();
+    // 320 -> 40: the 1/8 DCT scale gives exactly the size asked for.
+    let reduced = load_frame_rgb(&scene, 0, Some(40)).unwrap();
+    assert_eq!(reduced.dimensions(), (40, 30));
+    // The full decode, resized the usual way, for comparison.
+    let full = load_frame_rgb(&scene, 0, None).unwrap();
+    let resized = image::imageops::resize(&full, 40, 30, image::imageops::FilterType::Triangle);
+    let mean_difference = reduced
+        .pixels()
+        .zip(resized.pixels())
+        .flat_map(|(a, b)| (0..3).map(move |c| (a.0[c] - b.0[c]).abs()))
+        .sum::<f32>()
+        / (40 * 30 * 3) as f32;
+    assert!(mean_difference < 0.03, "{mean_difference}");
+    // Not a multiple of a DCT scale: decoded at 1/4 (80 x 60), then resized to 50 x 38.
+    assert_eq!(
+        load_frame_rgb(&scene, 0, Some(50)).unwrap().dimensions(),
+        (50, 38)
+    );
+
+    // A JPEG cut inside its headers is refused by validation and the reduced decode alike.
+    // (Cut inside the scan data, both decoders fill in the rest, as the `image` crate always
+    // did.)
+    let path = scene.root.join(&scene.frames[1].image_path);
+    let bytes = fs::read(&path).unwrap();
+    fs::write(&path, &bytes[..120]).unwrap();
+    assert!(validate_scene(&scene).is_err());
+    assert!(load_frame_rgb(&scene, 1, Some(40)).is_err());
+    // A JPEG of another size than its camera says is named as such.
+    image::RgbImage::new(160, 120).save(&path).unwrap();
+    let error = load_frame_rgb(&scene, 1, Some(40)).unwrap_err().to_string();
+    assert!(error.contains("160x120"), "{error}");
+}
+
 #[test]
 fn scaled_intrinsics_use_the_rounded_image_size() {
     let dir = tempfile::tempdir().unwrap();

@@ -10,8 +10,8 @@ use std::time::Duration;
 use common::handlers::{STEPS_KIND, StepsHandler};
 use common::{TestService, test_config};
 use segsplat::api::{ServiceBuilder, ServiceMode};
-use segsplat::store::Database;
 use segsplat::store::jobs::JobState;
+use segsplat::store::{Caller, Database};
 use serde_json::json;
 
 const WAIT: Duration = Duration::from_secs(15);
@@ -380,7 +380,11 @@ async fn shutdown_hands_running_jobs_back_and_the_next_run_resumes_from_the_chec
     let database = Database::open(&dir.path().join("segsplat.db"))
         .await
         .unwrap();
-    let job = database.get_job(&job_id).await.unwrap().unwrap();
+    let job = database
+        .get_job(&job_id, &Caller::system())
+        .await
+        .unwrap()
+        .unwrap();
     assert_eq!(job.state, JobState::Queued);
     assert_eq!(job.lease_owner, None);
     assert_eq!(job.attempts, 0, "a handed-back attempt is not counted");
@@ -413,7 +417,14 @@ async fn crash_after_a_checkpoint(service: &TestService, job_id: &str, worker: &
     assert_eq!(claimed.id, job_id);
     assert!(database.record_checkpoint(job_id, worker).await.unwrap());
     let started = std::time::Instant::now();
-    while database.get_job(job_id).await.unwrap().unwrap().state == JobState::Running {
+    while database
+        .get_job(job_id, &Caller::system())
+        .await
+        .unwrap()
+        .unwrap()
+        .state
+        == JobState::Running
+    {
         assert!(started.elapsed() < WAIT, "the lease never expired");
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
@@ -466,7 +477,7 @@ async fn crashes_after_progress_are_not_counted_as_attempts_but_are_bounded() {
         let job = service
             .service
             .database()
-            .get_job(&job_id)
+            .get_job(&job_id, &Caller::system())
             .await
             .unwrap()
             .unwrap();

@@ -1,5 +1,8 @@
 //! Optional bearer-token authentication for REST (middleware) and gRPC (interceptor). Health,
 //! readiness and metrics stay open so probes and scrapers need no secret.
+//!
+//! A token resolves to the [`Caller`] it acts for (tenant, admin), which the middleware and the
+//! interceptor attach to the request; handlers hand it to the store, which filters by it.
 
 use std::sync::Arc;
 
@@ -8,19 +11,33 @@ use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 
 use super::error::ApiError;
+use crate::config::AuthConfig;
+use crate::store::{Caller, DEFAULT_TENANT};
 
 /// Paths reachable without a token.
 const OPEN_PATHS: [&str; 3] = ["/healthz", "/readyz", "/metrics"];
 
 #[derive(Debug, Clone, Default)]
 pub struct TokenCheck {
-    tokens: Arc<Vec<String>>,
+    tokens: Arc<Vec<(String, Caller)>>,
 }
 
 impl TokenCheck {
-    pub fn new(tokens: Vec<String>) -> Self {
+    /// Every configured token with the caller it acts for: plain tokens for the default tenant.
+    pub fn from_config(auth: &AuthConfig) -> Self {
+        let plain = auth
+            .tokens
+            .iter()
+            .map(|token| (token.trim().to_string(), Caller::tenant(DEFAULT_TENANT)));
+        let tenant = auth.token.iter().map(|entry| {
+            let caller = Caller {
+                tenant: entry.tenant_name().to_string(),
+                admin: entry.admin,
+            };
+            (entry.token.trim().to_string(), caller)
+        });
         Self {
-            tokens: Arc::new(tokens),
+            tokens: Arc::new(plain.chain(tenant).collect()),
         }
     }
 
@@ -28,21 +45,25 @@ impl TokenCheck {
         !self.tokens.is_empty()
     }
 
-    /// Whether an `Authorization` header value carries an accepted token.
-    pub fn accepts(&self, header_value: Option<&str>) -> bool {
+    /// Who an `Authorization` header value acts for; `None` when it carries no accepted token.
+    /// With authentication off every caller is [`Caller::system`] (sees everything).
+    pub fn caller(&self, header_value: Option<&str>) -> Option<Caller> {
         if !self.enabled() {
-            return true;
+            return Some(Caller::system());
         }
-        let Some(token) = header_value.and_then(|value| {
+        let token = header_value.and_then(|value| {
             value
                 .strip_prefix("Bearer ")
                 .or_else(|| value.strip_prefix("bearer "))
-        }) else {
-            return false;
-        };
-        self.tokens.iter().fold(false, |found, accepted| {
-            found | constant_time_eq(accepted, token.trim())
-        })
+        })?;
+        // Every configured token is compared, so timing does not tell which one nearly matched.
+        self.tokens
+            .iter()
+            .fold(None, |found, (accepted, caller)| {
+                let matches = constant_time_eq(accepted, token.trim());
+                found.or(matches.then_some(caller))
+            })
+            .cloned()
     }
 }
 
@@ -58,9 +79,11 @@ fn constant_time_eq(left: &str, right: &str) -> bool {
         == 0
 }
 
+/// Admits requests with an accepted token (or to an open path) and attaches their [`Caller`]
+/// for the handlers' `Extension<Caller>`.
 pub async fn require_token(
     State(check): State<TokenCheck>,
-    request: Request,
+    mut request: Request,
     next: Next,
 ) -> Response {
     if OPEN_PATHS.contains(&request.uri().path()) {
@@ -70,28 +93,41 @@ pub async fn require_token(
         .headers()
         .get(axum::http::header::AUTHORIZATION)
         .and_then(|value| value.to_str().ok());
-    if check.accepts(header) {
-        next.run(request).await
-    } else {
-        ApiError::unauthorized().into_response()
+    match check.caller(header) {
+        Some(caller) => {
+            request.extensions_mut().insert(caller);
+            next.run(request).await
+        }
+        None => ApiError::unauthorized().into_response(),
     }
+}
+
+/// The caller the interceptor attached to a gRPC request.
+pub fn grpc_caller<T>(request: &tonic::Request<T>) -> Result<Caller, tonic::Status> {
+    request
+        .extensions()
+        .get::<Caller>()
+        .cloned()
+        .ok_or_else(|| tonic::Status::unauthenticated("the request carries no resolved caller"))
 }
 
 /// gRPC interceptor with the same tokens (metadata `authorization: Bearer ...`).
 pub fn grpc_interceptor(
     check: TokenCheck,
 ) -> impl FnMut(tonic::Request<()>) -> Result<tonic::Request<()>, tonic::Status> + Clone {
-    move |request: tonic::Request<()>| {
+    move |mut request: tonic::Request<()>| {
         let header = request
             .metadata()
             .get("authorization")
             .and_then(|value| value.to_str().ok());
-        if check.accepts(header) {
-            Ok(request)
-        } else {
-            Err(tonic::Status::unauthenticated(
+        match check.caller(header) {
+            Some(caller) => {
+                request.extensions_mut().insert(caller);
+                Ok(request)
+            }
+            None => Err(tonic::Status::unauthenticated(
                 "missing or invalid bearer token in the authorization metadata",
-            ))
+            )),
         }
     }
 }
@@ -100,15 +136,40 @@ pub fn grpc_interceptor(
 mod tests {
     use super::*;
 
+    use crate::config::TenantToken;
+
     #[test]
-    fn accepts_only_configured_tokens() {
-        let open = TokenCheck::new(vec![]);
-        assert!(open.accepts(None));
-        let check = TokenCheck::new(vec!["s3cret".to_string(), "other".to_string()]);
-        assert!(check.accepts(Some("Bearer s3cret")));
-        assert!(check.accepts(Some("Bearer other")));
-        assert!(!check.accepts(Some("Bearer s3cre")));
-        assert!(!check.accepts(Some("s3cret")));
-        assert!(!check.accepts(None));
+    fn tokens_resolve_to_their_tenant() {
+        let open = TokenCheck::from_config(&AuthConfig::default());
+        assert_eq!(open.caller(None), Some(Caller::system()));
+        let check = TokenCheck::from_config(&AuthConfig {
+            tokens: vec!["s3cret".to_string(), "other".to_string()],
+            token: vec![
+                TenantToken {
+                    token: "alpha-key".to_string(),
+                    tenant: Some("alpha".to_string()),
+                    admin: false,
+                },
+                TenantToken {
+                    token: "root-key".to_string(),
+                    tenant: None,
+                    admin: true,
+                },
+            ],
+        });
+        let plain = Some(Caller::tenant(DEFAULT_TENANT));
+        assert_eq!(check.caller(Some("Bearer s3cret")), plain);
+        assert_eq!(check.caller(Some("Bearer other")), plain);
+        assert_eq!(
+            check.caller(Some("Bearer alpha-key")),
+            Some(Caller::tenant("alpha"))
+        );
+        assert_eq!(
+            check.caller(Some("Bearer root-key")),
+            Some(Caller::admin(DEFAULT_TENANT))
+        );
+        assert_eq!(check.caller(Some("Bearer s3cre")), None);
+        assert_eq!(check.caller(Some("s3cret")), None);
+        assert_eq!(check.caller(None), None);
     }
 }

@@ -2,6 +2,7 @@
 //! (`labels.npy`, object ids per Gaussian in PLY order), cameras and reports, and single objects
 //! as their own PLY.
 
+use axum::Extension;
 use axum::extract::{Path as UrlPath, State};
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
@@ -9,6 +10,7 @@ use axum::response::{IntoResponse, Response};
 use super::error::{ApiResult, ErrorBody};
 use super::objects::parse_level;
 use super::state::AppState;
+use crate::store::Caller;
 
 fn content_type(file: &str) -> &'static str {
     if file.ends_with(".json") {
@@ -41,9 +43,10 @@ fn attachment(name: &str, content_type: &'static str, bytes: Vec<u8>) -> Respons
               (status = 409, description = "the scene is not trained yet", body = ErrorBody)))]
 pub async fn trained_file(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     UrlPath((id, file)): UrlPath<(String, String)>,
 ) -> ApiResult<Response> {
-    let bytes = state.serving.trained_file(&id, &file).await?;
+    let bytes = state.serving.trained_file(&id, &caller, &file).await?;
     Ok(attachment(&file, content_type(&file), bytes))
 }
 
@@ -57,10 +60,14 @@ pub async fn trained_file(
               (status = 409, body = ErrorBody)))]
 pub async fn object_ply(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     UrlPath((id, level, object_id)): UrlPath<(String, String, u32)>,
 ) -> ApiResult<Response> {
     let level = parse_level(&level)?;
-    let bytes = state.serving.object_ply(&id, level, object_id).await?;
+    let bytes = state
+        .serving
+        .object_ply(&id, &caller, level, object_id)
+        .await?;
     let name = format!("{}-{object_id}.ply", level.name());
     Ok(attachment(&name, "application/octet-stream", bytes))
 }

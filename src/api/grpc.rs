@@ -9,6 +9,7 @@ use std::time::Instant;
 use futures::Stream;
 use tonic::{Request, Response, Status};
 
+use super::auth::grpc_caller;
 use super::query::{QueryFailure, placement, run_query};
 use super::serving::{ServeFailure, Serving};
 use crate::language::{DEFAULT_RELEVANCY_THRESHOLD, Granularity, QueryOptions, SharedTextEncoder};
@@ -22,7 +23,7 @@ use crate::scene::Level;
 use crate::store::jobs::{JobRecord, JobState};
 use crate::store::objects::ObjectRecord;
 use crate::store::scenes::SceneRecord;
-use crate::store::{Database, StoreError};
+use crate::store::{Caller, Database, StoreError};
 
 /// Replies a stream query may have waiting before the client reads them.
 const STREAM_BUFFER: usize = 4;
@@ -44,7 +45,11 @@ impl SceneQueryService {
     }
 
     /// One query with optional masks: the core of `Query` and of each `StreamQuery` message.
-    async fn answer(&self, query: QueryParts) -> Result<proto::QueryResponse, Status> {
+    async fn answer(
+        &self,
+        query: QueryParts,
+        caller: &Caller,
+    ) -> Result<proto::QueryResponse, Status> {
         let started = Instant::now();
         let options = QueryOptions {
             granularity: granularity_from_proto(query.granularity)?,
@@ -66,6 +71,7 @@ impl SceneQueryService {
             &self.database,
             &self.text_encoder,
             &query.scene_id,
+            caller,
             &query.text,
             options,
         )
@@ -75,7 +81,7 @@ impl SceneQueryService {
             None
         } else {
             self.serving
-                .objects_at(&query.scene_id, time, view.as_ref())
+                .objects_at(&query.scene_id, caller, time, view.as_ref())
                 .await
                 .map_err(serve_failure_status)?
         };
@@ -89,6 +95,7 @@ impl SceneQueryService {
                 self.serving
                     .render_masks(
                         &query.scene_id,
+                        caller,
                         view,
                         time,
                         objects,
@@ -422,6 +429,7 @@ impl SceneQuery for SceneQueryService {
         &self,
         request: Request<proto::QueryRequest>,
     ) -> Result<Response<proto::QueryResponse>, Status> {
+        let caller = grpc_caller(&request)?;
         let request = request.into_inner();
         let parts = QueryParts {
             scene_id: request.scene_id,
@@ -434,7 +442,7 @@ impl SceneQuery for SceneQueryService {
             mask_encoding: request.mask_encoding,
             visible_only: request.visible_only,
         };
-        Ok(Response::new(self.answer(parts).await?))
+        Ok(Response::new(self.answer(parts, &caller).await?))
     }
 
     type StreamQueryStream = StreamQueryStream;
@@ -445,6 +453,7 @@ impl SceneQuery for SceneQueryService {
         &self,
         request: Request<tonic::Streaming<proto::StreamQueryRequest>>,
     ) -> Result<Response<Self::StreamQueryStream>, Status> {
+        let caller = grpc_caller(&request)?;
         let mut incoming = request.into_inner();
         let service = self.clone();
         let (replies, receiver) = tokio::sync::mpsc::channel(STREAM_BUFFER);
@@ -461,12 +470,13 @@ impl SceneQuery for SceneQueryService {
                 };
                 let sequence = message.sequence;
                 parts.update(message);
-                let reply = service.answer(parts.clone()).await.map(|response| {
-                    proto::StreamQueryResponse {
+                let reply = service
+                    .answer(parts.clone(), &caller)
+                    .await
+                    .map(|response| proto::StreamQueryResponse {
                         sequence,
                         response: Some(response),
-                    }
-                });
+                    });
                 let failed = reply.is_err();
                 if replies.send(reply).await.is_err() || failed {
                     break;
@@ -482,13 +492,14 @@ impl SceneQuery for SceneQueryService {
         &self,
         request: Request<proto::ListObjectsRequest>,
     ) -> Result<Response<proto::ListObjectsResponse>, Status> {
+        let caller = grpc_caller(&request)?;
         let request = request.into_inner();
         let level = proto::Level::try_from(request.level).map_err(|_| {
             Status::invalid_argument(format!("level: unknown value {}", request.level))
         })?;
         if self
             .database
-            .get_scene(&request.scene_id)
+            .get_scene(&request.scene_id, &caller)
             .await
             .map_err(internal)?
             .is_none()
@@ -506,7 +517,7 @@ impl SceneQuery for SceneQueryService {
         let moved = match time_from_proto(request.time)? {
             Some(time) if !objects.is_empty() => self
                 .serving
-                .objects_at(&request.scene_id, Some(time), None)
+                .objects_at(&request.scene_id, &caller, Some(time), None)
                 .await
                 .map_err(serve_failure_status)?,
             _ => None,
@@ -523,6 +534,7 @@ impl SceneQuery for SceneQueryService {
         &self,
         request: Request<proto::RenderMaskRequest>,
     ) -> Result<Response<proto::RenderMaskResponse>, Status> {
+        let caller = grpc_caller(&request)?;
         let request = request.into_inner();
         let level = proto::Level::try_from(request.level)
             .ok()
@@ -544,6 +556,7 @@ impl SceneQuery for SceneQueryService {
             .serving
             .render_masks(
                 &request.scene_id,
+                &caller,
                 view,
                 time,
                 vec![(level, request.object_id)],
@@ -568,10 +581,11 @@ impl SceneQuery for SceneQueryService {
         &self,
         request: Request<proto::GetJobRequest>,
     ) -> Result<Response<proto::Job>, Status> {
+        let caller = grpc_caller(&request)?;
         let job_id = request.into_inner().job_id;
         let job = self
             .database
-            .get_job(&job_id)
+            .get_job(&job_id, &caller)
             .await
             .map_err(internal)?
             .ok_or_else(|| Status::not_found(format!("job {job_id} not found")))?;
@@ -582,10 +596,11 @@ impl SceneQuery for SceneQueryService {
         &self,
         request: Request<proto::GetSceneRequest>,
     ) -> Result<Response<proto::Scene>, Status> {
+        let caller = grpc_caller(&request)?;
         let scene_id = request.into_inner().scene_id;
         let scene = self
             .database
-            .get_scene(&scene_id)
+            .get_scene(&scene_id, &caller)
             .await
             .map_err(internal)?
             .ok_or_else(|| Status::not_found(format!("scene {scene_id} not found")))?;
@@ -594,9 +609,10 @@ impl SceneQuery for SceneQueryService {
 
     async fn list_scenes(
         &self,
-        _request: Request<proto::ListScenesRequest>,
+        request: Request<proto::ListScenesRequest>,
     ) -> Result<Response<proto::ListScenesResponse>, Status> {
-        let scenes = self.database.list_scenes().await.map_err(internal)?;
+        let caller = grpc_caller(&request)?;
+        let scenes = self.database.list_scenes(&caller).await.map_err(internal)?;
         Ok(Response::new(proto::ListScenesResponse {
             scenes: scenes.into_iter().map(scene_to_proto).collect(),
         }))

@@ -3,10 +3,10 @@
 use std::convert::Infallible;
 use std::time::Duration;
 
-use axum::Json;
 use axum::extract::{Path as UrlPath, Query, State};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::sse::{Event, KeepAlive, Sse};
+use axum::{Extension, Json};
 use futures::Stream;
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
@@ -14,6 +14,7 @@ use utoipa::{IntoParams, ToSchema};
 use super::error::{ApiError, ApiResult, ErrorBody};
 use super::job_bounds::{check_adapter_fit, check_job_bounds};
 use super::state::AppState;
+use crate::store::Caller;
 use crate::store::jobs::{AttemptBounds, CancelOutcome, JobRecord, JobState};
 
 /// How often an SSE stream re-reads the database when no wake-up arrives (events written by
@@ -56,6 +57,8 @@ pub struct JobResponse {
     pub updated_at_ms: i64,
     pub started_at_ms: Option<i64>,
     pub finished_at_ms: Option<i64>,
+    /// The tenant that owns it (its scene's).
+    pub tenant: String,
 }
 
 impl From<JobRecord> for JobResponse {
@@ -78,6 +81,7 @@ impl From<JobRecord> for JobResponse {
             updated_at_ms: job.updated_at_ms,
             started_at_ms: job.started_at_ms,
             finished_at_ms: job.finished_at_ms,
+            tenant: job.tenant,
         }
     }
 }
@@ -101,6 +105,7 @@ pub struct JobListParams {
         (status = 422, description = "unknown kind or invalid config", body = ErrorBody)))]
 pub async fn create_job(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     UrlPath(scene_id): UrlPath<String>,
     Json(request): Json<CreateJobRequest>,
 ) -> ApiResult<(StatusCode, HeaderMap, Json<JobResponse>)> {
@@ -122,7 +127,7 @@ pub async fn create_job(
     check_job_bounds(&config, &state.config.jobs)
         .map_err(|message| ApiError::unprocessable(format!("config: {message}")))?;
     if handler.needs_gpu()
-        && let Some(scene) = state.database.get_scene(&scene_id).await?
+        && let Some(scene) = state.database.get_scene(&scene_id, &caller).await?
     {
         check_adapter_fit(
             &config,
@@ -141,6 +146,7 @@ pub async fn create_job(
                 max_attempts: state.config.jobs.max_attempts,
                 max_lease_expiries: state.config.jobs.max_lease_expiries,
             },
+            &caller,
         )
         .await?
         .ok_or_else(|| ApiError::not_found(format!("scene {scene_id} not found")))?;
@@ -159,11 +165,12 @@ pub async fn create_job(
     responses((status = 200, body = JobResponse), (status = 404, body = ErrorBody)))]
 pub async fn get_job(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     UrlPath(id): UrlPath<String>,
 ) -> ApiResult<Json<JobResponse>> {
     let job = state
         .database
-        .get_job(&id)
+        .get_job(&id, &caller)
         .await?
         .ok_or_else(|| ApiError::not_found(format!("job {id} not found")))?;
     Ok(Json(job.into()))
@@ -173,6 +180,7 @@ pub async fn get_job(
     responses((status = 200, body = JobList), (status = 400, body = ErrorBody)))]
 pub async fn list_jobs(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Query(params): Query<JobListParams>,
 ) -> ApiResult<Json<JobList>> {
     let filter = match params.state.as_deref() {
@@ -184,7 +192,7 @@ pub async fn list_jobs(
             ))
         })?),
     };
-    let jobs = state.database.list_jobs(filter).await?;
+    let jobs = state.database.list_jobs(filter, &caller).await?;
     Ok(Json(JobList {
         jobs: jobs.into_iter().map(JobResponse::from).collect(),
     }))
@@ -199,9 +207,10 @@ pub async fn list_jobs(
         (status = 404, body = ErrorBody), (status = 409, description = "already finished", body = ErrorBody)))]
 pub async fn cancel_job(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     UrlPath(id): UrlPath<String>,
 ) -> ApiResult<(StatusCode, Json<JobResponse>)> {
-    let outcome = state.database.request_cancel(&id).await?;
+    let outcome = state.database.request_cancel(&id, &caller).await?;
     state.bus.notify(&id);
     match outcome {
         CancelOutcome::Cancelled(job) => Ok((StatusCode::OK, Json(job.into()))),
@@ -223,10 +232,11 @@ pub async fn cancel_job(
         (status = 404, body = ErrorBody)))]
 pub async fn job_events(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     UrlPath(id): UrlPath<String>,
     headers: HeaderMap,
 ) -> ApiResult<Sse<impl Stream<Item = Result<Event, Infallible>>>> {
-    if state.database.get_job(&id).await?.is_none() {
+    if state.database.get_job(&id, &caller).await?.is_none() {
         return Err(ApiError::not_found(format!("job {id} not found")));
     }
     let resume_after = headers
@@ -234,11 +244,12 @@ pub async fn job_events(
         .and_then(|value| value.to_str().ok())
         .and_then(|value| value.parse::<i64>().ok())
         .unwrap_or(0);
-    Ok(Sse::new(event_stream(state, id, resume_after)).keep_alive(KeepAlive::default()))
+    Ok(Sse::new(event_stream(state, caller, id, resume_after)).keep_alive(KeepAlive::default()))
 }
 
 fn event_stream(
     state: AppState,
+    caller: Caller,
     job_id: String,
     mut last_id: i64,
 ) -> impl Stream<Item = Result<Event, Infallible>> {
@@ -247,7 +258,7 @@ fn event_stream(
         loop {
             // Read the job before its events: a final state is written with its event in one
             // transaction, so once the job is final all its events are visible.
-            let finished = match state.database.get_job(&job_id).await {
+            let finished = match state.database.get_job(&job_id, &caller).await {
                 Ok(Some(job)) => job.state.is_terminal(),
                 Ok(None) => true,
                 Err(error) => {

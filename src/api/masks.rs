@@ -3,10 +3,10 @@
 //! a plain PNG for browsers and curl). Also the view and mask JSON shapes the query endpoint
 //! shares.
 
-use axum::Json;
 use axum::extract::{Path as UrlPath, Query, State};
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
+use axum::{Extension, Json};
 use base64::Engine;
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
@@ -18,6 +18,7 @@ use super::state::AppState;
 use crate::pipeline::serving::{
     EncodedMask, EncodedMaskData, MaskFormat, MaskView, PinholeIntrinsics, ServingError,
 };
+use crate::store::Caller;
 
 /// Most objects one mask request may ask for.
 const MAX_OBJECTS_PER_REQUEST: usize = 64;
@@ -202,6 +203,7 @@ pub struct MasksResponse {
               (status = 503, description = "no GPU to render on", body = ErrorBody)))]
 pub async fn render_masks(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     UrlPath(id): UrlPath<String>,
     Json(request): Json<MasksRequest>,
 ) -> ApiResult<Json<MasksResponse>> {
@@ -222,6 +224,7 @@ pub async fn render_masks(
         .serving
         .render_masks(
             &id,
+            &caller,
             view,
             time,
             objects,
@@ -257,6 +260,7 @@ pub struct MaskPngParams {
               (status = 409, body = ErrorBody), (status = 503, body = ErrorBody)))]
 pub async fn object_mask_png(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     UrlPath((id, level, object_id)): UrlPath<(String, String, u32)>,
     Query(params): Query<MaskPngParams>,
 ) -> ApiResult<Response> {
@@ -270,6 +274,7 @@ pub async fn object_mask_png(
         .serving
         .render_masks(
             &id,
+            &caller,
             view,
             parse_time(params.time)?,
             vec![(level, object_id)],

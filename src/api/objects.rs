@@ -1,7 +1,7 @@
 //! Object endpoints: what a finished `segment_then_splat` job found in a scene.
 
-use axum::Json;
 use axum::extract::{Path as UrlPath, Query, State};
+use axum::{Extension, Json};
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
@@ -10,6 +10,7 @@ use super::masks::parse_time;
 use super::query::placement;
 use super::state::AppState;
 use crate::scene::Level;
+use crate::store::Caller;
 use crate::store::objects::ObjectRecord;
 
 /// One object at one granularity level.
@@ -72,20 +73,24 @@ pub fn parse_level(name: &str) -> Result<Level, ApiError> {
               (status = 404, body = ErrorBody)))]
 pub async fn list_objects(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     UrlPath(id): UrlPath<String>,
     Query(params): Query<ObjectListParams>,
 ) -> ApiResult<Json<ObjectList>> {
     let level = params.level.as_deref().map(parse_level).transpose()?;
     state
         .database
-        .get_scene(&id)
+        .get_scene(&id, &caller)
         .await?
         .ok_or_else(|| ApiError::not_found(format!("scene {id} not found")))?;
     let time = parse_time(params.time)?;
     let records = state.database.list_objects(&id, level).await?;
     let moved = match time {
         Some(time) if !records.is_empty() => {
-            state.serving.objects_at(&id, Some(time), None).await?
+            state
+                .serving
+                .objects_at(&id, &caller, Some(time), None)
+                .await?
         }
         _ => None,
     };

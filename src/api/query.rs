@@ -5,9 +5,9 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use axum::Json;
 use axum::extract::{Path as UrlPath, State};
 use axum::http::StatusCode;
+use axum::{Extension, Json};
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
@@ -19,6 +19,7 @@ use crate::language::{
     QueryOptions, QueryOptionsError, SharedTextEncoder, TextEncoderUnavailable, answer_query,
 };
 use crate::pipeline::segment_then_splat::objects::ObjectSummary;
+use crate::store::Caller;
 use crate::store::objects::ObjectRecord;
 use crate::store::{Database, StoreError};
 
@@ -70,6 +71,7 @@ pub async fn run_query(
     database: &Database,
     text_encoder: &Arc<SharedTextEncoder>,
     scene_id: &str,
+    caller: &Caller,
     text: &str,
     options: QueryOptions,
 ) -> Result<QueryOutcome, QueryFailure> {
@@ -78,7 +80,7 @@ pub async fn run_query(
     if text.trim().is_empty() {
         return Err(QueryFailure::EmptyText);
     }
-    if database.get_scene(scene_id).await?.is_none() {
+    if database.get_scene(scene_id, caller).await?.is_none() {
         return Err(QueryFailure::SceneNotFound(scene_id.to_string()));
     }
     let model_id = text_encoder
@@ -242,6 +244,7 @@ impl QueryRequest {
               (status = 503, description = "no text encoder configured", body = ErrorBody)))]
 pub async fn query_scene(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     UrlPath(id): UrlPath<String>,
     Json(request): Json<QueryRequest>,
 ) -> ApiResult<Json<QueryResponse>> {
@@ -266,6 +269,7 @@ pub async fn query_scene(
         &state.database,
         &state.text_encoder,
         &id,
+        &caller,
         &request.text,
         options,
     )
@@ -273,7 +277,10 @@ pub async fn query_scene(
     let moved = if outcome.matches.is_empty() {
         None
     } else {
-        state.serving.objects_at(&id, time, view.as_ref()).await?
+        state
+            .serving
+            .objects_at(&id, &caller, time, view.as_ref())
+            .await?
     };
     let masks = match view {
         Some(view) if !outcome.matches.is_empty() => {
@@ -285,7 +292,7 @@ pub async fn query_scene(
             let visible = request.visible_masks.unwrap_or(false);
             state
                 .serving
-                .render_masks(&id, view, time, objects, visible, format)
+                .render_masks(&id, &caller, view, time, objects, visible, format)
                 .await?
         }
         _ => Vec::new(),

@@ -2,6 +2,7 @@
 
 use std::path::Path;
 
+use axum::Extension;
 use axum::Json;
 use axum::extract::{FromRequest, Multipart, Path as UrlPath, Query, Request, State};
 use axum::http::{HeaderMap, StatusCode, header};
@@ -13,6 +14,7 @@ use utoipa::{IntoParams, ToSchema};
 use super::error::{ApiError, ApiResult, ErrorBody};
 use super::state::AppState;
 use super::upload_commit::ingest_and_record;
+use crate::store::Caller;
 use crate::store::process_tag::process_tag;
 use crate::store::scenes::{DeleteSceneError, SceneRecord};
 
@@ -49,6 +51,8 @@ pub struct SceneResponse {
     /// The first 20 of them, relative to the dataset.
     pub ignored_files: Vec<String>,
     pub created_at_ms: i64,
+    /// The tenant that owns it (the uploading token's).
+    pub tenant: String,
 }
 
 impl From<&SceneRecord> for SceneResponse {
@@ -74,6 +78,7 @@ impl From<&SceneRecord> for SceneResponse {
             ignored_file_count: summary.ignored_file_count,
             ignored_files: summary.ignored_files.clone(),
             created_at_ms: record.created_at_ms,
+            tenant: record.tenant.clone(),
         }
     }
 }
@@ -104,6 +109,7 @@ pub struct UploadParams {
     ))]
 pub async fn upload_scene(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Query(params): Query<UploadParams>,
     request: Request,
 ) -> ApiResult<(StatusCode, HeaderMap, Json<SceneResponse>)> {
@@ -126,7 +132,7 @@ pub async fn upload_scene(
         .name
         .filter(|name| !name.trim().is_empty())
         .or(uploaded_name);
-    let record = ingest_and_record(state.clone(), temp, name).await?;
+    let record = ingest_and_record(state.clone(), temp, name, caller.tenant).await?;
     let mut headers = HeaderMap::new();
     if let Ok(location) = format!("/v1/scenes/{}", record.id).parse() {
         headers.insert(header::LOCATION, location);
@@ -267,11 +273,14 @@ impl UploadWriter {
     }
 }
 
-/// All scenes, oldest first.
+/// The caller's tenant's scenes (every tenant's for an admin), oldest first.
 #[utoipa::path(get, path = "/v1/scenes", tag = "scenes",
     responses((status = 200, body = SceneList)))]
-pub async fn list_scenes(State(state): State<AppState>) -> ApiResult<Json<SceneList>> {
-    let scenes = state.database.list_scenes().await?;
+pub async fn list_scenes(
+    State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
+) -> ApiResult<Json<SceneList>> {
+    let scenes = state.database.list_scenes(&caller).await?;
     Ok(Json(SceneList {
         scenes: scenes.iter().map(SceneResponse::from).collect(),
     }))
@@ -282,11 +291,12 @@ pub async fn list_scenes(State(state): State<AppState>) -> ApiResult<Json<SceneL
     responses((status = 200, body = SceneResponse), (status = 404, body = ErrorBody)))]
 pub async fn get_scene(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     UrlPath(id): UrlPath<String>,
 ) -> ApiResult<Json<SceneResponse>> {
     let record = state
         .database
-        .get_scene(&id)
+        .get_scene(&id, &caller)
         .await?
         .ok_or_else(|| ApiError::not_found(format!("scene {id} not found")))?;
     Ok(Json(SceneResponse::from(&record)))
@@ -299,18 +309,18 @@ pub async fn get_scene(
     responses((status = 204), (status = 404, body = ErrorBody), (status = 409, body = ErrorBody)))]
 pub async fn delete_scene(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     UrlPath(id): UrlPath<String>,
 ) -> ApiResult<StatusCode> {
-    let (record, job_ids) =
-        state
-            .database
-            .delete_scene(&id)
-            .await
-            .map_err(|error| match error {
-                DeleteSceneError::NotFound(_) => ApiError::not_found(error.to_string()),
-                DeleteSceneError::Busy { .. } => ApiError::conflict(error.to_string()),
-                DeleteSceneError::Store(store) => store.into(),
-            })?;
+    let (record, job_ids) = state
+        .database
+        .delete_scene(&id, &caller)
+        .await
+        .map_err(|error| match error {
+            DeleteSceneError::NotFound(_) => ApiError::not_found(error.to_string()),
+            DeleteSceneError::Busy { .. } => ApiError::conflict(error.to_string()),
+            DeleteSceneError::Store(store) => store.into(),
+        })?;
     let blobs = state.blobs.clone();
     tokio::task::spawn_blocking(move || {
         blobs.delete_prefix(&record.blob_prefix)?;

@@ -312,7 +312,7 @@ async fn start_grpc(
         what: "gRPC",
         source,
     })?;
-    let tokens = TokenCheck::new(config.auth.tokens.clone());
+    let tokens = TokenCheck::from_config(&config.auth);
     let (health_reporter, health_service) = tonic_health::server::health_reporter();
     health_reporter
         .set_serving::<SceneQueryServer<SceneQueryService>>()

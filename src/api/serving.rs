@@ -13,7 +13,7 @@ use crate::pipeline::serving::{
 };
 use crate::scene::Level;
 use crate::store::jobs::JobRecord;
-use crate::store::{BlobError, BlobStore, Database, StoreError};
+use crate::store::{BlobError, BlobStore, Caller, Database, StoreError};
 
 /// Results files a client may download from a scene's trained version (the deformation
 /// field's two files exist for dynamic scenes only).
@@ -99,9 +99,15 @@ impl Serving {
     }
 
     /// The job whose results the scene serves: its latest finished `segment_then_splat` job
-    /// (whose objects the object table holds), else its latest `reconstruct` job.
-    pub async fn serving_job(&self, scene_id: &str) -> Result<JobRecord, ServeFailure> {
-        if self.database.get_scene(scene_id).await?.is_none() {
+    /// (whose objects the object table holds), else its latest `reconstruct` job. A scene
+    /// `caller` does not see is [`ServeFailure::SceneNotFound`]: every method here starts
+    /// from this check.
+    pub async fn serving_job(
+        &self,
+        scene_id: &str,
+        caller: &Caller,
+    ) -> Result<JobRecord, ServeFailure> {
+        if self.database.get_scene(scene_id, caller).await?.is_none() {
             return Err(ServeFailure::SceneNotFound(scene_id.to_string()));
         }
         for kind in [SEGMENT_THEN_SPLAT, crate::pipeline::reconstruct::KIND] {
@@ -113,8 +119,12 @@ impl Serving {
     }
 
     /// The scene's served version, resident on the GPU.
-    pub async fn loaded_scene(&self, scene_id: &str) -> Result<Arc<LoadedScene>, ServeFailure> {
-        let job = self.serving_job(scene_id).await?;
+    pub async fn loaded_scene(
+        &self,
+        scene_id: &str,
+        caller: &Caller,
+    ) -> Result<Arc<LoadedScene>, ServeFailure> {
+        let job = self.serving_job(scene_id, caller).await?;
         self.load_job(job).await
     }
 
@@ -131,9 +141,12 @@ impl Serving {
     }
 
     /// Renders and encodes the masks of `objects` for `view` (at `time` for a dynamic scene).
+    // The scene, who asks, and the render settings each caller passes straight from its request.
+    #[allow(clippy::too_many_arguments)]
     pub async fn render_masks(
         &self,
         scene_id: &str,
+        caller: &Caller,
         view: MaskView,
         time: Option<f32>,
         objects: Vec<(Level, u32)>,
@@ -141,7 +154,7 @@ impl Serving {
         format: MaskFormat,
     ) -> Result<Vec<EncodedObjectMasks>, ServeFailure> {
         let rendered = self
-            .render_bit_masks(scene_id, view, time, objects, visible_too)
+            .render_bit_masks(scene_id, caller, view, time, objects, visible_too)
             .await?;
         blocking(move || {
             rendered
@@ -170,13 +183,14 @@ impl Serving {
     pub async fn render_bit_masks(
         &self,
         scene_id: &str,
+        caller: &Caller,
         view: MaskView,
         time: Option<f32>,
         objects: Vec<(Level, u32)>,
         visible_too: bool,
     ) -> Result<Vec<ObjectMasks>, ServeFailure> {
         let started = std::time::Instant::now();
-        let job = self.serving_job(scene_id).await?;
+        let job = self.serving_job(scene_id, caller).await?;
         // Unknown ids would render as empty masks; say so instead.
         let known = self.database.list_objects(scene_id, None).await?;
         if let Some(&(level, object_id)) = objects.iter().find(|(level, object_id)| {
@@ -204,19 +218,20 @@ impl Serving {
     pub async fn objects_at(
         &self,
         scene_id: &str,
+        caller: &Caller,
         time: Option<f32>,
         view: Option<&MaskView>,
     ) -> Result<Option<Vec<ObjectSummary>>, ServeFailure> {
         // Static scenes answer from the object table without claiming the GPU.
         let dynamic = self
             .database
-            .get_scene(scene_id)
+            .get_scene(scene_id, caller)
             .await?
             .is_some_and(|scene| scene.summary.time_count > 0);
         if !dynamic {
             return Ok(None);
         }
-        let scene = self.loaded_scene(scene_id).await?;
+        let scene = self.loaded_scene(scene_id, caller).await?;
         let frame_time = view.and_then(|view| view.frame_time(&scene.cameras));
         let Some(time) = scene.effective_time(time, frame_time) else {
             return Ok(None);
@@ -226,11 +241,16 @@ impl Serving {
     }
 
     /// One trained file of the scene's served version.
-    pub async fn trained_file(&self, scene_id: &str, file: &str) -> Result<Vec<u8>, ServeFailure> {
+    pub async fn trained_file(
+        &self,
+        scene_id: &str,
+        caller: &Caller,
+        file: &str,
+    ) -> Result<Vec<u8>, ServeFailure> {
         if !DOWNLOADABLE_FILES.contains(&file) {
             return Err(ServeFailure::UnknownFile(file.to_string()));
         }
-        let job = self.serving_job(scene_id).await?;
+        let job = self.serving_job(scene_id, caller).await?;
         let blobs = Arc::clone(&self.blobs);
         let file = file.to_string();
         blocking(move || {
@@ -250,10 +270,11 @@ impl Serving {
     pub async fn object_ply(
         &self,
         scene_id: &str,
+        caller: &Caller,
         level: Level,
         object_id: u32,
     ) -> Result<Vec<u8>, ServeFailure> {
-        let job = self.serving_job(scene_id).await?;
+        let job = self.serving_job(scene_id, caller).await?;
         let blobs = Arc::clone(&self.blobs);
         blocking(move || {
             let trained = TrainedScene::from_blobs(blobs.as_ref(), &output_prefix(&job.id))?;

@@ -14,14 +14,15 @@ use crate::scene::{InputErrorClass, LoadOptions, PixelLimits, UnpackLimits};
 use crate::store::now_ms;
 use crate::store::scenes::SceneRecord;
 
-/// Ingests `archive` as a new scene named `name` (the scene id when `None`) in a detached task
-/// and waits for it; the task finishes even when this future is dropped.
+/// Ingests `archive` as a new scene of `tenant` named `name` (the scene id when `None`) in a
+/// detached task and waits for it; the task finishes even when this future is dropped.
 pub async fn ingest_and_record(
     state: AppState,
     archive: NamedTempFile,
     name: Option<String>,
+    tenant: String,
 ) -> ApiResult<SceneRecord> {
-    tokio::spawn(run(state, archive, name))
+    tokio::spawn(run(state, archive, name, tenant))
         .await
         .map_err(|error| ApiError::internal(format!("scene ingest crashed: {error}")))?
 }
@@ -30,6 +31,7 @@ async fn run(
     state: AppState,
     archive: NamedTempFile,
     name: Option<String>,
+    tenant: String,
 ) -> ApiResult<SceneRecord> {
     let config = &state.config;
     let scene_id = uuid::Uuid::now_v7().to_string();
@@ -78,6 +80,7 @@ async fn run(
         summary,
         blob_prefix: blob_prefix.clone(),
         created_at_ms: now_ms(),
+        tenant,
     };
     if let Err(error) = state.database.insert_scene(&record).await {
         let blobs = state.blobs.clone();

@@ -21,6 +21,7 @@ use segsplat::segment::BitMask;
 use serde::Serialize;
 
 use super::local::{LocalService, StoreArgs};
+use segsplat::store::Caller;
 
 /// Objects rendered per request in the oracle's sweep over every object.
 const ORACLE_BATCH: usize = 64;
@@ -90,11 +91,14 @@ async fn run_async(args: EvalArgs, config_file: Option<PathBuf>) -> anyhow::Resu
         LocalService::open_with_models(config_file.as_deref(), &args.store).await?
     };
     let scene_id = local.resolve_scene(&args.scene).await?;
-    let job = local.serving.serving_job(&scene_id).await?;
+    let job = local
+        .serving
+        .serving_job(&scene_id, &Caller::system())
+        .await?;
     let cameras: Vec<SceneCamera> = serde_json::from_slice(
         &local
             .serving
-            .trained_file(&scene_id, "cameras.json")
+            .trained_file(&scene_id, &Caller::system(), "cameras.json")
             .await?,
     )
     .context("cameras.json")?;
@@ -130,6 +134,7 @@ async fn run_async(args: EvalArgs, config_file: Option<PathBuf>) -> anyhow::Resu
                     .serving
                     .render_bit_masks(
                         &scene_id,
+                        &Caller::system(),
                         view(frame.frame_index),
                         None,
                         batch.to_vec(),
@@ -157,6 +162,7 @@ async fn run_async(args: EvalArgs, config_file: Option<PathBuf>) -> anyhow::Resu
                         &local.database,
                         &local.text_encoder,
                         &scene_id,
+                        &Caller::system(),
                         &query.text,
                         options,
                     )
@@ -183,6 +189,7 @@ async fn run_async(args: EvalArgs, config_file: Option<PathBuf>) -> anyhow::Resu
                     .serving
                     .render_bit_masks(
                         &scene_id,
+                        &Caller::system(),
                         view(frame.frame_index),
                         None,
                         vec![(object.level, object.object_id)],
@@ -199,7 +206,11 @@ async fn run_async(args: EvalArgs, config_file: Option<PathBuf>) -> anyhow::Resu
         }
     }
     let segmentation = summarize(frames);
-    let held_out = match local.serving.trained_file(&scene_id, "metrics.json").await {
+    let held_out = match local
+        .serving
+        .trained_file(&scene_id, &Caller::system(), "metrics.json")
+        .await
+    {
         Ok(bytes) => serde_json::from_slice::<serde_json::Value>(&bytes)
             .ok()
             .and_then(|metrics| metrics.get("held_out").cloned()),

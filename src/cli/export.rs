@@ -10,6 +10,7 @@ use segsplat::api::serving::DOWNLOADABLE_FILES;
 use segsplat::scene::Level;
 
 use super::local::{LocalService, StoreArgs};
+use segsplat::store::Caller;
 
 #[derive(Args)]
 pub struct ExportArgs {
@@ -48,7 +49,11 @@ pub fn run(args: ExportArgs, config_file: Option<PathBuf>) -> anyhow::Result<()>
             .with_context(|| format!("cannot create {}", args.out.display()))?;
         let mut written = Vec::new();
         for file in DOWNLOADABLE_FILES {
-            match local.serving.trained_file(&scene_id, file).await {
+            match local
+                .serving
+                .trained_file(&scene_id, &Caller::system(), file)
+                .await
+            {
                 Ok(bytes) => {
                     let path = args.out.join(file);
                     std::fs::write(&path, bytes)
@@ -63,7 +68,7 @@ pub fn run(args: ExportArgs, config_file: Option<PathBuf>) -> anyhow::Result<()>
         for &(level, object_id) in &args.objects {
             let bytes = local
                 .serving
-                .object_ply(&scene_id, level, object_id)
+                .object_ply(&scene_id, &Caller::system(), level, object_id)
                 .await?;
             let path = args.out.join(format!("{}-{object_id}.ply", level.name()));
             std::fs::write(&path, bytes)

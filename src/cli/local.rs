@@ -11,7 +11,7 @@ use segsplat::api::serving::Serving;
 use segsplat::config::{Config, ConfigOverrides};
 use segsplat::language::SharedTextEncoder;
 use segsplat::models::ModelsStatus;
-use segsplat::store::{Database, LocalBlobStore};
+use segsplat::store::{Caller, Database, LocalBlobStore};
 
 /// Where the service keeps its data.
 #[derive(Args, Debug, Clone)]
@@ -84,12 +84,17 @@ impl LocalService {
 
     /// The scene's id from an id or a unique scene name.
     pub async fn resolve_scene(&self, id_or_name: &str) -> anyhow::Result<String> {
-        if self.database.get_scene(id_or_name).await?.is_some() {
+        if self
+            .database
+            .get_scene(id_or_name, &Caller::system())
+            .await?
+            .is_some()
+        {
             return Ok(id_or_name.to_string());
         }
         let named: Vec<String> = self
             .database
-            .list_scenes()
+            .list_scenes(&Caller::system())
             .await?
             .into_iter()
             .filter(|scene| scene.name == id_or_name)

@@ -11,6 +11,7 @@ use segsplat::pipeline::serving::{MaskView, mask_png};
 use serde::Serialize;
 
 use super::local::{LocalService, StoreArgs};
+use segsplat::store::Caller;
 
 #[derive(Args)]
 pub struct QueryArgs {
@@ -84,6 +85,7 @@ async fn run_async(args: QueryArgs, config_file: Option<PathBuf>) -> anyhow::Res
         &local.database,
         &local.text_encoder,
         &scene_id,
+        &Caller::system(),
         &args.text,
         options,
     )
@@ -95,7 +97,10 @@ async fn run_async(args: QueryArgs, config_file: Option<PathBuf>) -> anyhow::Res
     let moved = if outcome.matches.is_empty() {
         None
     } else {
-        local.serving.objects_at(&scene_id, args.time, None).await?
+        local
+            .serving
+            .objects_at(&scene_id, &Caller::system(), args.time, None)
+            .await?
     };
     let mut objects = Vec::new();
     for (rank, found) in outcome.matches.iter().enumerate() {
@@ -111,6 +116,7 @@ async fn run_async(args: QueryArgs, config_file: Option<PathBuf>) -> anyhow::Res
                 .serving
                 .render_bit_masks(
                     &scene_id,
+                    &Caller::system(),
                     view,
                     args.time,
                     vec![(level, object_id)],

@@ -11,10 +11,10 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, SystemTime};
 
-use crate::store::Database;
 use crate::store::blob::TEMP_MARKER;
 use crate::store::jobs::JobState;
 use crate::store::process_tag::tagged_by_a_stopped_local_process;
+use crate::store::{Caller, Database};
 
 /// Where to look and how old an unattributable leftover must be.
 #[derive(Debug, Clone)]
@@ -36,7 +36,7 @@ pub async fn sweep_leftovers(places: &SweepPlaces, database: &Database) -> Vec<P
         }
     };
     for (path, job_id, attempt) in job_dirs {
-        let live = match database.get_job(&job_id).await {
+        let live = match database.get_job(&job_id, &Caller::system()).await {
             Ok(Some(job)) => job.state == JobState::Running && job.attempts == attempt,
             Ok(None) => false,
             // Unknown: leave it for the next sweep.

@@ -10,6 +10,7 @@ use image::imageops::FilterType;
 use image::{DynamicImage, ImageReader, Rgb32FImage};
 
 use super::distortion::{Lens, undistort_rgb};
+use super::jpeg_scaled::{ScaledJpeg, decode_scaled};
 use super::{Frame, Scene, SceneError};
 
 /// Image size after scaling by `factor`, rounded, at least one pixel per side.
@@ -88,28 +89,91 @@ pub fn load_frame_rgb(
                 scene.frames.len()
             ),
         })?;
-    let decoded = decode_image(&scene.root, &frame.image_path)?;
-    let (width, height) = (decoded.width(), decoded.height());
-    if (width, height) != (frame.intrinsics.width, frame.intrinsics.height) {
-        return Err(size_mismatch(
-            &frame.image_path,
-            (width, height),
-            (frame.intrinsics.width, frame.intrinsics.height),
-        ));
-    }
-    let rgb = undistorted(frame, composite_on_background(decoded, scene.background))?;
+    let (width, height) = (frame.intrinsics.width, frame.intrinsics.height);
     let factor = max_side.map_or(1.0, |max_side| scale_for_max_side(width, height, max_side));
-    if factor >= 1.0 {
+    let target = scaled_size(width, height, factor);
+    // A pinhole frame used below full size: JPEGs decode at a DCT scale near that size. Lens
+    // distortion is undone at full resolution, so distorted frames decode in full.
+    let rgb = match decode_reduced(scene, frame, target, factor)? {
+        Some(reduced) => reduced,
+        None => {
+            let decoded = decode_image(&scene.root, &frame.image_path)?;
+            let actual = (decoded.width(), decoded.height());
+            if actual != (width, height) {
+                return Err(size_mismatch(&frame.image_path, actual, (width, height)));
+            }
+            undistorted(frame, composite_on_background(decoded, scene.background))?
+        }
+    };
+    if (rgb.width(), rgb.height()) == target {
         return Ok(rgb);
     }
-    let (scaled_width, scaled_height) = scaled_size(width, height, factor);
-    let mut resized =
-        image::imageops::resize(&rgb, scaled_width, scaled_height, FilterType::Lanczos3);
+    let mut resized = image::imageops::resize(&rgb, target.0, target.1, FilterType::Lanczos3);
     // Lanczos rings slightly past the input range at hard edges.
     for value in resized.iter_mut() {
         *value = value.clamp(0.0, 1.0);
     }
     Ok(resized)
+}
+
+/// The frame's image decoded at a reduced size covering `target`, when it is a JPEG of a
+/// pinhole camera used below full size; `None` to decode in full.
+fn decode_reduced(
+    scene: &Scene,
+    frame: &Frame,
+    target: (u32, u32),
+    factor: f64,
+) -> Result<Option<Rgb32FImage>, SceneError> {
+    if factor >= 1.0 || !frame_lens(frame)?.is_pinhole() || !is_jpeg(&scene.root, &frame.image_path)
+    {
+        return Ok(None);
+    }
+    let Some(scaled) = jpeg_at_scale(&scene.root, &frame.image_path, target) else {
+        return Ok(None);
+    };
+    let expected = (frame.intrinsics.width, frame.intrinsics.height);
+    if scaled.full_size != expected {
+        return Err(size_mismatch(&frame.image_path, scaled.full_size, expected));
+    }
+    Ok(Some(composite_on_background(
+        scaled.image,
+        scene.background,
+    )))
+}
+
+/// The JPEG at `relative_path` decoded at the DCT scale nearest above `target`; `None` when it
+/// cannot be (not a JPEG, no smaller scale, a format or error of `jpeg-decoder`): callers then
+/// decode in full with the `image` crate, whose verdict and messages are the ones users see.
+fn jpeg_at_scale(root: &Path, relative_path: &Path, target: (u32, u32)) -> Option<ScaledJpeg> {
+    if !is_jpeg(root, relative_path) {
+        return None;
+    }
+    let reader = std::fs::File::open(root.join(relative_path)).ok()?;
+    decode_scaled(reader, target)
+        .inspect_err(|message| {
+            tracing::debug!(file = %relative_path.display(), %message, "scaled JPEG decode failed")
+        })
+        .ok()
+        .flatten()
+}
+
+/// Decodes the image at `relative_path` to prove it decodes, and returns its size: JPEGs at an
+/// eighth of their size (every coefficient is still entropy-decoded, so damage shows), other
+/// formats in full.
+pub(crate) fn decoded_size(root: &Path, relative_path: &Path) -> Result<(u32, u32), SceneError> {
+    if let Some(scaled) = jpeg_at_scale(root, relative_path, (1, 1)) {
+        return Ok(scaled.full_size);
+    }
+    let image = decode_image(root, relative_path)?;
+    Ok((image.width(), image.height()))
+}
+
+/// Whether the file's first bytes are a JPEG's start-of-image marker.
+fn is_jpeg(root: &Path, relative_path: &Path) -> bool {
+    let mut start = [0u8; 3];
+    std::fs::File::open(root.join(relative_path))
+        .and_then(|mut file| io::Read::read_exact(&mut file, &mut start))
+        .is_ok_and(|()| start == [0xFF, 0xD8, 0xFF])
 }
 
 /// The lens of `frame`'s camera; errors name the frame's image.

@@ -14,7 +14,10 @@ pub mod colmap;
 mod dataset_path;
 mod dataset_root;
 pub mod distortion;
+#[doc(hidden)]
+pub mod fuzz_entry;
 mod images;
+mod jpeg_scaled;
 pub mod masks;
 pub mod nerfies;
 pub mod nerfstudio;

@@ -40,6 +40,7 @@ pub fn read_float_matrix(
             source,
         },
     })?;
+    check_header(&bytes).map_err(parse_error)?;
     let npy = npyz::NpyFile::new(&bytes[..])
         .map_err(|error| parse_error(format!("not a .npy array: {error}")))?;
     let shape = npy.shape().to_vec();
@@ -78,6 +79,73 @@ pub fn read_float_matrix(
         columns,
         values,
     })
+}
+
+/// The most brackets a header may nest: `{'shape': (2, 3)}` needs 2. Deeper headers describe
+/// structured dtypes, which are refused anyway.
+const MAX_HEADER_NESTING: usize = 2;
+
+/// Checks what `npyz` would otherwise trust (both found by fuzzing): a header length past the
+/// end of the file, for which it allocates a buffer first (up to 4 GiB from the u32 of a
+/// version 2 or 3 header), and deeply nested brackets, on which its Python-literal parser
+/// backtracks for minutes.
+fn check_header(bytes: &[u8]) -> Result<(), String> {
+    const MAGIC: &[u8] = b"\x93NUMPY";
+    let (Some(magic), Some(&major)) = (bytes.get(..MAGIC.len()), bytes.get(6)) else {
+        return Err("not a .npy array: too short".to_string());
+    };
+    if magic != MAGIC {
+        return Err("not a .npy array: no \\x93NUMPY signature".to_string());
+    }
+    let (header_length, preamble) = match major {
+        1 => (
+            bytes
+                .get(8..10)
+                .map(|b| u64::from(u16::from_le_bytes([b[0], b[1]]))),
+            10,
+        ),
+        _ => (
+            bytes
+                .get(8..12)
+                .map(|b| u64::from(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))),
+            12,
+        ),
+    };
+    let Some(header_length) = header_length else {
+        return Err("not a .npy array: too short".to_string());
+    };
+    if preamble + header_length > bytes.len() as u64 {
+        return Err(format!(
+            "header says it is {header_length} bytes long but the file has {} bytes",
+            bytes.len()
+        ));
+    }
+    let header = &bytes[preamble as usize..(preamble + header_length) as usize];
+    if nesting_depth(header) > MAX_HEADER_NESTING {
+        return Err(format!(
+            "header nests brackets more than {MAX_HEADER_NESTING} deep (only plain float32 or \
+             float64 arrays are read)"
+        ));
+    }
+    Ok(())
+}
+
+/// The deepest bracket nesting in `header`, quotes ignored (a bracket in a string only makes
+/// a valid header look deeper, and valid float headers have no such strings).
+fn nesting_depth(header: &[u8]) -> usize {
+    let mut depth = 0usize;
+    let mut deepest = 0;
+    for byte in header {
+        match byte {
+            b'{' | b'[' | b'(' => {
+                depth += 1;
+                deepest = deepest.max(depth);
+            }
+            b'}' | b']' | b')' => depth = depth.saturating_sub(1),
+            _ => {}
+        }
+    }
+    deepest
 }
 
 /// The array's values widened to f64; only float32 and float64 arrays are accepted.
@@ -159,5 +227,32 @@ mod tests {
         std::fs::write(dir.path().join("m.npy"), integers).unwrap();
         let error = read_float_matrix(dir.path(), "m.npy", 3).unwrap_err();
         assert!(error.to_string().contains("float32 or float64"), "{error}");
+    }
+
+    /// Fuzzing found a version 3 header claiming 1.6 GB, which npyz allocated before reading.
+    #[test]
+    fn header_length_past_the_end_is_refused_before_allocating() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut bytes = b"\x93NUMPY\x03\x00".to_vec();
+        bytes.extend(0x6464_7b27_u32.to_le_bytes());
+        bytes.extend(b"{'descr': '<f8'}");
+        std::fs::write(dir.path().join("m.npy"), bytes).unwrap();
+        let error = read_float_matrix(dir.path(), "m.npy", 3).unwrap_err();
+        assert!(error.to_string().contains("header says"), "{error}");
+    }
+
+    /// Fuzzing found 60 nested braces in a header keep npyz's literal parser busy for minutes.
+    #[test]
+    fn deeply_nested_headers_are_refused_before_parsing() {
+        let dir = tempfile::tempdir().unwrap();
+        let header = format!("{{'descr': {}'<f8'}}", "{".repeat(60));
+        let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+        bytes.extend((header.len() as u16).to_le_bytes());
+        bytes.extend(header.as_bytes());
+        std::fs::write(dir.path().join("m.npy"), bytes).unwrap();
+        let started = std::time::Instant::now();
+        let error = read_float_matrix(dir.path(), "m.npy", 3).unwrap_err();
+        assert!(error.to_string().contains("nests"), "{error}");
+        assert!(started.elapsed() < std::time::Duration::from_secs(1));
     }
 }

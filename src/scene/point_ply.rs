@@ -160,7 +160,9 @@ fn parse_header(bytes: &[u8]) -> Result<Header, String> {
     while body_offset < bytes.len() && bytes[body_offset] != b'\n' {
         body_offset += 1;
     }
-    body_offset += 1;
+    // Past the newline; a file ending right after `end_header` has an empty body (found by
+    // fuzzing: the offset ran one past the end).
+    body_offset = (body_offset + 1).min(bytes.len());
     let text = std::str::from_utf8(&bytes[..end]).map_err(|_| "header is not text")?;
     let mut lines = text.lines().map(str::trim);
     if lines.next() != Some("ply") {
@@ -325,5 +327,16 @@ mod tests {
         let error = read_point_ply(dir.path(), Path::new("p.ply")).unwrap_err();
         assert!(error.to_string().contains("p.ply"), "{error}");
         assert!(error.to_string().contains("ends early"), "{error}");
+    }
+
+    /// Fuzzing found a file ending right after `end_header` (no newline) panicked slicing the
+    /// body one byte past the end.
+    #[test]
+    fn header_at_the_very_end_is_an_error_not_a_panic() {
+        let dir = tempfile::tempdir().unwrap();
+        let ply = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header";
+        fs::write(dir.path().join("p.ply"), ply).unwrap();
+        let error = read_point_ply(dir.path(), Path::new("p.ply")).unwrap_err();
+        assert!(error.to_string().contains("ends after 0 of 1"), "{error}");
     }
 }

@@ -3,7 +3,7 @@
 
 use rayon::prelude::*;
 
-use super::images::{decode_image, size_mismatch};
+use super::images::{decoded_size, size_mismatch};
 use super::masks::decode_mask;
 use super::pixel_limits::{PixelLimits, check_pixel_limits};
 use super::{Scene, SceneError, SceneSummary};
@@ -34,15 +34,10 @@ pub fn validate_scene_within(
         .enumerate()
         .map(|(frame_index, frame)| {
             let expected = (frame.intrinsics.width, frame.intrinsics.height);
-            let image = decode_image(&scene.root, &frame.image_path)?;
-            if (image.width(), image.height()) != expected {
-                return Err(size_mismatch(
-                    &frame.image_path,
-                    (image.width(), image.height()),
-                    expected,
-                ));
+            let actual = decoded_size(&scene.root, &frame.image_path)?;
+            if actual != expected {
+                return Err(size_mismatch(&frame.image_path, actual, expected));
             }
-            drop(image);
             let mask_paths = scene.masks.iter().flat_map(|layout| {
                 layout
                     .paths

@@ -25,6 +25,11 @@ const MIGRATIONS: &[(i64, &str, &str)] = &[
         "lease expiries",
         include_str!("../../migrations/0002_lease_expiries.sql"),
     ),
+    (
+        3,
+        "tenants",
+        include_str!("../../migrations/0003_tenants.sql"),
+    ),
 ];
 
 /// How long a writer waits for another writer's lock before failing.

@@ -13,6 +13,7 @@ use serde::{Deserialize, Serialize};
 use sqlx::sqlite::SqliteRow;
 use sqlx::{Row, Sqlite, Transaction};
 
+use super::tenancy::{Caller, visible};
 use super::{Database, StoreError, now_ms};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -85,6 +86,8 @@ pub struct JobRecord {
     pub updated_at_ms: i64,
     pub started_at_ms: Option<i64>,
     pub finished_at_ms: Option<i64>,
+    /// Its scene's tenant ([`super::tenancy`]).
+    pub tenant: String,
 }
 
 /// How a worker's attempt at a job ended.
@@ -138,7 +141,7 @@ pub struct ExpiredLease {
 
 pub(super) const COLUMNS: &str = "id, scene_id, kind, state, config_json, attempts, max_attempts, \
     lease_expiries, max_lease_expiries, checkpointed_this_attempt, lease_owner, lease_expires_at_ms, cancel_requested, error, progress_json, created_at_ms, \
-    updated_at_ms, started_at_ms, finished_at_ms";
+    updated_at_ms, started_at_ms, finished_at_ms, tenant";
 
 fn corrupt(job_id: &str, what: &str, message: impl ToString) -> StoreError {
     StoreError::Corrupt {
@@ -183,6 +186,7 @@ pub(super) fn job_from_row(row: &SqliteRow) -> Result<JobRecord, StoreError> {
         updated_at_ms: row.try_get("updated_at_ms")?,
         started_at_ms: row.try_get("started_at_ms")?,
         finished_at_ms: row.try_get("finished_at_ms")?,
+        tenant: row.try_get("tenant")?,
         id,
     })
 }
@@ -221,22 +225,25 @@ pub(super) async fn insert_state_event(
 }
 
 impl Database {
-    /// Queues a job for an existing scene; `None` when the scene does not exist.
+    /// Queues a job for an existing scene `caller` sees; `None` when there is no such scene.
+    /// The job belongs to the scene's tenant (also when an admin queues it).
     pub async fn insert_job(
         &self,
         scene_id: &str,
         kind: &str,
         config: &serde_json::Value,
         bounds: AttemptBounds,
+        caller: &Caller,
     ) -> Result<Option<JobRecord>, StoreError> {
         let id = uuid::Uuid::now_v7().to_string();
         let now = now_ms();
         let mut transaction = self.pool().begin().await?;
         let row = sqlx::query(sqlx::AssertSqlSafe(format!(
             "INSERT INTO jobs (id, scene_id, kind, state, config_json, attempts, max_attempts, \
-             max_lease_expiries, cancel_requested, created_at_ms, updated_at_ms) \
-             SELECT ?, ?, ?, 'queued', ?, 0, ?, ?, FALSE, ?, ? \
-             WHERE EXISTS (SELECT 1 FROM scenes WHERE id = ?) RETURNING {COLUMNS}"
+             max_lease_expiries, cancel_requested, created_at_ms, updated_at_ms, tenant) \
+             SELECT ?, ?, ?, 'queued', ?, 0, ?, ?, FALSE, ?, ?, tenant FROM scenes \
+             WHERE id = ? AND {} RETURNING {COLUMNS}",
+            visible("tenant")
         )))
         .bind(&id)
         .bind(scene_id)
@@ -247,6 +254,8 @@ impl Database {
         .bind(now)
         .bind(now)
         .bind(scene_id)
+        .bind(caller.admin)
+        .bind(&caller.tenant)
         .fetch_optional(&mut *transaction)
         .await?;
         let Some(row) = row else {
@@ -258,34 +267,41 @@ impl Database {
         Ok(Some(job))
     }
 
-    pub async fn get_job(&self, id: &str) -> Result<Option<JobRecord>, StoreError> {
+    /// The job, when it exists and `caller` sees its tenant.
+    pub async fn get_job(
+        &self,
+        id: &str,
+        caller: &Caller,
+    ) -> Result<Option<JobRecord>, StoreError> {
         let row = sqlx::query(sqlx::AssertSqlSafe(format!(
-            "SELECT {COLUMNS} FROM jobs WHERE id = ?"
+            "SELECT {COLUMNS} FROM jobs WHERE id = ? AND {}",
+            visible("tenant")
         )))
         .bind(id)
+        .bind(caller.admin)
+        .bind(&caller.tenant)
         .fetch_optional(self.pool())
         .await?;
         row.as_ref().map(job_from_row).transpose()
     }
 
-    pub async fn list_jobs(&self, state: Option<JobState>) -> Result<Vec<JobRecord>, StoreError> {
-        let rows = match state {
-            Some(state) => {
-                sqlx::query(sqlx::AssertSqlSafe(format!(
-                    "SELECT {COLUMNS} FROM jobs WHERE state = ? ORDER BY created_at_ms, id"
-                )))
-                .bind(state.as_str())
-                .fetch_all(self.pool())
-                .await?
-            }
-            None => {
-                sqlx::query(sqlx::AssertSqlSafe(format!(
-                    "SELECT {COLUMNS} FROM jobs ORDER BY created_at_ms, id"
-                )))
-                .fetch_all(self.pool())
-                .await?
-            }
-        };
+    /// The jobs `caller` sees (in `state`, when given), oldest first.
+    pub async fn list_jobs(
+        &self,
+        state: Option<JobState>,
+        caller: &Caller,
+    ) -> Result<Vec<JobRecord>, StoreError> {
+        let rows = sqlx::query(sqlx::AssertSqlSafe(format!(
+            "SELECT {COLUMNS} FROM jobs WHERE (? IS NULL OR state = ?) AND {} \
+             ORDER BY created_at_ms, id",
+            visible("tenant")
+        )))
+        .bind(state.map(JobState::as_str))
+        .bind(state.map(JobState::as_str))
+        .bind(caller.admin)
+        .bind(&caller.tenant)
+        .fetch_all(self.pool())
+        .await?;
         rows.iter().map(job_from_row).collect()
     }
 
@@ -472,8 +488,17 @@ impl Database {
         Ok(updated.rows_affected() > 0)
     }
 
-    /// Cancels a queued job at once, or flags a running one for its worker.
-    pub async fn request_cancel(&self, job_id: &str) -> Result<CancelOutcome, StoreError> {
+    /// Cancels a queued job at once, or flags a running one for its worker. Another tenant's
+    /// job is [`CancelOutcome::NotFound`] (a job never changes tenant, so checking first is
+    /// enough).
+    pub async fn request_cancel(
+        &self,
+        job_id: &str,
+        caller: &Caller,
+    ) -> Result<CancelOutcome, StoreError> {
+        if self.get_job(job_id, caller).await?.is_none() {
+            return Ok(CancelOutcome::NotFound);
+        }
         let now = now_ms();
         let mut transaction = self.pool().begin().await?;
         let row = sqlx::query(sqlx::AssertSqlSafe(format!(
@@ -512,7 +537,7 @@ impl Database {
             return Ok(CancelOutcome::Requested(job));
         }
         transaction.commit().await?;
-        Ok(match self.get_job(job_id).await? {
+        Ok(match self.get_job(job_id, caller).await? {
             Some(job) => CancelOutcome::AlreadyFinished(job),
             None => CancelOutcome::NotFound,
         })

@@ -11,10 +11,12 @@ mod lease_reaping;
 pub mod objects;
 pub mod process_tag;
 pub mod scenes;
+pub mod tenancy;
 
 pub use blob::{BlobError, BlobStore, LocalBlobStore};
 pub use database::Database;
 pub use error::StoreError;
+pub use tenancy::{Caller, DEFAULT_TENANT};
 
 /// Milliseconds since the Unix epoch, the one timestamp representation in the database.
 pub fn now_ms() -> i64 {

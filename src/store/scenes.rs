@@ -4,6 +4,7 @@ use serde::Serialize;
 use sqlx::Row;
 use sqlx::sqlite::SqliteRow;
 
+use super::tenancy::{Caller, visible};
 use super::{Database, StoreError};
 use crate::scene::SceneSummary;
 
@@ -15,6 +16,8 @@ pub struct SceneRecord {
     /// Blob-store prefix holding the scene's files (`{prefix}/files/<relative path>`).
     pub blob_prefix: String,
     pub created_at_ms: i64,
+    /// The tenant whose token uploaded it ([`super::tenancy`]).
+    pub tenant: String,
 }
 
 /// Why a scene could not be deleted.
@@ -34,7 +37,7 @@ impl From<sqlx::Error> for DeleteSceneError {
     }
 }
 
-const COLUMNS: &str = "id, name, summary_json, blob_prefix, created_at_ms";
+const COLUMNS: &str = "id, name, summary_json, blob_prefix, created_at_ms, tenant";
 
 fn scene_from_row(row: &SqliteRow) -> Result<SceneRecord, StoreError> {
     let summary_json: String = row.try_get("summary_json")?;
@@ -49,6 +52,7 @@ fn scene_from_row(row: &SqliteRow) -> Result<SceneRecord, StoreError> {
         summary,
         blob_prefix: row.try_get("blob_prefix")?,
         created_at_ms: row.try_get("created_at_ms")?,
+        tenant: row.try_get("tenant")?,
     })
 }
 
@@ -65,7 +69,7 @@ impl Database {
             .unwrap_or_default();
         sqlx::query(
             "INSERT INTO scenes (id, name, format, frame_count, sparse_point_count, summary_json, \
-             blob_prefix, created_at_ms) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+             blob_prefix, created_at_ms, tenant) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
         )
         .bind(&scene.id)
         .bind(&scene.name)
@@ -75,25 +79,38 @@ impl Database {
         .bind(summary_json)
         .bind(&scene.blob_prefix)
         .bind(scene.created_at_ms)
+        .bind(&scene.tenant)
         .execute(self.pool())
         .await?;
         Ok(())
     }
 
-    pub async fn get_scene(&self, id: &str) -> Result<Option<SceneRecord>, StoreError> {
+    /// The scene, when it exists and `caller` sees its tenant.
+    pub async fn get_scene(
+        &self,
+        id: &str,
+        caller: &Caller,
+    ) -> Result<Option<SceneRecord>, StoreError> {
         let row = sqlx::query(sqlx::AssertSqlSafe(format!(
-            "SELECT {COLUMNS} FROM scenes WHERE id = ?"
+            "SELECT {COLUMNS} FROM scenes WHERE id = ? AND {}",
+            visible("tenant")
         )))
         .bind(id)
+        .bind(caller.admin)
+        .bind(&caller.tenant)
         .fetch_optional(self.pool())
         .await?;
         row.as_ref().map(scene_from_row).transpose()
     }
 
-    pub async fn list_scenes(&self) -> Result<Vec<SceneRecord>, StoreError> {
+    /// The scenes `caller` sees, oldest first.
+    pub async fn list_scenes(&self, caller: &Caller) -> Result<Vec<SceneRecord>, StoreError> {
         let rows = sqlx::query(sqlx::AssertSqlSafe(format!(
-            "SELECT {COLUMNS} FROM scenes ORDER BY created_at_ms, id"
+            "SELECT {COLUMNS} FROM scenes WHERE {} ORDER BY created_at_ms, id",
+            visible("tenant")
         )))
+        .bind(caller.admin)
+        .bind(&caller.tenant)
         .fetch_all(self.pool())
         .await?;
         rows.iter().map(scene_from_row).collect()
@@ -108,16 +125,20 @@ impl Database {
 
     /// Deletes the scene and everything recorded about it, unless a job of it is still queued
     /// or running. Returns the removed record and the ids of its removed jobs, so the caller can
-    /// delete their blobs.
+    /// delete their blobs. Another tenant's scene is [`DeleteSceneError::NotFound`].
     pub async fn delete_scene(
         &self,
         id: &str,
+        caller: &Caller,
     ) -> Result<(SceneRecord, Vec<String>), DeleteSceneError> {
         let mut transaction = self.pool().begin().await?;
         let row = sqlx::query(sqlx::AssertSqlSafe(format!(
-            "SELECT {COLUMNS} FROM scenes WHERE id = ?"
+            "SELECT {COLUMNS} FROM scenes WHERE id = ? AND {}",
+            visible("tenant")
         )))
         .bind(id)
+        .bind(caller.admin)
+        .bind(&caller.tenant)
         .fetch_optional(&mut *transaction)
         .await?;
         let Some(row) = row else {

@@ -1,0 +1,4 @@
+#![no_main]
+//! Fuzzes `scene::fuzz_entry::colmap_text` (see that module for what the input holds).
+
+libfuzzer_sys::fuzz_target!(|data: &[u8]| segsplat_fuzz::scene::fuzz_entry::colmap_text(data));
