@@ -23,3 +23,11 @@ if command -v python3 >/dev/null 2>&1; then
       || echo "warning: could not install onnxruntime; model features will report it missing" >&2
   fi
 fi
+
+# cargo-fuzz for the short fuzz runs at the end of scripts/test.sh (docs/fuzzing.md), when a
+# nightly toolchain is there to run it; without either, fuzz.sh says so and the stable corpus
+# replay still runs.
+if cargo +nightly --version >/dev/null 2>&1 && ! cargo fuzz --version >/dev/null 2>&1; then
+  cargo install --quiet --locked cargo-fuzz@0.13.2 \
+    || echo "warning: could not install cargo-fuzz; the fuzz runs will be skipped" >&2
+fi

@@ -25,4 +25,4 @@ cargo test --locked --lib --bins --tests
 # Every fuzz target for a short bounded time on its committed corpus (docs/fuzzing.md). Needs
 # nightly Rust and cargo-fuzz; without them fuzz.sh says so and skips, and the stable replay of
 # the corpus in tests/fuzz_corpus.rs (above) is what guards the parsers.
-bash scripts/fuzz.sh "${SEGSPLAT_FUZZ_SECONDS:-20}"
+bash scripts/fuzz.sh "${SEGSPLAT_FUZZ_SECONDS:-10}"

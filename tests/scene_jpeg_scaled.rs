@@ -11,8 +11,11 @@ use segsplat::scene::{LoadOptions, load_frame_rgb, load_scene, validate_scene};
 
 struct LargestAllocation;
 
+// The allocator interface is unsafe by nature; this forwards to the system allocator unchanged.
+
 static LARGEST: AtomicUsize = AtomicUsize::new(0);
 
+#[allow(unsafe_code)]
 unsafe impl GlobalAlloc for LargestAllocation {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         LARGEST.fetch_max(layout.size(), Ordering::Relaxed);

@@ -404,10 +404,6 @@ impl RunningService {
         self.state.serving.cache().stats()
     }
 
-    pub fn worker_slots(&self) -> usize {
-        self.pool.as_ref().map_or(0, WorkerPool::slot_count)
-    }
-
     /// Runs until SIGINT or SIGTERM, then shuts down gracefully.
     pub async fn run_until_signal(self) {
         wait_for_signal().await;

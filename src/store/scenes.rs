@@ -116,13 +116,6 @@ impl Database {
         rows.iter().map(scene_from_row).collect()
     }
 
-    /// All scene ids, for sweeping blobs that lost their row in a crash.
-    pub async fn scene_ids(&self) -> Result<Vec<String>, StoreError> {
-        Ok(sqlx::query_scalar("SELECT id FROM scenes")
-            .fetch_all(self.pool())
-            .await?)
-    }
-
     /// Deletes the scene and everything recorded about it, unless a job of it is still queued
     /// or running. Returns the removed record and the ids of its removed jobs, so the caller can
     /// delete their blobs. Another tenant's scene is [`DeleteSceneError::NotFound`].
