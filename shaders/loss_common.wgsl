@@ -6,15 +6,14 @@
 // with `SSIM_C1`, `SSIM_C2`, `L1_WEIGHT` and `DSSIM_WEIGHT`.
 
 const WINDOW_RADIUS: i32 = 5;
-// Each workgroup covers a LOSS_TILE x LOSS_TILE square of pixels.
-const LOSS_TILE: u32 = 16u;
+// Each workgroup covers a LOSS_TILE x LOSS_TILE square of pixels (LOSS_TILE and LOSS_RUN are
+// prepended by the host, loss.rs, which sizes the dispatches and partial sums with them).
 // Each invocation filters a run of LOSS_RUN consecutive pixels along its pass's direction, so
 // each input pixel it reads serves up to LOSS_RUN outputs: LOSS_RUN + 10 reads instead of
 // 11 LOSS_RUN. A CPU adapter reads memory lane by lane, so the reads dominate (lavapipe,
 // 512x339: the four passes took ~52 ms a step one pixel per invocation).
-const LOSS_RUN: u32 = 4u;
 // Inputs a run reads: its pixels and the window's reach on both sides.
-const RUN_INPUTS: i32 = 14;
+const RUN_INPUTS: i32 = i32(LOSS_RUN) + 2 * WINDOW_RADIUS;
 
 struct LossParams {
     width: u32,

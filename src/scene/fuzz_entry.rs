@@ -75,31 +75,27 @@ fn dataset(files: &[(&str, &[u8])]) -> Option<tempfile::TempDir> {
     Some(dir)
 }
 
-fn load_colmap_model(files: &[(&str, &[u8])]) {
-    let Some(dir) = dataset(files) else { return };
+/// A COLMAP model of `cameras`, `images` and `points3D` files with `extension` (see
+/// [`split_parts`]), loaded as an upload is.
+fn load_colmap_model(data: &[u8], extension: &str) {
+    let parts = split_parts(data, 3);
+    let names =
+        ["cameras", "images", "points3D"].map(|name| format!("sparse/0/{name}.{extension}"));
+    let files: Vec<(&str, &[u8])> = names.iter().map(String::as_str).zip(parts).collect();
+    let Some(dir) = dataset(&files) else { return };
     if let Some(location) = super::colmap::find_model(dir.path()) {
         let _ = super::colmap::load_colmap(dir.path(), &location, &LoadOptions::default());
     }
 }
 
-/// `cameras.bin`, `images.bin`, `points3D.bin` (see [`split_parts`]).
+/// `cameras.bin`, `images.bin`, `points3D.bin`.
 pub fn colmap_binary(data: &[u8]) {
-    let parts = split_parts(data, 3);
-    load_colmap_model(&[
-        ("sparse/0/cameras.bin", parts[0]),
-        ("sparse/0/images.bin", parts[1]),
-        ("sparse/0/points3D.bin", parts[2]),
-    ]);
+    load_colmap_model(data, "bin");
 }
 
-/// `cameras.txt`, `images.txt`, `points3D.txt` (see [`split_parts`]).
+/// `cameras.txt`, `images.txt`, `points3D.txt`.
 pub fn colmap_text(data: &[u8]) {
-    let parts = split_parts(data, 3);
-    load_colmap_model(&[
-        ("sparse/0/cameras.txt", parts[0]),
-        ("sparse/0/images.txt", parts[1]),
-        ("sparse/0/points3D.txt", parts[2]),
-    ]);
+    load_colmap_model(data, "txt");
 }
 
 /// One uploaded sparse point cloud PLY (nerfstudio `ply_file_path`, Blender `points3d.ply`).

@@ -20,6 +20,7 @@
 
 use wgpu::util::DeviceExt;
 
+use crate::gpu::kernel::wgsl_u32_constants;
 use crate::gpu::validation::validated;
 use crate::gpu::{GpuContext, GpuError, Kernel};
 
@@ -34,9 +35,9 @@ pub const SSIM_C2: f32 = 0.03 * 0.03;
 pub const SSIM_WINDOW_SIZE: usize = 11;
 pub const SSIM_WINDOW_SIGMA: f64 = 1.5;
 
-/// Pixels per side of the per-pixel kernels' workgroups (`LOSS_TILE` in `loss_common.wgsl`).
+/// Pixels per side of the per-pixel kernels' workgroups (prepended as `LOSS_TILE`).
 const LOSS_TILE: u32 = 16;
-/// Pixels each per-pixel invocation filters (`LOSS_RUN` in `loss_common.wgsl`).
+/// Pixels each per-pixel invocation filters (prepended as `LOSS_RUN`).
 const LOSS_RUN: u32 = 4;
 /// Invocations of a per-pixel workgroup, each writing one loss partial sum.
 const PER_PIXEL_INVOCATIONS: u32 = LOSS_TILE * LOSS_TILE / LOSS_RUN;
@@ -95,11 +96,12 @@ fn loss_constants_wgsl() -> String {
     format!(
         "const SSIM_WINDOW = array<f32, {size}>({taps});\n\
          const SSIM_C1: f32 = {c1:?};\nconst SSIM_C2: f32 = {c2:?};\n\
-         const L1_WEIGHT: f32 = {l1:?};\nconst DSSIM_WEIGHT: f32 = {dssim:?};\n",
+         const L1_WEIGHT: f32 = {l1:?};\nconst DSSIM_WEIGHT: f32 = {dssim:?};\n{tiles}",
         size = SSIM_WINDOW_SIZE,
         taps = taps.join(", "),
         c1 = SSIM_C1,
         c2 = SSIM_C2,
+        tiles = wgsl_u32_constants(&[("LOSS_TILE", LOSS_TILE), ("LOSS_RUN", LOSS_RUN)]),
         l1 = L1_WEIGHT,
         dssim = DSSIM_WEIGHT,
     )
