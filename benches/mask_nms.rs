@@ -15,7 +15,7 @@
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use segsplat::segment::{AutomaticConfig, BitMask, ScoredMask, postprocess_level};
+use segsplat_vision::segment::{AutomaticConfig, BitMask, ScoredMask, postprocess_level};
 
 const WIDTH: u32 = 1000;
 const HEIGHT: u32 = 660;

@@ -14,14 +14,17 @@ else
     echo "skipping cargo fmt --check: rustfmt is not installed"
 fi
 if cargo clippy --version >/dev/null 2>&1; then
-    cargo clippy --locked --all-targets -- -D warnings
+    cargo clippy --locked --workspace --all-targets -- -D warnings
 else
     echo "skipping cargo clippy: clippy is not installed"
 fi
+# The crates' dependency graph is the architecture: nothing reaches up a layer, and the engine
+# side never pulls in tokio, axum, tonic or sqlx (docs/architecture.md).
+bash scripts/check_layers.sh
 # Benches first (one quick pass each, to prove they still run), then every test target, so the
 # run ends on the test summary.
-cargo test --locked --benches
-cargo test --locked --lib --bins --tests
+cargo test --locked --workspace --benches
+cargo test --locked --workspace --lib --bins --tests
 # Every fuzz target for a short bounded time on its committed corpus (docs/fuzzing.md). Needs
 # nightly Rust and cargo-fuzz; without them fuzz.sh says so and skips, and the stable replay of
 # the corpus in tests/fuzz_corpus.rs (above) is what guards the parsers.

@@ -8,8 +8,8 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use clap::{Args, Parser, Subcommand};
-use segsplat::api::{ServiceBuilder, ServiceMode};
-use segsplat::config::{Config, ConfigOverrides, LogFormat};
+use segsplat_api::{ServiceBuilder, ServiceMode};
+use segsplat_service::config::{Config, ConfigOverrides, LogFormat};
 
 #[derive(Parser)]
 #[command(
@@ -146,9 +146,11 @@ fn run_service(
     let runtime = tokio::runtime::Runtime::new().context("cannot start the async runtime")?;
     runtime.block_on(async move {
         let service = ServiceBuilder::new(config)
-            .handler(std::sync::Arc::new(segsplat::pipeline::ReconstructHandler))
             .handler(std::sync::Arc::new(
-                segsplat::pipeline::SegmentThenSplatHandler,
+                segsplat_service::job_kinds::ReconstructHandler,
+            ))
+            .handler(std::sync::Arc::new(
+                segsplat_service::job_kinds::SegmentThenSplatHandler,
             ))
             .mode(mode)
             .start()
@@ -183,9 +185,9 @@ fn init_logging(config: &Config) -> anyhow::Result<()> {
 }
 
 fn write_synthetic_scene(args: &SyntheticSceneArgs) -> anyhow::Result<()> {
-    use segsplat::scene::Level;
-    use segsplat::scene::synthetic::{SyntheticSpec, write_colmap};
-    use segsplat::scene::synthetic_dynamic::write_dynamic_blender;
+    use segsplat_scene::Level;
+    use segsplat_scene::synthetic::{SyntheticSpec, write_colmap};
+    use segsplat_scene::synthetic_dynamic::write_dynamic_blender;
     let spec = SyntheticSpec {
         frame_count: args.frames,
         width: args.width,
@@ -196,7 +198,7 @@ fn write_synthetic_scene(args: &SyntheticSceneArgs) -> anyhow::Result<()> {
     let (written, kind) = if args.dynamic {
         (write_dynamic_blender(&args.dir, &spec), "dynamic D-NeRF")
     } else {
-        let encoding = segsplat::scene::colmap::ColmapEncoding::Binary;
+        let encoding = segsplat_scene::colmap::ColmapEncoding::Binary;
         (write_colmap(&args.dir, &spec, encoding), "COLMAP")
     };
     written.with_context(|| format!("cannot write {}", args.dir.display()))?;
@@ -205,7 +207,7 @@ fn write_synthetic_scene(args: &SyntheticSceneArgs) -> anyhow::Result<()> {
 }
 
 fn print_adapters() -> anyhow::Result<()> {
-    let reports: Vec<_> = segsplat::gpu::context::enumerate_adapters()
+    let reports: Vec<_> = segsplat_gpu::context::enumerate_adapters()
         .into_iter()
         .map(|(_, report)| report)
         .collect();

@@ -15,13 +15,13 @@ mod gpu_support;
 
 use gpu_support::{gpu_context, new_encoder, seeded_rng, submit};
 use rand::Rng;
-use segsplat::gpu::GpuContext;
-use segsplat::splat::deform::reference;
-use segsplat::splat::deform::warp::{Pose, warp, warp_backward};
-use segsplat::splat::deform::{
+use segsplat_engine::deform::reference;
+use segsplat_engine::deform::warp::{Pose, warp, warp_backward};
+use segsplat_engine::deform::{
     DeformationField, DeformedGeometry, FieldShape, GemmKernel, WarpKind,
 };
-use segsplat::splat::{GaussianModel, GpuGaussianGrads, GpuGaussians, OBJECT_NONE};
+use segsplat_engine::{GaussianModel, GpuGaussianGrads, GpuGaussians, OBJECT_NONE};
+use segsplat_gpu::GpuContext;
 
 const COUNT: usize = 150;
 const CHUNK: usize = 64;

@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use segsplat::scene::fuzz_entry::TARGETS;
+use segsplat_scene::fuzz_entry::TARGETS;
 
 /// One input may take this long before it counts as a hang (debug build, shared CI machine).
 const SLOW_INPUT: Duration = Duration::from_secs(20);
@@ -64,39 +64,4 @@ fn fuzz_targets_match_the_library_list() {
     let mut listed: Vec<String> = TARGETS.iter().map(|(name, _)| name.to_string()).collect();
     listed.sort();
     assert_eq!(on_disk, listed);
-}
-
-/// `fuzz/` compiles `src/scene` on its own (see fuzz/src/lib.rs): the module may refer to
-/// nothing else of the crate.
-#[test]
-fn scene_module_stands_alone() {
-    fn walk(dir: &Path, found: &mut Vec<String>) {
-        for entry in std::fs::read_dir(dir).unwrap().flatten() {
-            let path = entry.path();
-            if path.is_dir() {
-                walk(&path, found);
-            } else if path.extension().is_some_and(|ext| ext == "rs") {
-                let text = std::fs::read_to_string(&path).unwrap();
-                for (number, line) in text.lines().enumerate() {
-                    let mut rest = line;
-                    while let Some(at) = rest.find("crate::") {
-                        rest = &rest[at + "crate::".len()..];
-                        if !rest.starts_with("scene") {
-                            found.push(format!("{}:{}: {line}", path.display(), number + 1));
-                        }
-                    }
-                }
-            }
-        }
-    }
-    let mut found = Vec::new();
-    walk(
-        &Path::new(env!("CARGO_MANIFEST_DIR")).join("src/scene"),
-        &mut found,
-    );
-    assert!(
-        found.is_empty(),
-        "src/scene uses other modules:\n{}",
-        found.join("\n")
-    );
 }

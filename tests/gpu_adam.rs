@@ -7,8 +7,8 @@ mod gpu_support;
 
 use gpu_support::{gpu_context, new_encoder, seeded_rng, storage_buffer, submit};
 use rand::Rng;
-use segsplat::gpu::GpuContext;
-use segsplat::splat::adam::{Adam, AdamBuffers, AdamSettings};
+use segsplat_engine::adam::{Adam, AdamBuffers, AdamSettings};
+use segsplat_gpu::GpuContext;
 
 #[derive(Clone)]
 struct CpuAdamState {

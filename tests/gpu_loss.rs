@@ -11,11 +11,11 @@ mod gpu_support;
 
 use gpu_support::{gpu_context, new_encoder, seeded_rng, storage_buffer, submit};
 use rand::Rng;
-use segsplat::gpu::GpuContext;
-use segsplat::splat::loss::{
+use segsplat_engine::loss::{
     DSSIM_WEIGHT, L1_WEIGHT, LossImages, LossOutputs, ObjectMask, RenderLoss, SSIM_C1, SSIM_C2,
     ssim_window,
 };
+use segsplat_gpu::GpuContext;
 
 type Rgb = [f64; 3];
 

@@ -4,7 +4,7 @@ mod gpu_support;
 
 use gpu_support::{gpu_context, new_encoder, seeded_rng, storage_buffer, submit};
 use rand::Rng;
-use segsplat::gpu::{ExclusiveScan, WorkgroupSum};
+use segsplat_gpu::{ExclusiveScan, WorkgroupSum};
 
 fn cpu_exclusive_scan(input: &[u32]) -> Vec<u32> {
     let mut output = Vec::with_capacity(input.len() + 1);

@@ -5,7 +5,7 @@ mod gpu_support;
 
 use gpu_support::{gpu_context, new_encoder, seeded_rng, storage_buffer, submit};
 use rand::Rng;
-use segsplat::gpu::{DEFAULT_SMALL_SORT_LIMIT, GpuContext, RadixSort, WorkgroupSum};
+use segsplat_gpu::{DEFAULT_SMALL_SORT_LIMIT, GpuContext, RadixSort, WorkgroupSum};
 
 const SENTINEL: u32 = 0x5eed_5eed;
 

@@ -4,10 +4,10 @@
 mod models_support;
 
 use models_support::{clip_fixtures_dir, discs_image, tiny_models_dir};
-use segsplat::models::clip::{
+use segsplat_vision::models::clip::{
     ClipImageEncoder, ClipTextEncoder, ClipTokenizer, clip_pixel_values, masked_square_crop,
 };
-use segsplat::models::manifest::{Manifest, Preprocess, Role};
+use segsplat_vision::models::manifest::{Manifest, Preprocess, Role};
 
 #[derive(serde::Deserialize)]
 struct TokenizerCase {

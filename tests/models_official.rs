@@ -8,13 +8,13 @@ mod models_support;
 use std::path::{Path, PathBuf};
 
 use models_support::{discs_image, mask_iou, tiny_models_dir};
-use segsplat::models::ModelStore;
-use segsplat::models::init::{InitOptions, init_model_dir};
-use segsplat::models::manifest::{Family, Manifest, MaskSource, Preprocess, Role};
-use segsplat::models::sam::{DecoderBatching, SamModel, SamPredictor};
-use segsplat::scene::Level;
-use segsplat::segment::region_prompt::{RegionPrompt, RegionPromptSegmenter};
-use segsplat::segment::{AutomaticConfig, MaskGenerator, ScoredMask};
+use segsplat_scene::Level;
+use segsplat_vision::models::ModelStore;
+use segsplat_vision::models::init::{InitOptions, init_model_dir};
+use segsplat_vision::models::manifest::{Family, Manifest, MaskSource, Preprocess, Role};
+use segsplat_vision::models::sam::{DecoderBatching, SamModel, SamPredictor};
+use segsplat_vision::segment::region_prompt::{RegionPrompt, RegionPromptSegmenter};
+use segsplat_vision::segment::{AutomaticConfig, MaskGenerator, ScoredMask};
 
 const DISCS: [(f32, f32, f32, [u8; 3]); 3] = [
     (40.0, 40.0, 16.0, [220, 30, 30]),

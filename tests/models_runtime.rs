@@ -5,8 +5,8 @@ mod models_support;
 
 use std::path::Path;
 
-use segsplat::models::ModelError;
-use segsplat::models::runtime::{library_version, locate_library, required_minor_version};
+use segsplat_vision::models::ModelError;
+use segsplat_vision::models::runtime::{library_version, locate_library, required_minor_version};
 
 #[test]
 fn runtime_loads_and_reports_a_supported_version() {
@@ -55,7 +55,7 @@ fn sessions_are_shared_across_threads() {
     let Some(store) = models_support::tiny_store() else {
         return;
     };
-    let encoder = segsplat::models::clip::ClipTextEncoder::new(&store, 16).unwrap();
+    let encoder = segsplat_vision::models::clip::ClipTextEncoder::new(&store, 16).unwrap();
     let encoder = std::sync::Arc::new(encoder);
     let handles: Vec<_> = ["red", "blue", "green", "yellow"]
         .into_iter()
@@ -73,8 +73,8 @@ fn sessions_are_shared_across_threads() {
 
 #[test]
 fn readiness_reports_a_missing_library_when_models_are_configured() {
-    use segsplat::config::ModelsConfig;
-    use segsplat::models::ModelsStatus;
+    use segsplat_service::config::ModelsConfig;
+    use segsplat_vision::models::ModelsStatus;
     let status = ModelsStatus::load(&ModelsConfig {
         dir: Some(models_support::tiny_models_dir()),
         ort_library: Some("/nonexistent/libonnxruntime.so".into()),
@@ -98,10 +98,11 @@ fn readiness_lists_the_loaded_models() {
     if models_support::runtime().is_none() {
         return;
     }
-    let status = segsplat::models::ModelsStatus::load(&segsplat::config::ModelsConfig {
-        dir: Some(models_support::tiny_models_dir()),
-        ..Default::default()
-    });
+    let status =
+        segsplat_vision::models::ModelsStatus::load(&segsplat_service::config::ModelsConfig {
+            dir: Some(models_support::tiny_models_dir()),
+            ..Default::default()
+        });
     let (ok, detail) = status.readiness();
     assert!(ok, "{detail}");
     assert!(

@@ -4,10 +4,10 @@
 mod models_support;
 
 use models_support::{discs_image, mask_iou};
-use segsplat::models::sam::{PointLabel, SamModel, SamPredictor, SamPrompt};
-use segsplat::scene::Level;
-use segsplat::segment::prompt::{PointPromptSegmenter, PromptError};
-use segsplat::segment::{AutomaticConfig, MaskGenerator};
+use segsplat_scene::Level;
+use segsplat_vision::models::sam::{PointLabel, SamModel, SamPredictor, SamPrompt};
+use segsplat_vision::segment::prompt::{PointPromptSegmenter, PromptError};
+use segsplat_vision::segment::{AutomaticConfig, MaskGenerator};
 
 /// Mask IoU with the drawn disc that every answer must reach (the stand-in measures 0.95-0.998
 /// on blobs of this size).

@@ -4,7 +4,7 @@
 mod models_support;
 
 use models_support::{copy_of_tiny_models, edit_manifest, model_of_role, tiny_models_dir};
-use segsplat::models::{ModelError, ModelStore, Role};
+use segsplat_vision::models::{ModelError, ModelStore, Role};
 
 #[test]
 fn the_tiny_directory_opens_with_every_role() {
@@ -38,7 +38,7 @@ fn copy_with_file_of_another_role(source: &str, role: &str) -> tempfile::TempDir
             .to_string();
     });
     std::fs::copy(copy.path().join(source), copy.path().join(&file)).unwrap();
-    let hash = segsplat::models::store::sha256_file(&copy.path().join(&file)).unwrap();
+    let hash = segsplat_vision::models::store::sha256_file(&copy.path().join(&file)).unwrap();
     edit_manifest(copy.path(), |manifest| {
         model_of_role(manifest, role)["sha256"] = hash.into();
     });
@@ -79,7 +79,7 @@ fn a_corrupted_file_with_its_hash_updated_is_reported_as_unreadable() {
     let path = copy.path().join("tiny-clip-image.onnx");
     let bytes = std::fs::read(&path).unwrap();
     std::fs::write(&path, &bytes[..bytes.len() / 3]).unwrap();
-    let hash = segsplat::models::store::sha256_file(&path).unwrap();
+    let hash = segsplat_vision::models::store::sha256_file(&path).unwrap();
     edit_manifest(copy.path(), |manifest| {
         model_of_role(manifest, "clip_image")["sha256"] = hash.into();
     });
@@ -117,7 +117,7 @@ fn an_unknown_role_is_a_manifest_error() {
     edit_manifest(copy.path(), |manifest| {
         model_of_role(manifest, "sam_encoder")["role"] = "sam_encodr".into();
     });
-    let error = segsplat::models::Manifest::load(copy.path()).unwrap_err();
+    let error = segsplat_vision::models::Manifest::load(copy.path()).unwrap_err();
     assert!(matches!(error, ModelError::Manifest { .. }), "{error:?}");
     let message = error.to_string();
     assert!(

@@ -5,15 +5,15 @@
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use segsplat::gpu::GpuContext;
-use segsplat::scene::Level;
-use segsplat::splat::reference::ReferenceGaussians;
-use segsplat::splat::reference::parameter_name;
-use segsplat::splat::reference::scenes::{random_scene, test_camera};
-use segsplat::splat::render::{ObjectSlot, RasterVariant, Renderer};
-use segsplat::splat::{
+use segsplat_engine::reference::ReferenceGaussians;
+use segsplat_engine::reference::parameter_name;
+use segsplat_engine::reference::scenes::{random_scene, test_camera};
+use segsplat_engine::render::{ObjectSlot, RasterVariant, Renderer};
+use segsplat_engine::{
     GaussianModel, GpuGaussianGrads, GpuGaussians, ObjectFilter, RenderCamera, RenderSettings,
 };
+use segsplat_gpu::GpuContext;
+use segsplat_scene::Level;
 use wgpu::util::DeviceExt;
 
 fn context() -> Option<GpuContext> {

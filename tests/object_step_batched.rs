@@ -7,10 +7,10 @@
 mod segment_then_splat_support;
 
 use segment_then_splat_support::{config, gpu, synthetic_scene};
-use segsplat::pipeline::segment_then_splat::training::{
+use segsplat_engine::train::{ObjectLossConfig, TrainConfig};
+use segsplat_method::segment_then_splat::training::{
     SegmentedTrainingOptions, segmented_trainer_from_user_masks,
 };
-use segsplat::splat::train::{ObjectLossConfig, TrainConfig};
 
 /// Relative difference allowed between the two paths' object losses: float atomics sum the
 /// gradients in a different order, so the models drift apart by rounding after the first step.

@@ -3,18 +3,18 @@
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use segsplat::gpu::GpuContext;
-use segsplat::scene::Level;
-use segsplat::splat::reference::scenes::{
+use segsplat_engine::reference::scenes::{
     edge_case_scene, random_scene, test_camera, turned_around, two_object_scene,
 };
-use segsplat::splat::reference::{
+use segsplat_engine::reference::{
     ReferenceGaussians, ReferenceGrads, parameter_name, render_backward, render_forward,
 };
-use segsplat::splat::render::{RasterVariant, Renderer};
-use segsplat::splat::{
+use segsplat_engine::render::{RasterVariant, Renderer};
+use segsplat_engine::{
     GaussianModel, GpuGaussianGrads, GpuGaussians, ObjectFilter, RenderCamera, RenderSettings,
 };
+use segsplat_gpu::GpuContext;
+use segsplat_scene::Level;
 use wgpu::util::DeviceExt;
 
 fn context() -> Option<GpuContext> {
@@ -479,7 +479,7 @@ fn footprint_tile_count(
 ) -> usize {
     let sigma =
         |dx: f64, dy: f64| 0.5 * (conic[0] * dx * dx + conic[2] * dy * dy) + conic[1] * dx * dy;
-    let tile = segsplat::splat::TILE_SIZE as f64;
+    let tile = segsplat_engine::TILE_SIZE as f64;
     let mut count = 0;
     for ty in 0..tiles[1] {
         for tx in 0..tiles[0] {
@@ -521,7 +521,7 @@ fn gpu_tile_lists_hold_the_tiles_each_footprint_touches() {
         .iter()
         .flatten()
         .map(|p| {
-            let sigma_max = (p.opacity / segsplat::splat::ALPHA_MIN as f64).ln() + 0.01;
+            let sigma_max = (p.opacity / segsplat_engine::ALPHA_MIN as f64).ln() + 0.01;
             footprint_tile_count(p.mean2d.to_array(), p.conic, sigma_max, camera.tile_grid())
         })
         .sum();
@@ -530,7 +530,7 @@ fn gpu_tile_lists_hold_the_tiles_each_footprint_touches() {
         .iter()
         .flatten()
         .map(|p| {
-            let tile = segsplat::splat::TILE_SIZE as f64;
+            let tile = segsplat_engine::TILE_SIZE as f64;
             let span = |centre: f64, tiles: u32| {
                 let lo = ((centre - p.radius) / tile)
                     .floor()

@@ -3,12 +3,12 @@
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use segsplat::scene::Level;
-use segsplat::splat::reference::scenes::{edge_case_scene, test_camera, two_object_scene};
-use segsplat::splat::reference::{
+use segsplat_engine::reference::scenes::{edge_case_scene, test_camera, two_object_scene};
+use segsplat_engine::reference::{
     ReferenceForward, ReferenceGaussians, parameter_name, render_backward, render_forward,
 };
-use segsplat::splat::{ObjectFilter, RenderCamera, RenderSettings, TILE_SIZE};
+use segsplat_engine::{ObjectFilter, RenderCamera, RenderSettings, TILE_SIZE};
+use segsplat_scene::Level;
 
 fn weighted_loss(forward: &ReferenceForward, weights: &[[f64; 4]]) -> f64 {
     forward

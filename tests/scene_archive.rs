@@ -4,7 +4,7 @@ use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use segsplat::scene::{ArchiveError, InputErrorClass, UnpackLimits, UnpackStats, unpack_archive};
+use segsplat_scene::{ArchiveError, InputErrorClass, UnpackLimits, UnpackStats, unpack_archive};
 use zip::write::SimpleFileOptions;
 
 fn limits() -> UnpackLimits {

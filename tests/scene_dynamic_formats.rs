@@ -6,12 +6,10 @@ use std::fs;
 use std::path::Path;
 
 use glam::{Mat4, Vec3};
-use segsplat::scene::colmap::ColmapEncoding;
-use segsplat::scene::synthetic::{self, SyntheticSpec, synthetic_intrinsics};
-use segsplat::scene::synthetic_dynamic_formats::{
-    self, nerfies_id, neu3d_camera, write_npy_matrix,
-};
-use segsplat::scene::{
+use segsplat_scene::colmap::ColmapEncoding;
+use segsplat_scene::synthetic::{self, SyntheticSpec, synthetic_intrinsics};
+use segsplat_scene::synthetic_dynamic_formats::{self, nerfies_id, neu3d_camera, write_npy_matrix};
+use segsplat_scene::{
     Frame, FrameSplit, InputErrorClass, Level, LoadOptions, Scene, SceneError, SceneFormat,
     VideoFrameOptions, load_frame_rgb, load_scene, validate_scene,
 };

@@ -4,12 +4,12 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use glam::Mat4;
-use segsplat::scene::colmap::{self, CameraModel, ColmapEncoding};
-use segsplat::scene::synthetic::{
+use segsplat_scene::colmap::{self, CameraModel, ColmapEncoding};
+use segsplat_scene::synthetic::{
     self, SyntheticImageFormat, SyntheticLens, SyntheticSpec, synthetic_intrinsics,
     synthetic_world_from_cameras,
 };
-use segsplat::scene::{
+use segsplat_scene::{
     FrameSplit, InputErrorClass, LoadOptions, Scene, SceneError, SceneFormat, load_frame_rgb,
     load_scene, validate_scene,
 };
@@ -484,7 +484,7 @@ fn assert_undistorted_like_pinhole(distorted: &Scene, pinhole: &Scene, label: &s
 }
 
 /// Pinhole projection of `point` into `frame` (pixel centres at i + 0.5).
-fn project(frame: &segsplat::scene::Frame, point: glam::Vec3) -> [f64; 2] {
+fn project(frame: &segsplat_scene::Frame, point: glam::Vec3) -> [f64; 2] {
     let camera_point = frame.world_from_camera.inverse().transform_point3(point);
     let camera = &frame.intrinsics;
     [

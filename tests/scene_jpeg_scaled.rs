@@ -5,9 +5,9 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use segsplat::scene::colmap::ColmapEncoding;
-use segsplat::scene::synthetic::{self, SyntheticImageFormat, SyntheticSpec};
-use segsplat::scene::{LoadOptions, load_frame_rgb, load_scene, validate_scene};
+use segsplat_scene::colmap::ColmapEncoding;
+use segsplat_scene::synthetic::{self, SyntheticImageFormat, SyntheticSpec};
+use segsplat_scene::{LoadOptions, load_frame_rgb, load_scene, validate_scene};
 
 struct LargestAllocation;
 

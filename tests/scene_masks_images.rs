@@ -3,11 +3,11 @@
 use std::fs;
 use std::path::Path;
 
-use segsplat::scene::colmap::{CameraModel, ColmapEncoding};
-use segsplat::scene::synthetic::{
+use segsplat_scene::colmap::{CameraModel, ColmapEncoding};
+use segsplat_scene::synthetic::{
     self, SYNTHETIC_BACKGROUND, SyntheticLens, SyntheticSpec, synthetic_objects,
 };
-use segsplat::scene::{
+use segsplat_scene::{
     InstanceMask, Level, LoadOptions, Scene, SceneError, load_frame_rgb, load_instance_mask,
     load_scene, scale_for_max_side, validate_scene,
 };
@@ -295,7 +295,7 @@ fn synthetic_objects_have_distinct_small_ids() {
 
 #[test]
 fn source_level_picks_the_nearest_given_level() {
-    use segsplat::scene::MaskLayout;
+    use segsplat_scene::MaskLayout;
     let layout_with = |levels: &[Level]| {
         let mut layout = MaskLayout::default();
         for level in levels {

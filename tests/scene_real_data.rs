@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use segsplat::scene::{LoadOptions, SceneFormat, load_frame_rgb, load_scene, validate_scene};
+use segsplat_scene::{LoadOptions, SceneFormat, load_frame_rgb, load_scene, validate_scene};
 
 fn figurine_dir() -> Option<PathBuf> {
     let dir = std::env::var_os("SEGSPLAT_FIGURINE_DIR")

@@ -4,9 +4,9 @@ use std::fs;
 use std::io::Write;
 use std::path::Path;
 
-use segsplat::scene::colmap::ColmapEncoding;
-use segsplat::scene::synthetic::{self, SyntheticSpec};
-use segsplat::scene::{
+use segsplat_scene::colmap::ColmapEncoding;
+use segsplat_scene::synthetic::{self, SyntheticSpec};
+use segsplat_scene::{
     Level, LoadOptions, SceneFormat, UnpackLimits, load_scene, unpack_archive, validate_scene,
 };
 use zip::write::SimpleFileOptions;

@@ -8,8 +8,8 @@
 //! predicted IoU than its container).
 
 use image::{Rgb, RgbImage};
-use segsplat::scene::Level;
-use segsplat::segment::{
+use segsplat_scene::Level;
+use segsplat_vision::segment::{
     AutomaticConfig, BitMask, FrameMasks, MaskGenerator, PointMasks, PointPromptSegmenter,
     PromptError, generate_automatic_masks, instance_ids_from_masks,
 };

@@ -2,8 +2,8 @@
 //! small disc nested in a rectangle.
 
 use image::{Rgb, RgbImage};
-use segsplat::scene::Level;
-use segsplat::segment::{BitMask, ClassicalConfig, MaskGenerator, classical_masks};
+use segsplat_scene::Level;
+use segsplat_vision::segment::{BitMask, ClassicalConfig, MaskGenerator, classical_masks};
 
 const WIDTH: u32 = 200;
 const HEIGHT: u32 = 150;
@@ -85,7 +85,7 @@ fn flat_image_config() -> ClassicalConfig {
     }
 }
 
-fn best_iou(masks: &[segsplat::segment::ScoredMask], truth: &BitMask) -> f32 {
+fn best_iou(masks: &[segsplat_vision::segment::ScoredMask], truth: &BitMask) -> f32 {
     masks
         .iter()
         .map(|scored| scored.mask.iou(truth).unwrap_or(0.0))

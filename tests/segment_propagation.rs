@@ -11,9 +11,9 @@
 mod models_support;
 
 use models_support::{discs_image, mask_iou};
-use segsplat::models::sam::{SamModel, SamPredictor};
-use segsplat::segment::propagation::{FirstFrameMasks, PropagationOptions, propagate_masks};
-use segsplat::segment::{AutomaticConfig, MaskGenerator};
+use segsplat_vision::models::sam::{SamModel, SamPredictor};
+use segsplat_vision::segment::propagation::{FirstFrameMasks, PropagationOptions, propagate_masks};
+use segsplat_vision::segment::{AutomaticConfig, MaskGenerator};
 
 const WIDTH: u32 = 160;
 const HEIGHT: u32 = 120;

@@ -11,20 +11,20 @@
 mod segment_then_splat_support;
 
 use segment_then_splat_support::{config, full_truth, gpu, iou, mean, synthetic_scene};
-use segsplat::pipeline::segment_then_splat::association::{
+use segsplat_engine::ObjectFilter;
+use segsplat_engine::render::Renderer;
+use segsplat_method::segment_then_splat::association::{
     AssociationError, AssociationOptions, AssociationReport, associate_frame_masks,
     generated_view_masks,
 };
-use segsplat::pipeline::segment_then_splat::objects::{full_mask, render_layer};
-use segsplat::pipeline::segment_then_splat::track_metrics::object_recall_and_duplicates;
-use segsplat::pipeline::segment_then_splat::training::{
+use segsplat_method::segment_then_splat::objects::{full_mask, render_layer};
+use segsplat_method::segment_then_splat::track_metrics::object_recall_and_duplicates;
+use segsplat_method::segment_then_splat::training::{
     SegmentedTrainingOptions, segmented_trainer_from_generated_masks, training_frames,
 };
-use segsplat::pipeline::segment_then_splat::view_masks::ViewMaskSet;
-use segsplat::scene::{Level, Scene};
-use segsplat::segment::{ClassicalConfig, MaskGenerator, SegmentError, user_frame_masks};
-use segsplat::splat::ObjectFilter;
-use segsplat::splat::render::Renderer;
+use segsplat_method::segment_then_splat::view_masks::ViewMaskSet;
+use segsplat_scene::{Level, Scene};
+use segsplat_vision::segment::{ClassicalConfig, MaskGenerator, SegmentError, user_frame_masks};
 
 /// Objects per level (small, middle, large) in the synthetic scene.
 const TRUE_OBJECTS: [usize; 3] = [3, 2, 1];

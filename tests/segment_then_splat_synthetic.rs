@@ -9,16 +9,16 @@ mod segment_then_splat_support;
 
 use image::{GrayImage, Luma};
 use segment_then_splat_support::{config, full_truth, gpu, iou, mean, synthetic_scene};
-use segsplat::pipeline::segment_then_splat::objects::{
+use segsplat_engine::ObjectFilter;
+use segsplat_engine::render::Renderer;
+use segsplat_engine::train::SkippedPair;
+use segsplat_method::segment_then_splat::objects::{
     full_mask, render_layer, summarize_objects, visible_mask,
 };
-use segsplat::pipeline::segment_then_splat::training::{
+use segsplat_method::segment_then_splat::training::{
     SegmentedTrainingOptions, segmented_trainer_from_user_masks,
 };
-use segsplat::scene::{Level, load_instance_mask};
-use segsplat::splat::ObjectFilter;
-use segsplat::splat::render::Renderer;
-use segsplat::splat::train::SkippedPair;
+use segsplat_scene::{Level, load_instance_mask};
 
 /// Held-out mIoU the trained full (amodal) object masks must reach against the true silhouettes.
 const MIN_FULL_MIOU: f64 = 0.9;

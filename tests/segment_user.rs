@@ -4,10 +4,10 @@
 use std::sync::Arc;
 
 use image::RgbImage;
-use segsplat::scene::colmap::ColmapEncoding;
-use segsplat::scene::synthetic::{SyntheticSpec, write_colmap};
-use segsplat::scene::{Level, LoadOptions, load_instance_mask, load_scene};
-use segsplat::segment::{MaskGenerator, SegmentError, UserMaskError};
+use segsplat_scene::colmap::ColmapEncoding;
+use segsplat_scene::synthetic::{SyntheticSpec, write_colmap};
+use segsplat_scene::{Level, LoadOptions, load_instance_mask, load_scene};
+use segsplat_vision::segment::{MaskGenerator, SegmentError, UserMaskError};
 
 fn spec(with_masks: Option<Vec<Level>>) -> SyntheticSpec {
     SyntheticSpec {

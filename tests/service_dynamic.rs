@@ -22,15 +22,15 @@ use std::time::Duration;
 
 use base64::Engine;
 use common::{TestService, archives};
-use segsplat::proto;
-use segsplat::scene::Level;
-use segsplat::scene::synthetic::SyntheticSpec;
-use segsplat::scene::synthetic_dynamic::{
+use segsplat_api::proto;
+use segsplat_scene::Level;
+use segsplat_scene::synthetic::SyntheticSpec;
+use segsplat_scene::synthetic_dynamic::{
     dynamic_frame_time, dynamic_object_center, dynamic_true_mask, dynamic_world_from_cameras,
     is_dynamic_test_frame, write_dynamic_blender,
 };
-use segsplat::scene::synthetic_dynamic_formats::write_neu3d;
-use segsplat::segment::BitMask;
+use segsplat_scene::synthetic_dynamic_formats::write_neu3d;
+use segsplat_vision::segment::BitMask;
 
 const FRAMES: usize = 40;
 

@@ -9,9 +9,9 @@ use std::time::Duration;
 
 use common::handlers::{STEPS_KIND, StepsHandler};
 use common::{TestService, test_config};
-use segsplat::api::{ServiceBuilder, ServiceMode};
-use segsplat::store::jobs::JobState;
-use segsplat::store::{Caller, Database};
+use segsplat_api::{ServiceBuilder, ServiceMode};
+use segsplat_service::store::jobs::JobState;
+use segsplat_service::store::{Caller, Database};
 use serde_json::json;
 
 const WAIT: Duration = Duration::from_secs(15);
@@ -214,7 +214,7 @@ async fn cancel_stops_queued_and_running_jobs_and_guards_scene_deletion() {
 async fn start_worker_process(
     dir: &std::path::Path,
     handler: &StepsHandler,
-) -> segsplat::api::RunningService {
+) -> segsplat_api::RunningService {
     let mut config = test_config(dir);
     config.workers.cpu_slots = 1;
     ServiceBuilder::new(config)
@@ -513,7 +513,10 @@ async fn a_restart_takes_back_its_own_and_dead_local_processes_jobs_at_once() {
         .await
         .unwrap();
     // A pid above the kernel's limit: a process on this host that is certainly gone.
-    let dead_local = format!("{}-pid4294967-0badf00d/0", segsplat::jobs::host_name());
+    let dead_local = format!(
+        "{}-pid4294967-0badf00d/0",
+        segsplat_service::jobs::host_name()
+    );
     let owners = ["box-1/0", dead_local.as_str(), "other-host-pid7-0badf00d/0"];
     for (job_id, owner) in jobs.iter().zip(owners) {
         let claimed = database
@@ -576,7 +579,7 @@ async fn a_start_reclaims_leftovers_of_stopped_processes_and_nothing_live() {
     let checkpoints = dir.path().join("blobs/jobs/j1/checkpoints");
     std::fs::create_dir_all(&tmp).unwrap();
     std::fs::create_dir_all(&checkpoints).unwrap();
-    let host = segsplat::jobs::host_name();
+    let host = segsplat_service::jobs::host_name();
     // A pid above the kernel's limit: a process on this host that is certainly gone.
     let dead = format!("{host}-pid4294967");
     let live = format!("{host}-pid{}", std::process::id());
@@ -634,8 +637,8 @@ async fn training_configs_beyond_the_service_limits_or_meaningless_get_422() {
     let service = TestService::start(
         test_config(dir.path()),
         vec![
-            Arc::new(segsplat::pipeline::ReconstructHandler),
-            Arc::new(segsplat::pipeline::SegmentThenSplatHandler),
+            Arc::new(segsplat_service::job_kinds::ReconstructHandler),
+            Arc::new(segsplat_service::job_kinds::SegmentThenSplatHandler),
         ],
     )
     .await;

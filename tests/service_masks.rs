@@ -9,13 +9,13 @@ use std::time::Duration;
 
 use base64::Engine;
 use common::{TestService, archives};
-use segsplat::proto;
-use segsplat::scene::Level;
-use segsplat::scene::colmap::ColmapEncoding;
-use segsplat::scene::synthetic::SyntheticSpec;
-use segsplat::segment::{BitMask, CompressedRle};
-use segsplat::splat::labels::read_labels;
-use segsplat::splat::ply::read_ply;
+use segsplat_api::proto;
+use segsplat_engine::labels::read_labels;
+use segsplat_engine::ply::read_ply;
+use segsplat_scene::Level;
+use segsplat_scene::colmap::ColmapEncoding;
+use segsplat_scene::synthetic::SyntheticSpec;
+use segsplat_vision::segment::{BitMask, CompressedRle};
 
 fn decode_mask(mask: &serde_json::Value) -> BitMask {
     let width = mask["width"].as_u64().unwrap() as u32;
@@ -51,7 +51,7 @@ fn true_mask(
     frame_name: &str,
     object_id: u32,
 ) -> BitMask {
-    let path = segsplat::scene::masks::mask_path(level, frame_name);
+    let path = segsplat_scene::masks::mask_path(level, frame_name);
     let path = path.to_string_lossy();
     let (_, bytes) = files
         .iter()

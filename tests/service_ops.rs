@@ -7,10 +7,10 @@ use std::sync::Arc;
 
 use common::handlers::{STEPS_KIND, StepsHandler};
 use common::{TestService, test_config};
-use segsplat::proto;
-use segsplat::proto::scene_query_client::SceneQueryClient;
-use segsplat::scene::Level;
-use segsplat::store::objects::{ObjectEmbedding, ObjectRecord};
+use segsplat_api::proto;
+use segsplat_api::proto::scene_query_client::SceneQueryClient;
+use segsplat_scene::Level;
+use segsplat_service::store::objects::{ObjectEmbedding, ObjectRecord};
 use serde_json::json;
 use tonic_health::pb::HealthCheckRequest;
 use tonic_health::pb::health_check_response::ServingStatus;

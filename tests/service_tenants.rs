@@ -13,11 +13,11 @@ use std::time::Duration;
 use common::handlers::{STEPS_KIND, StepsHandler};
 use common::{TestService, archives, test_config};
 use prost::Message;
-use segsplat::config::TenantToken;
-use segsplat::proto;
-use segsplat::proto::scene_query_client::SceneQueryClient;
-use segsplat::scene::Level;
-use segsplat::store::objects::ObjectRecord;
+use segsplat_api::proto;
+use segsplat_api::proto::scene_query_client::SceneQueryClient;
+use segsplat_scene::Level;
+use segsplat_service::config::TenantToken;
+use segsplat_service::store::objects::ObjectRecord;
 use serde_json::{Value, json};
 
 const ALPHA: &str = "alpha-token";
@@ -490,7 +490,7 @@ async fn tenant_token_config_is_validated() {
     config.auth.tokens = vec![];
     config.auth.token = vec![tenant_token("root", None, true)];
     config.validate().unwrap();
-    let parsed: segsplat::config::Config = toml::from_str(
+    let parsed: segsplat_service::config::Config = toml::from_str(
         "[auth]\ntokens = [\"old\"]\n[[auth.token]]\ntoken = \"a\"\ntenant = \"alpha\"\n\
          [[auth.token]]\ntoken = \"r\"\nadmin = true\n",
     )

@@ -7,11 +7,11 @@ mod common;
 use std::time::Duration;
 
 use common::{TestService, archives};
-use segsplat::scene::Level;
-use segsplat::scene::colmap::ColmapEncoding;
-use segsplat::scene::synthetic::SyntheticSpec;
-use segsplat::splat::labels::read_labels;
-use segsplat::splat::ply::read_ply;
+use segsplat_engine::labels::read_labels;
+use segsplat_engine::ply::read_ply;
+use segsplat_scene::Level;
+use segsplat_scene::colmap::ColmapEncoding;
+use segsplat_scene::synthetic::SyntheticSpec;
 
 async fn start_service(data: &std::path::Path) -> Option<TestService> {
     TestService::start_on_gpu(data, |_| {}).await
@@ -375,7 +375,7 @@ async fn segment_then_splat_embeds_objects_and_answers_text_queries() {
 /// gRPC `StreamQuery`: the text is sent once, then poses; each reply echoes its sequence and
 /// carries the mask for that pose; a bad pose ends the stream with INVALID_ARGUMENT.
 async fn stream_query_answers_each_pose(client: &TestService, scene_id: &str) {
-    use segsplat::proto;
+    use segsplat_api::proto;
     let (status, cameras) = client
         .get_json(&format!("/v1/scenes/{scene_id}/trained/cameras.json"))
         .await;

@@ -7,9 +7,9 @@ use common::archives::{
     self, colmap_files, dataset_files, gzip, small_spec, tar_of, wrapped, zip_of,
 };
 use common::{TestService, entries_in, files_under, test_config};
-use segsplat::scene::colmap::ColmapEncoding;
-use segsplat::scene::synthetic::{self, SyntheticSpec};
-use segsplat::scene::synthetic_dynamic_formats;
+use segsplat_scene::colmap::ColmapEncoding;
+use segsplat_scene::synthetic::{self, SyntheticSpec};
+use segsplat_scene::synthetic_dynamic_formats;
 
 async fn start(dir: &std::path::Path) -> TestService {
     TestService::start(test_config(dir), vec![]).await
@@ -36,14 +36,14 @@ async fn assert_no_trace(service: &TestService, data_dir: &std::path::Path) {
 async fn assert_stored_scene_reloads(service: &TestService, data_dir: &std::path::Path, id: &str) {
     let (_, body) = service.get_json(&format!("/v1/scenes/{id}")).await;
     let files = data_dir.join("blobs/scenes").join(id).join("files");
-    let scene = segsplat::scene::load_scene(&files, &segsplat::scene::LoadOptions::default())
+    let scene = segsplat_scene::load_scene(&files, &segsplat_scene::LoadOptions::default())
         .unwrap_or_else(|error| panic!("{body}: stored files do not load: {error}"));
     assert_eq!(
         scene.frames.len() as u64,
         body["frame_count"].as_u64().unwrap(),
         "{body}"
     );
-    segsplat::scene::validate_scene(&scene)
+    segsplat_scene::validate_scene(&scene)
         .unwrap_or_else(|error| panic!("{body}: stored files do not validate: {error}"));
 }
 
@@ -53,7 +53,7 @@ async fn every_format_and_archive_kind_uploads() {
     let service = start(dir.path()).await;
     let spec = small_spec();
     let masked = SyntheticSpec {
-        with_masks: Some(vec![segsplat::scene::Level::Small]),
+        with_masks: Some(vec![segsplat_scene::Level::Small]),
         ..small_spec()
     };
     let cases: Vec<(&str, Vec<u8>, &str, &str, u32)> = vec![
@@ -447,7 +447,7 @@ async fn client_disconnect_during_ingest_still_records_the_scene() {
         frame_count: 16,
         width: 64,
         height: 48,
-        with_masks: Some(segsplat::scene::Level::ALL.to_vec()),
+        with_masks: Some(segsplat_scene::Level::ALL.to_vec()),
         ..small_spec()
     });
     let addr = service.service.http_addr().unwrap();

@@ -11,14 +11,14 @@ mod gpu_support;
 use glam::Vec3;
 use gpu_support::{gpu_context, segsplat};
 use rand::SeedableRng;
-use segsplat::scene::synthetic::SyntheticSpec;
-use segsplat::scene::synthetic_dynamic::write_dynamic_blender;
-use segsplat::scene::{LoadOptions, Scene, load_scene};
-use segsplat::splat::GaussianModel;
-use segsplat::splat::checkpoint::Checkpoint;
-use segsplat::splat::deform::{DeformationConfig, FieldShape};
-use segsplat::splat::init::random_gaussians;
-use segsplat::splat::train::{TrainConfig, Trainer, TrainerMeta};
+use segsplat_engine::GaussianModel;
+use segsplat_engine::checkpoint::Checkpoint;
+use segsplat_engine::deform::{DeformationConfig, FieldShape};
+use segsplat_engine::init::random_gaussians;
+use segsplat_engine::train::{TrainConfig, Trainer, TrainerMeta};
+use segsplat_scene::synthetic::SyntheticSpec;
+use segsplat_scene::synthetic_dynamic::write_dynamic_blender;
+use segsplat_scene::{LoadOptions, Scene, load_scene};
 
 const STEPS: u32 = 1000;
 

@@ -6,13 +6,13 @@
 mod gpu_support;
 
 use gpu_support::segsplat;
-use segsplat::gpu::GpuContext;
-use segsplat::scene::colmap::ColmapEncoding;
-use segsplat::scene::synthetic::{SYNTHETIC_BACKGROUND, SyntheticSpec, write_colmap};
-use segsplat::scene::{LoadOptions, Scene, load_scene};
-use segsplat::splat::checkpoint::Checkpoint;
-use segsplat::splat::train::trainer::initial_model;
-use segsplat::splat::train::{TrainConfig, Trainer, TrainerMeta};
+use segsplat_engine::checkpoint::Checkpoint;
+use segsplat_engine::train::trainer::initial_model;
+use segsplat_engine::train::{TrainConfig, Trainer, TrainerMeta};
+use segsplat_gpu::GpuContext;
+use segsplat_scene::colmap::ColmapEncoding;
+use segsplat_scene::synthetic::{SYNTHETIC_BACKGROUND, SyntheticSpec, write_colmap};
+use segsplat_scene::{LoadOptions, Scene, load_scene};
 
 fn gpu() -> Option<GpuContext> {
     match GpuContext::new_default() {
@@ -145,7 +145,7 @@ fn bench_starts_from_a_trained_ply() {
     let trained = segsplat(&["train", scene, "--steps", "5", "--out", out]);
     assert!(trained.status.success(), "{trained:?}");
     let ply = format!("{out}/scene.ply");
-    let count = segsplat::splat::ply::read_ply_file(std::path::Path::new(&ply))
+    let count = segsplat_engine::ply::read_ply_file(std::path::Path::new(&ply))
         .expect("trained ply")
         .model
         .len();

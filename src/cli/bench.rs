@@ -11,15 +11,15 @@ use clap::Args;
 use glam::Vec3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use segsplat::gpu::GpuContext;
-use segsplat::gpu::profiler::KernelTime;
-use segsplat::scene::Scene;
-use segsplat::splat::GaussianModel;
-use segsplat::splat::deform::{DeformationConfig, FieldShape};
-use segsplat::splat::init::random_gaussians;
-use segsplat::splat::ply::read_ply_file;
-use segsplat::splat::train::trainer::initial_model;
-use segsplat::splat::train::{TrainConfig, Trainer};
+use segsplat_engine::GaussianModel;
+use segsplat_engine::deform::{DeformationConfig, FieldShape};
+use segsplat_engine::init::random_gaussians;
+use segsplat_engine::ply::read_ply_file;
+use segsplat_engine::train::trainer::initial_model;
+use segsplat_engine::train::{TrainConfig, Trainer};
+use segsplat_gpu::GpuContext;
+use segsplat_gpu::profiler::KernelTime;
+use segsplat_scene::Scene;
 use serde::Serialize;
 
 #[derive(Args)]
@@ -111,23 +111,23 @@ struct ObjectLossReport {
 
 /// A trainer with the object loss on every level from the start, and what it trains on.
 fn object_loss_trainer(
-    ctx: &segsplat::gpu::GpuContext,
+    ctx: &segsplat_gpu::GpuContext,
     scene: &Scene,
     mut config: TrainConfig,
     initial: Option<GaussianModel>,
     objects_per_level: u32,
     separate_renders: bool,
 ) -> anyhow::Result<(Trainer, ObjectLossReport)> {
-    use segsplat::pipeline::segment_then_splat::association::{
+    use segsplat_engine::train::ObjectLossConfig;
+    use segsplat_method::segment_then_splat::association::{
         AssociationOptions, generated_view_masks,
     };
-    use segsplat::pipeline::segment_then_splat::training::{
+    use segsplat_method::segment_then_splat::training::{
         SegmentedTrainingOptions, attach_object_training, segmented_trainer_from_view_masks,
         training_frames,
     };
-    use segsplat::pipeline::segment_then_splat::view_masks::ViewMaskSet;
-    use segsplat::segment::{ClassicalConfig, MaskGenerator};
-    use segsplat::splat::train::ObjectLossConfig;
+    use segsplat_method::segment_then_splat::view_masks::ViewMaskSet;
+    use segsplat_vision::segment::{ClassicalConfig, MaskGenerator};
 
     anyhow::ensure!(
         objects_per_level > 0,
@@ -168,7 +168,7 @@ fn object_loss_trainer(
         None => segmented_trainer_from_view_masks(ctx, scene, config, &masks, &options)?,
     };
     trainer.set_separate_object_renders(separate_renders);
-    let objects = segsplat::scene::Level::ALL.map(|level| masks.object_count(level));
+    let objects = segsplat_scene::Level::ALL.map(|level| masks.object_count(level));
     Ok((
         trainer,
         ObjectLossReport {
@@ -289,7 +289,7 @@ struct PlainBaselineReport {
 fn run_counting_dispatches(
     ctx: &GpuContext,
     trainer: &mut Trainer,
-) -> anyhow::Result<(segsplat::splat::train::TrainProgress, f64)> {
+) -> anyhow::Result<(segsplat_engine::train::TrainProgress, f64)> {
     let before = ctx.dispatch_count();
     let progress = trainer.run(|_| true)?;
     let dispatches = ctx.dispatch_count() - before;
@@ -390,7 +390,7 @@ fn deformation_config(args: &BenchArgs) -> DeformationConfig {
 
 /// A trainer for `config` (with the object loss when asked), and its object-loss report.
 fn bench_trainer(
-    ctx: &segsplat::gpu::GpuContext,
+    ctx: &segsplat_gpu::GpuContext,
     scene: &Scene,
     config: TrainConfig,
     initial: Option<GaussianModel>,
@@ -415,7 +415,7 @@ fn bench_trainer(
 /// returning (steps/s, seconds, held-out PSNR). Its trainer is dropped before the dynamic run
 /// so the two never hold memory at once.
 fn static_baseline(
-    ctx: &segsplat::gpu::GpuContext,
+    ctx: &segsplat_gpu::GpuContext,
     scene: &Scene,
     config: &TrainConfig,
     initial: Option<GaussianModel>,

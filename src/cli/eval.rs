@@ -9,19 +9,19 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args;
-use segsplat::api::query::run_query;
-use segsplat::eval::{
+use segsplat_eval::{
     FrameScore, GroundTruthFormat, SegmentationReport, load_ground_truth, oracle_choice,
     report_table, score_frame, summarize,
 };
-use segsplat::language::QueryOptions;
-use segsplat::pipeline::serving::{MaskView, SceneCamera};
-use segsplat::scene::Level;
-use segsplat::segment::BitMask;
+use segsplat_scene::Level;
+use segsplat_service::serving::{MaskView, SceneCamera};
+use segsplat_service::usecases::query::run_query;
+use segsplat_vision::language::QueryOptions;
+use segsplat_vision::segment::BitMask;
 use serde::Serialize;
 
 use super::local::{LocalService, StoreArgs};
-use segsplat::store::Caller;
+use segsplat_service::store::Caller;
 
 /// Objects rendered per request in the oracle's sweep over every object.
 const ORACLE_BATCH: usize = 64;
@@ -109,7 +109,7 @@ async fn run_async(args: EvalArgs, config_file: Option<PathBuf>) -> anyhow::Resu
         index: frame_index,
         max_side: Some(args.max_side),
     };
-    let pick = |masks: &segsplat::pipeline::serving::ObjectMasks| -> BitMask {
+    let pick = |masks: &segsplat_service::serving::ObjectMasks| -> BitMask {
         match (&masks.visible, args.visible) {
             (Some(visible), true) => visible.clone(),
             _ => masks.full.clone(),

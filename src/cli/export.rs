@@ -6,11 +6,11 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args;
-use segsplat::api::serving::DOWNLOADABLE_FILES;
-use segsplat::scene::Level;
+use segsplat_scene::Level;
+use segsplat_service::usecases::serving::DOWNLOADABLE_FILES;
 
 use super::local::{LocalService, StoreArgs};
-use segsplat::store::Caller;
+use segsplat_service::store::Caller;
 
 #[derive(Args)]
 pub struct ExportArgs {
@@ -61,7 +61,9 @@ pub fn run(args: ExportArgs, config_file: Option<PathBuf>) -> anyhow::Result<()>
                     written.push(path);
                 }
                 // Reports a reconstruct job does not write (objects, skipped pairs).
-                Err(segsplat::api::serving::ServeFailure::FileNotStored { .. }) => {}
+                Err(segsplat_service::usecases::serving::ServeFailure::FileNotStored {
+                    ..
+                }) => {}
                 Err(error) => return Err(error.into()),
             }
         }

@@ -7,11 +7,11 @@ use std::sync::Arc;
 
 use anyhow::Context;
 use clap::Args;
-use segsplat::api::serving::Serving;
-use segsplat::config::{Config, ConfigOverrides};
-use segsplat::language::SharedTextEncoder;
-use segsplat::models::ModelsStatus;
-use segsplat::store::{Caller, Database, LocalBlobStore};
+use segsplat_service::config::{Config, ConfigOverrides};
+use segsplat_service::store::{Caller, Database, LocalBlobStore};
+use segsplat_service::usecases::serving::Serving;
+use segsplat_vision::language::SharedTextEncoder;
+use segsplat_vision::models::ModelsStatus;
 
 /// Where the service keeps its data.
 #[derive(Args, Debug, Clone)]

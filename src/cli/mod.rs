@@ -13,8 +13,8 @@ pub mod train;
 use std::path::Path;
 
 use anyhow::Context;
-use segsplat::gpu::{GpuContext, KernelChoices};
-use segsplat::scene::{LoadOptions, Scene, load_scene};
+use segsplat_gpu::{GpuContext, KernelChoices};
+use segsplat_scene::{LoadOptions, Scene, load_scene};
 
 /// Loads a dataset directory (any supported format).
 pub fn open_scene(dir: &Path) -> anyhow::Result<Scene> {

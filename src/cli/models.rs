@@ -5,12 +5,12 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::{Args, Subcommand};
-use segsplat::config::Config;
-use segsplat::models::init::{InitOptions, init_model_dir};
-use segsplat::models::manifest::Family;
-use segsplat::models::reference_check::check_against_reference;
-use segsplat::models::service::runtime_options;
-use segsplat::models::{ModelStore, OrtRuntime};
+use segsplat_service::config::Config;
+use segsplat_vision::models::init::{InitOptions, init_model_dir};
+use segsplat_vision::models::manifest::Family;
+use segsplat_vision::models::reference_check::check_against_reference;
+use segsplat_vision::models::service::runtime_options;
+use segsplat_vision::models::{ModelStore, OrtRuntime};
 
 #[derive(Args)]
 pub struct ModelsArgs {

@@ -5,13 +5,13 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args;
-use segsplat::api::query::{placement, run_query};
-use segsplat::language::{DEFAULT_RELEVANCY_THRESHOLD, QueryOptions};
-use segsplat::pipeline::serving::{MaskView, mask_png};
+use segsplat_service::serving::{MaskView, mask_png};
+use segsplat_service::usecases::query::{QueryRequest, query_with_masks};
+use segsplat_vision::language::{DEFAULT_RELEVANCY_THRESHOLD, QueryOptions};
 use serde::Serialize;
 
 use super::local::{LocalService, StoreArgs};
-use segsplat::store::Caller;
+use segsplat_service::store::Caller;
 
 #[derive(Args)]
 pub struct QueryArgs {
@@ -81,29 +81,27 @@ async fn run_async(args: QueryArgs, config_file: Option<PathBuf>) -> anyhow::Res
         top_k: args.top_k,
         threshold: args.threshold,
     };
-    let outcome = run_query(
+    // Placed at `--time`; masks are rendered below, per frame, as PNG files.
+    let answer = query_with_masks(
         &local.database,
         &local.text_encoder,
-        &scene_id,
+        &local.serving,
         &Caller::system(),
-        &args.text,
-        options,
+        QueryRequest {
+            scene_id: scene_id.clone(),
+            text: args.text.clone(),
+            options,
+            time: args.time,
+            masks: None,
+        },
     )
     .await?;
-    if !args.frames.is_empty() && !outcome.matches.is_empty() {
+    if !args.frames.is_empty() && !answer.objects.is_empty() {
         std::fs::create_dir_all(&args.out)
             .with_context(|| format!("cannot create {}", args.out.display()))?;
     }
-    let moved = if outcome.matches.is_empty() {
-        None
-    } else {
-        local
-            .serving
-            .objects_at(&scene_id, &Caller::system(), args.time, None)
-            .await?
-    };
     let mut objects = Vec::new();
-    for (rank, found) in outcome.matches.iter().enumerate() {
+    for (rank, found) in answer.objects.iter().enumerate() {
         let level = found.object.level;
         let object_id = found.object.object_id;
         let mut written = Vec::new();
@@ -137,22 +135,21 @@ async fn run_async(args: QueryArgs, config_file: Option<PathBuf>) -> anyhow::Res
                 written.push(path);
             }
         }
-        let place = placement(&found.object, moved.as_deref());
         objects.push(AnswerObject {
             level: level.name().to_string(),
             object_id,
             score: found.score,
             relevancy: found.relevancy,
-            centroid: place.centroid,
-            bounds_min: place.bounds_min,
-            bounds_max: place.bounds_max,
+            centroid: found.object.centroid,
+            bounds_min: found.object.bounds_min,
+            bounds_max: found.object.bounds_max,
             masks: written,
         });
     }
     let answer = Answer {
         scene_id,
-        matched: outcome.matched,
-        model_id: outcome.model_id,
+        matched: answer.matched,
+        model_id: answer.model_id,
         objects,
     };
     println!("{}", serde_json::to_string_pretty(&answer)?);

@@ -4,10 +4,10 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
-use segsplat::splat::ply::read_ply_file;
-use segsplat::splat::render::Renderer;
-use segsplat::splat::train::views::is_held_out;
-use segsplat::splat::{GpuGaussians, RenderCamera, RenderSettings};
+use segsplat_engine::ply::read_ply_file;
+use segsplat_engine::render::Renderer;
+use segsplat_engine::train::views::is_held_out;
+use segsplat_engine::{GpuGaussians, RenderCamera, RenderSettings};
 
 #[derive(Clone, Copy, ValueEnum)]
 pub enum Split {

@@ -6,10 +6,10 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use segsplat::pipeline::reconstruct::{ReconstructMetrics, write_scene_files};
-use segsplat::splat::checkpoint::Checkpoint;
-use segsplat::splat::deform::{DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE, DeformationConfig};
-use segsplat::splat::train::{TrainConfig, Trainer, TrainerMeta};
+use segsplat_engine::checkpoint::Checkpoint;
+use segsplat_engine::deform::{DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE, DeformationConfig};
+use segsplat_engine::train::{TrainConfig, Trainer, TrainerMeta};
+use segsplat_method::scene_files::{ReconstructMetrics, write_scene_files};
 
 #[derive(Args)]
 pub struct TrainArgs {

@@ -3,8 +3,8 @@
 use std::io::Write;
 use std::path::Path;
 
-use segsplat::scene::colmap::ColmapEncoding;
-use segsplat::scene::synthetic::{self, SyntheticSpec};
+use segsplat_scene::colmap::ColmapEncoding;
+use segsplat_scene::synthetic::{self, SyntheticSpec};
 use zip::write::SimpleFileOptions;
 
 /// Small enough to keep uploads and validation fast.

@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use futures::future::BoxFuture;
-use segsplat::jobs::{JobContext, JobFailure, JobHandler, Progress};
+use segsplat_service::jobs::{JobContext, JobFailure, JobHandler, Progress};
 use serde::{Deserialize, Serialize};
 
 pub const STEPS_KIND: &str = "test_steps";

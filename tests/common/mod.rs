@@ -11,9 +11,9 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use segsplat::api::{RunningService, ServiceBuilder};
-use segsplat::config::Config;
-use segsplat::jobs::JobHandler;
+use segsplat_api::{RunningService, ServiceBuilder};
+use segsplat_service::config::Config;
+use segsplat_service::jobs::JobHandler;
 
 pub use models_support::tiny_models_dir;
 
@@ -63,7 +63,7 @@ impl TestService {
         data_dir: &Path,
         configure: impl FnOnce(&mut Config),
     ) -> Option<TestService> {
-        if segsplat::gpu::GpuContext::new_default().is_err() {
+        if segsplat_gpu::GpuContext::new_default().is_err() {
             if std::env::var("SEGSPLAT_SKIP_GPU_TESTS").is_ok() {
                 eprintln!("skipping: no GPU adapter");
                 return None;
@@ -76,8 +76,10 @@ impl TestService {
         config.jobs.heartbeat_secs = 1.0;
         configure(&mut config);
         let service = ServiceBuilder::new(config)
-            .handler(Arc::new(segsplat::pipeline::ReconstructHandler))
-            .handler(Arc::new(segsplat::pipeline::SegmentThenSplatHandler))
+            .handler(Arc::new(segsplat_service::job_kinds::ReconstructHandler))
+            .handler(Arc::new(
+                segsplat_service::job_kinds::SegmentThenSplatHandler,
+            ))
             .start()
             .await
             .unwrap();
@@ -103,14 +105,14 @@ impl TestService {
     /// A gRPC client of this service's `SceneQuery`.
     pub async fn grpc(
         &self,
-    ) -> segsplat::proto::scene_query_client::SceneQueryClient<tonic::transport::Channel> {
+    ) -> segsplat_api::proto::scene_query_client::SceneQueryClient<tonic::transport::Channel> {
         let addr = self.service.grpc_addr().unwrap();
         let channel = tonic::transport::Endpoint::from_shared(format!("http://{addr}"))
             .unwrap()
             .connect()
             .await
             .unwrap();
-        segsplat::proto::scene_query_client::SceneQueryClient::new(channel)
+        segsplat_api::proto::scene_query_client::SceneQueryClient::new(channel)
     }
 
     /// GET returning the status and raw body.

@@ -4,7 +4,7 @@
 
 use std::sync::OnceLock;
 
-use segsplat::gpu::GpuContext;
+use segsplat_gpu::GpuContext;
 use wgpu::util::DeviceExt;
 
 /// The test context, or `None` (with a printed reason) when no adapter exists and

@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use segsplat::models::{ModelStore, OrtRuntime, RuntimeOptions};
+use segsplat_vision::models::{ModelStore, OrtRuntime, RuntimeOptions};
 
 pub fn tiny_models_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/models/tiny")

@@ -3,13 +3,13 @@
 #![allow(dead_code)]
 
 use glam::Vec3;
-use segsplat::gpu::GpuContext;
-use segsplat::scene::colmap::ColmapEncoding;
-use segsplat::scene::synthetic::{
+use segsplat_engine::train::{ObjectLossConfig, TrainConfig};
+use segsplat_gpu::GpuContext;
+use segsplat_scene::colmap::ColmapEncoding;
+use segsplat_scene::synthetic::{
     SYNTHETIC_BACKGROUND, SyntheticSpec, synthetic_objects, write_colmap,
 };
-use segsplat::scene::{Level, LoadOptions, Scene, load_scene};
-use segsplat::splat::train::{ObjectLossConfig, TrainConfig};
+use segsplat_scene::{Level, LoadOptions, Scene, load_scene};
 
 /// The adapter, or `None` (skip, with the reason printed) when there is none and
 /// `SEGSPLAT_SKIP_GPU_TESTS` is set; without that variable a missing adapter fails.

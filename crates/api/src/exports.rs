@@ -1,0 +1,73 @@
+//! Downloads of a scene's trained version: the whole scene (`scene.ply`), the labels sidecar
+//! (`labels.npy`, object ids per Gaussian in PLY order), cameras and reports, and single objects
+//! as their own PLY.
+
+use axum::Extension;
+use axum::extract::{Path as UrlPath, State};
+use axum::http::header;
+use axum::response::{IntoResponse, Response};
+
+use super::error::{ApiResult, ErrorBody};
+use super::params::parse_level;
+use super::state::AppState;
+use segsplat_service::store::Caller;
+
+fn content_type(file: &str) -> &'static str {
+    if file.ends_with(".json") {
+        "application/json"
+    } else {
+        "application/octet-stream"
+    }
+}
+
+fn attachment(name: &str, content_type: &'static str, bytes: Vec<u8>) -> Response {
+    (
+        [
+            (header::CONTENT_TYPE, content_type.to_string()),
+            (
+                header::CONTENT_DISPOSITION,
+                format!("attachment; filename=\"{name}\""),
+            ),
+        ],
+        bytes,
+    )
+        .into_response()
+}
+
+#[utoipa::path(get, path = "/v1/scenes/{id}/trained/{file}", tag = "objects",
+    params(("id" = String, Path, description = "scene id"),
+           ("file" = String, Path, description = "scene.ply, labels.npy, cameras.json, \
+             objects.json, metrics.json or skipped_pairs.json")),
+    responses((status = 200, description = "the file", content_type = "application/octet-stream"),
+              (status = 404, description = "unknown scene or file", body = ErrorBody),
+              (status = 409, description = "the scene is not trained yet", body = ErrorBody)))]
+pub async fn trained_file(
+    State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    UrlPath((id, file)): UrlPath<(String, String)>,
+) -> ApiResult<Response> {
+    let bytes = state.serving.trained_file(&id, &caller, &file).await?;
+    Ok(attachment(&file, content_type(&file), bytes))
+}
+
+#[utoipa::path(get, path = "/v1/scenes/{id}/objects/{level}/{object_id}/ply", tag = "objects",
+    params(("id" = String, Path, description = "scene id"),
+           ("level" = String, Path, description = "small, middle or large"),
+           ("object_id" = u32, Path, description = "object id at that level")),
+    responses((status = 200, description = "the object's Gaussians, Inria-layout PLY",
+               content_type = "application/octet-stream"),
+              (status = 400, body = ErrorBody), (status = 404, body = ErrorBody),
+              (status = 409, body = ErrorBody)))]
+pub async fn object_ply(
+    State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    UrlPath((id, level, object_id)): UrlPath<(String, String, u32)>,
+) -> ApiResult<Response> {
+    let level = parse_level(&level)?;
+    let bytes = state
+        .serving
+        .object_ply(&id, &caller, level, object_id)
+        .await?;
+    let name = format!("{}-{object_id}.ply", level.name());
+    Ok(attachment(&name, "application/octet-stream", bytes))
+}

@@ -1,0 +1,615 @@
+//! gRPC `segsplat.v1.SceneQuery`: scene, job and object reads; the text `Query`, unary and
+//! streamed (robots send poses, get masks per pose), with masks rendered from the GPU scene
+//! cache when a view is given; and `RenderMask` for one object.
+
+use std::pin::Pin;
+use std::sync::Arc;
+use std::time::Instant;
+
+use futures::Stream;
+use tonic::{Request, Response, Status};
+
+use super::auth::grpc_caller;
+use crate::proto;
+use crate::proto::scene_query_server::SceneQuery;
+use segsplat_scene::Level;
+use segsplat_service::serving::{
+    EncodedMask, EncodedMaskData, MaskFormat, MaskView, PinholeIntrinsics, ServingError,
+};
+use segsplat_service::store::jobs::{JobRecord, JobState};
+use segsplat_service::store::objects::ObjectRecord;
+use segsplat_service::store::scenes::SceneRecord;
+use segsplat_service::store::{Caller, Database, StoreError};
+use segsplat_service::usecases::objects::{ListObjectsError, list_objects};
+use segsplat_service::usecases::query::{
+    MaskRequest, QueryError, QueryFailure, QueryRequest as CoreQuery, query_with_masks,
+};
+use segsplat_service::usecases::serving::{ServeFailure, Serving};
+use segsplat_vision::language::{
+    DEFAULT_RELEVANCY_THRESHOLD, Granularity, QueryOptions, SharedTextEncoder,
+};
+
+/// Replies a stream query may have waiting before the client reads them.
+const STREAM_BUFFER: usize = 4;
+
+#[derive(Clone)]
+pub struct SceneQueryService {
+    database: Database,
+    text_encoder: Arc<SharedTextEncoder>,
+    serving: Serving,
+}
+
+impl SceneQueryService {
+    pub fn new(database: Database, text_encoder: Arc<SharedTextEncoder>, serving: Serving) -> Self {
+        Self {
+            database,
+            text_encoder,
+            serving,
+        }
+    }
+
+    /// One query with optional masks: the core of `Query` and of each `StreamQuery` message.
+    async fn answer(
+        &self,
+        query: QueryParts,
+        caller: &Caller,
+    ) -> Result<proto::QueryResponse, Status> {
+        let started = Instant::now();
+        let options = QueryOptions {
+            granularity: granularity_from_proto(query.granularity)?,
+            top_k: (query.top_k.max(1)) as usize,
+            threshold: query.min_score.unwrap_or(DEFAULT_RELEVANCY_THRESHOLD),
+        };
+        let format = mask_format_from_proto(query.mask_encoding)?;
+        let view = match (&query.view, format) {
+            (Some(view), Some(_)) => Some(view_from_proto(view)?),
+            (None, Some(_)) => {
+                return Err(Status::invalid_argument(
+                    "view: masks were asked for (mask_encoding) but no view was given",
+                ));
+            }
+            (_, None) => None,
+        };
+        let time = time_from_proto(query.time.or(query.view.as_ref().and_then(|v| v.time)))?;
+        let masks = match (view, format) {
+            (Some(view), Some(format)) => Some(MaskRequest {
+                view,
+                format,
+                visible: query.visible_only,
+            }),
+            _ => None,
+        };
+        let answer = query_with_masks(
+            &self.database,
+            &self.text_encoder,
+            &self.serving,
+            caller,
+            CoreQuery {
+                scene_id: query.scene_id,
+                text: query.text,
+                options,
+                time,
+                masks,
+            },
+        )
+        .await
+        .map_err(|error| match error {
+            QueryError::Query(failure) => query_failure_status(failure),
+            QueryError::Serve(failure) => serve_failure_status(failure),
+        })?;
+        let matches = answer
+            .objects
+            .into_iter()
+            .map(|found| proto::QueryMatch {
+                mask: found.mask.as_ref().map(|mask| mask_to_proto(mask, true)),
+                visible_mask: found
+                    .visible_mask
+                    .as_ref()
+                    .map(|mask| mask_to_proto(mask, false)),
+                object: Some(object_to_proto(found.object)),
+                score: found.score,
+                relevancy: found.relevancy,
+            })
+            .collect();
+        Ok(proto::QueryResponse {
+            matches,
+            no_match: !answer.matched,
+            model_id: answer.model_id,
+            latency_ms: started.elapsed().as_secs_f64() * 1000.0,
+        })
+    }
+}
+
+/// What one query needs, from a `QueryRequest` or the running state of a stream.
+#[derive(Debug, Clone, Default)]
+struct QueryParts {
+    scene_id: String,
+    text: String,
+    granularity: i32,
+    top_k: u32,
+    min_score: Option<f32>,
+    view: Option<proto::View>,
+    /// Dynamic scenes: the answer's time (else the view's).
+    time: Option<f64>,
+    mask_encoding: i32,
+    visible_only: bool,
+}
+
+impl QueryParts {
+    /// Folds one stream message in: scene, text, granularity and top_k carry over when a
+    /// message leaves them empty; the view and mask encoding are per message.
+    fn update(&mut self, message: proto::StreamQueryRequest) {
+        if !message.scene_id.is_empty() {
+            self.scene_id = message.scene_id;
+        }
+        if !message.text.is_empty() {
+            self.text = message.text;
+        }
+        if message.granularity != 0 {
+            self.granularity = message.granularity;
+        }
+        if message.top_k != 0 {
+            self.top_k = message.top_k;
+        }
+        self.view = message.view.map(|pose| proto::View {
+            source: Some(proto::view::Source::Pose(pose)),
+            time: message.time,
+            max_side: None,
+        });
+        self.time = message.time;
+        self.mask_encoding = message.mask_encoding;
+    }
+}
+
+fn mask_format_from_proto(value: i32) -> Result<Option<MaskFormat>, Status> {
+    match proto::MaskEncoding::try_from(value) {
+        Ok(proto::MaskEncoding::None) => Ok(None),
+        Ok(proto::MaskEncoding::Png) => Ok(Some(MaskFormat::Png)),
+        Ok(proto::MaskEncoding::CocoRle) => Ok(Some(MaskFormat::CocoRle)),
+        Err(_) => Err(Status::invalid_argument(format!(
+            "mask_encoding: unknown value {value}"
+        ))),
+    }
+}
+
+/// A requested time, checked to be a number.
+fn time_from_proto(time: Option<f64>) -> Result<Option<f32>, Status> {
+    match time {
+        Some(value) if !value.is_finite() => Err(Status::invalid_argument(format!(
+            "time: {value} is not a finite number"
+        ))),
+        other => Ok(other.map(|value| value as f32)),
+    }
+}
+
+fn view_from_proto(view: &proto::View) -> Result<MaskView, Status> {
+    match &view.source {
+        Some(proto::view::Source::FrameIndex(index)) => Ok(MaskView::Frame {
+            index: *index as usize,
+            max_side: view.max_side,
+        }),
+        Some(proto::view::Source::Pose(pose)) => pose_view_from_proto(pose),
+        None => Err(Status::invalid_argument("view: set frame_index or pose")),
+    }
+}
+
+fn pose_view_from_proto(view: &proto::PoseView) -> Result<MaskView, Status> {
+    let values = view
+        .pose
+        .as_ref()
+        .map(|pose| pose.camera_to_world.as_slice())
+        .unwrap_or_default();
+    if values.len() != 16 {
+        return Err(Status::invalid_argument(format!(
+            "view.pose.camera_to_world: expected 16 values (row-major 4x4), got {}",
+            values.len()
+        )));
+    }
+    let mut rows = [[0.0f64; 4]; 4];
+    for (index, value) in values.iter().enumerate() {
+        rows[index / 4][index % 4] = *value;
+    }
+    let intrinsics = view
+        .intrinsics
+        .as_ref()
+        .ok_or_else(|| Status::invalid_argument("view.intrinsics: required with a pose"))?;
+    Ok(MaskView::Pose {
+        camera_to_world: rows,
+        intrinsics: PinholeIntrinsics {
+            fx: intrinsics.fx,
+            fy: intrinsics.fy,
+            cx: intrinsics.cx,
+            cy: intrinsics.cy,
+            width: intrinsics.width,
+            height: intrinsics.height,
+        },
+    })
+}
+
+fn mask_to_proto(mask: &EncodedMask, amodal: bool) -> proto::Mask {
+    let (encoding, data) = match &mask.data {
+        EncodedMaskData::Png(bytes) => (proto::MaskEncoding::Png, bytes.clone()),
+        EncodedMaskData::CocoRle(counts) => {
+            (proto::MaskEncoding::CocoRle, counts.as_bytes().to_vec())
+        }
+    };
+    proto::Mask {
+        encoding: encoding as i32,
+        width: mask.width,
+        height: mask.height,
+        data,
+        amodal,
+    }
+}
+
+fn serve_failure_status(failure: ServeFailure) -> Status {
+    let message = failure.to_string();
+    match failure {
+        ServeFailure::SceneNotFound(_)
+        | ServeFailure::FileNotStored { .. }
+        | ServeFailure::UnknownFile(_) => Status::not_found(message),
+        ServeFailure::NotTrained(_) => Status::failed_precondition(message),
+        ServeFailure::Serving(error) => match error {
+            ServingError::FrameOutOfRange { .. } | ServingError::BadView(_) => {
+                Status::invalid_argument(message)
+            }
+            ServingError::NoSuchObject { .. } => Status::not_found(message),
+            ServingError::MissingFile { .. } => Status::failed_precondition(message),
+            ServingError::NoGpu(_) => Status::unavailable(message),
+            ServingError::Corrupt { .. }
+            | ServingError::Storage(_)
+            | ServingError::Gpu(_)
+            | ServingError::Encoding(_) => {
+                tracing::error!(%message, "gRPC mask request failed");
+                Status::internal(message)
+            }
+        },
+        ServeFailure::Store(_) | ServeFailure::Worker(_) => {
+            tracing::error!(%message, "gRPC mask request failed");
+            Status::internal(message)
+        }
+    }
+}
+
+fn query_failure_status(failure: QueryFailure) -> Status {
+    let message = failure.to_string();
+    match failure {
+        QueryFailure::BadOptions(_) | QueryFailure::EmptyText => Status::invalid_argument(message),
+        QueryFailure::SceneNotFound(_) => Status::not_found(message),
+        QueryFailure::NoObjects(_) | QueryFailure::NoEmbeddings { .. } => {
+            Status::failed_precondition(message)
+        }
+        QueryFailure::NoTextEncoder(_) | QueryFailure::EmbeddingWidth(_) => {
+            Status::unavailable(message)
+        }
+        QueryFailure::Store(_) | QueryFailure::Encoding(_) => {
+            tracing::error!(%message, "gRPC query failed");
+            Status::internal(message)
+        }
+    }
+}
+
+fn granularity_from_proto(value: i32) -> Result<Granularity, Status> {
+    match proto::Granularity::try_from(value) {
+        Ok(proto::Granularity::Auto) => Ok(Granularity::Auto),
+        Ok(proto::Granularity::Small) => Ok(Granularity::Small),
+        Ok(proto::Granularity::Middle) => Ok(Granularity::Middle),
+        Ok(proto::Granularity::Large) => Ok(Granularity::Large),
+        Err(_) => Err(Status::invalid_argument(format!(
+            "granularity: unknown value {value}"
+        ))),
+    }
+}
+
+fn internal(error: StoreError) -> Status {
+    tracing::error!(%error, "gRPC request failed");
+    Status::internal(error.to_string())
+}
+
+fn job_state_to_proto(state: JobState) -> proto::JobState {
+    match state {
+        JobState::Queued => proto::JobState::Queued,
+        JobState::Running => proto::JobState::Running,
+        JobState::Succeeded => proto::JobState::Succeeded,
+        JobState::Failed => proto::JobState::Failed,
+        JobState::Cancelled => proto::JobState::Cancelled,
+    }
+}
+
+fn level_to_proto(level: Level) -> proto::Level {
+    match level {
+        Level::Small => proto::Level::Small,
+        Level::Middle => proto::Level::Middle,
+        Level::Large => proto::Level::Large,
+    }
+}
+
+fn level_from_proto(level: proto::Level) -> Option<Level> {
+    match level {
+        proto::Level::Unspecified => None,
+        proto::Level::Small => Some(Level::Small),
+        proto::Level::Middle => Some(Level::Middle),
+        proto::Level::Large => Some(Level::Large),
+    }
+}
+
+fn vec3(values: [f32; 3]) -> proto::Vec3 {
+    proto::Vec3 {
+        x: values[0],
+        y: values[1],
+        z: values[2],
+    }
+}
+
+fn progress_to_proto(progress: &serde_json::Value) -> Option<proto::Progress> {
+    let parsed: segsplat_service::jobs::Progress = serde_json::from_value(progress.clone()).ok()?;
+    Some(proto::Progress {
+        stage: parsed.stage,
+        step: parsed.step,
+        total_steps: parsed.total_steps,
+        metrics: parsed.metrics.into_iter().collect(),
+        eta_secs: parsed.eta_secs,
+    })
+}
+
+fn job_to_proto(job: JobRecord) -> proto::Job {
+    proto::Job {
+        state: job_state_to_proto(job.state) as i32,
+        progress: job.progress.as_ref().and_then(progress_to_proto),
+        config_json: job.config.to_string(),
+        id: job.id,
+        scene_id: job.scene_id,
+        kind: job.kind,
+        attempts: job.attempts,
+        max_attempts: job.max_attempts,
+        error: job.error,
+        created_at_ms: job.created_at_ms,
+        updated_at_ms: job.updated_at_ms,
+        cancel_requested: job.cancel_requested,
+    }
+}
+
+fn scene_to_proto(scene: SceneRecord) -> proto::Scene {
+    proto::Scene {
+        format: serde_json::to_value(scene.summary.format)
+            .ok()
+            .and_then(|value| value.as_str().map(str::to_string))
+            .unwrap_or_default(),
+        frame_count: scene.summary.frame_count,
+        sparse_point_count: scene.summary.sparse_point_count,
+        has_masks: !scene.summary.mask_levels.is_empty(),
+        id: scene.id,
+        name: scene.name,
+        created_at_ms: scene.created_at_ms,
+    }
+}
+
+fn object_to_proto(object: ObjectRecord) -> proto::ObjectInfo {
+    proto::ObjectInfo {
+        object_id: object.object_id,
+        level: level_to_proto(object.level) as i32,
+        gaussian_count: object.gaussian_count,
+        centroid: Some(vec3(object.centroid)),
+        bounds: Some(proto::Bounds3 {
+            min: Some(vec3(object.bounds_min)),
+            max: Some(vec3(object.bounds_max)),
+        }),
+        mean_color: Some(vec3(object.mean_color)),
+    }
+}
+
+type StreamQueryStream =
+    Pin<Box<dyn Stream<Item = Result<proto::StreamQueryResponse, Status>> + Send + 'static>>;
+
+#[tonic::async_trait]
+impl SceneQuery for SceneQueryService {
+    async fn query(
+        &self,
+        request: Request<proto::QueryRequest>,
+    ) -> Result<Response<proto::QueryResponse>, Status> {
+        let caller = grpc_caller(&request)?;
+        let request = request.into_inner();
+        let parts = QueryParts {
+            scene_id: request.scene_id,
+            text: request.text,
+            granularity: request.granularity,
+            top_k: request.top_k,
+            min_score: request.min_score,
+            time: request.time,
+            view: request.view,
+            mask_encoding: request.mask_encoding,
+            visible_only: request.visible_only,
+        };
+        Ok(Response::new(self.answer(parts, &caller).await?))
+    }
+
+    type StreamQueryStream = StreamQueryStream;
+
+    /// Answers each incoming message in order, echoing its `sequence`. A message that fails
+    /// (say, a bad pose) ends the stream with that error, like a unary call would.
+    async fn stream_query(
+        &self,
+        request: Request<tonic::Streaming<proto::StreamQueryRequest>>,
+    ) -> Result<Response<Self::StreamQueryStream>, Status> {
+        let caller = grpc_caller(&request)?;
+        let mut incoming = request.into_inner();
+        let service = self.clone();
+        let (replies, receiver) = tokio::sync::mpsc::channel(STREAM_BUFFER);
+        tokio::spawn(async move {
+            let mut parts = QueryParts::default();
+            loop {
+                let message = match incoming.message().await {
+                    Ok(Some(message)) => message,
+                    Ok(None) => break,
+                    Err(status) => {
+                        tracing::debug!(%status, "stream query client went away");
+                        break;
+                    }
+                };
+                let sequence = message.sequence;
+                parts.update(message);
+                let reply = service
+                    .answer(parts.clone(), &caller)
+                    .await
+                    .map(|response| proto::StreamQueryResponse {
+                        sequence,
+                        response: Some(response),
+                    });
+                let failed = reply.is_err();
+                if replies.send(reply).await.is_err() || failed {
+                    break;
+                }
+            }
+        });
+        Ok(Response::new(Box::pin(
+            tokio_stream::wrappers::ReceiverStream::new(receiver),
+        )))
+    }
+
+    async fn list_objects(
+        &self,
+        request: Request<proto::ListObjectsRequest>,
+    ) -> Result<Response<proto::ListObjectsResponse>, Status> {
+        let caller = grpc_caller(&request)?;
+        let request = request.into_inner();
+        let level = proto::Level::try_from(request.level).map_err(|_| {
+            Status::invalid_argument(format!("level: unknown value {}", request.level))
+        })?;
+        let objects = list_objects(
+            &self.database,
+            &self.serving,
+            &caller,
+            &request.scene_id,
+            level_from_proto(level),
+            time_from_proto(request.time)?,
+        )
+        .await
+        .map_err(|error| match error {
+            ListObjectsError::SceneNotFound(_) => Status::not_found(error.to_string()),
+            ListObjectsError::Store(store) => internal(store),
+            ListObjectsError::Serve(failure) => serve_failure_status(failure),
+        })?;
+        Ok(Response::new(proto::ListObjectsResponse {
+            objects: objects.into_iter().map(object_to_proto).collect(),
+        }))
+    }
+
+    async fn render_mask(
+        &self,
+        request: Request<proto::RenderMaskRequest>,
+    ) -> Result<Response<proto::RenderMaskResponse>, Status> {
+        let caller = grpc_caller(&request)?;
+        let request = request.into_inner();
+        let level = proto::Level::try_from(request.level)
+            .ok()
+            .and_then(level_from_proto)
+            .ok_or_else(|| {
+                Status::invalid_argument(format!(
+                    "level: {} is not small, middle or large",
+                    request.level
+                ))
+            })?;
+        let view = request
+            .view
+            .as_ref()
+            .ok_or_else(|| Status::invalid_argument("view: required"))
+            .and_then(view_from_proto)?;
+        let format = mask_format_from_proto(request.mask_encoding)?.unwrap_or_default();
+        let time = time_from_proto(request.view.as_ref().and_then(|v| v.time))?;
+        let masks = self
+            .serving
+            .render_masks(
+                &request.scene_id,
+                &caller,
+                view,
+                time,
+                vec![(level, request.object_id)],
+                request.visible_only,
+                format,
+            )
+            .await
+            .map_err(serve_failure_status)?;
+        let first = masks
+            .first()
+            .ok_or_else(|| Status::internal("no mask rendered"))?;
+        let mask = match (&first.visible_mask, request.visible_only) {
+            (Some(visible), true) => mask_to_proto(visible, false),
+            _ => mask_to_proto(&first.mask, true),
+        };
+        Ok(Response::new(proto::RenderMaskResponse {
+            mask: Some(mask),
+        }))
+    }
+
+    async fn get_job(
+        &self,
+        request: Request<proto::GetJobRequest>,
+    ) -> Result<Response<proto::Job>, Status> {
+        let caller = grpc_caller(&request)?;
+        let job_id = request.into_inner().job_id;
+        let job = self
+            .database
+            .get_job(&job_id, &caller)
+            .await
+            .map_err(internal)?
+            .ok_or_else(|| Status::not_found(format!("job {job_id} not found")))?;
+        Ok(Response::new(job_to_proto(job)))
+    }
+
+    async fn get_scene(
+        &self,
+        request: Request<proto::GetSceneRequest>,
+    ) -> Result<Response<proto::Scene>, Status> {
+        let caller = grpc_caller(&request)?;
+        let scene_id = request.into_inner().scene_id;
+        let scene = self
+            .database
+            .get_scene(&scene_id, &caller)
+            .await
+            .map_err(internal)?
+            .ok_or_else(|| Status::not_found(format!("scene {scene_id} not found")))?;
+        Ok(Response::new(scene_to_proto(scene)))
+    }
+
+    async fn list_scenes(
+        &self,
+        request: Request<proto::ListScenesRequest>,
+    ) -> Result<Response<proto::ListScenesResponse>, Status> {
+        let caller = grpc_caller(&request)?;
+        let scenes = self.database.list_scenes(&caller).await.map_err(internal)?;
+        Ok(Response::new(proto::ListScenesResponse {
+            scenes: scenes.into_iter().map(scene_to_proto).collect(),
+        }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stream_messages_carry_their_time_with_and_without_a_pose() {
+        let mut parts = QueryParts::default();
+        parts.update(proto::StreamQueryRequest {
+            scene_id: "scene".into(),
+            text: "mug".into(),
+            view: Some(proto::PoseView::default()),
+            time: Some(0.25),
+            ..Default::default()
+        });
+        assert_eq!(parts.time, Some(0.25));
+        assert_eq!(parts.view.as_ref().and_then(|view| view.time), Some(0.25));
+        // A later message without a pose still moves the answer's time; text and scene stay.
+        parts.update(proto::StreamQueryRequest {
+            time: Some(0.75),
+            ..Default::default()
+        });
+        assert_eq!((parts.time, parts.view.is_none()), (Some(0.75), true));
+        assert_eq!(
+            (parts.scene_id.as_str(), parts.text.as_str()),
+            ("scene", "mug")
+        );
+        assert!(time_from_proto(Some(f64::NAN)).is_err());
+        assert_eq!(time_from_proto(Some(0.5)).ok().flatten(), Some(0.5));
+    }
+}

@@ -1,0 +1,33 @@
+//! The service edge: REST (axum) and gRPC (tonic) APIs, authentication, metrics, health, and
+//! the process lifecycle that ties them to the store and the worker pool.
+
+mod auth;
+pub mod error;
+mod exports;
+mod grpc;
+mod jobs;
+mod masks;
+mod metrics;
+mod objects;
+mod openapi;
+mod ops;
+mod params;
+pub mod query;
+mod router;
+mod scenes;
+mod server;
+mod state;
+mod upload_commit;
+
+pub use openapi::ApiDoc;
+pub use server::{RunningService, ServiceBuilder, ServiceError, ServiceMode};
+
+/// Generated gRPC types and services (`crates/api/proto/segsplat/v1`).
+pub mod proto {
+    #![allow(clippy::all, missing_docs)]
+    tonic::include_proto!("segsplat.v1");
+
+    /// Encoded file descriptors, for the gRPC reflection service.
+    pub const FILE_DESCRIPTOR_SET: &[u8] =
+        tonic::include_file_descriptor_set!("segsplat_descriptor");
+}

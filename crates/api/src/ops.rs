@@ -1,0 +1,139 @@
+//! Liveness, readiness and metrics endpoints.
+
+use axum::Json;
+use axum::extract::State;
+use axum::http::{StatusCode, header};
+use axum::response::IntoResponse;
+use serde::Serialize;
+use utoipa::ToSchema;
+
+use super::metrics::refresh_queue_gauges;
+use super::state::AppState;
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct HealthResponse {
+    pub status: String,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct ReadinessCheck {
+    pub ok: bool,
+    pub detail: String,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct ReadinessChecks {
+    pub database: ReadinessCheck,
+    pub adapters: ReadinessCheck,
+    pub models: ReadinessCheck,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct ReadinessResponse {
+    pub ready: bool,
+    /// Why the service is not ready; empty when it is.
+    pub reasons: Vec<String>,
+    pub checks: ReadinessChecks,
+    /// The GPU adapters workers use (as reported by wgpu).
+    #[schema(value_type = Vec<Object>)]
+    pub adapters: Vec<segsplat_gpu::AdapterReport>,
+}
+
+/// The process is alive.
+#[utoipa::path(get, path = "/healthz", tag = "ops",
+    responses((status = 200, body = HealthResponse)))]
+pub async fn healthz() -> Json<HealthResponse> {
+    Json(HealthResponse {
+        status: "ok".to_string(),
+    })
+}
+
+/// Whether the service can do its work: database reachable, GPU workers available, models.
+#[utoipa::path(get, path = "/readyz", tag = "ops",
+    responses((status = 200, body = ReadinessResponse), (status = 503, body = ReadinessResponse)))]
+pub async fn readyz(State(state): State<AppState>) -> impl IntoResponse {
+    let database = match state.database.ping().await {
+        Ok(()) => ReadinessCheck {
+            ok: true,
+            detail: "reachable".to_string(),
+        },
+        Err(error) => ReadinessCheck {
+            ok: false,
+            detail: error.to_string(),
+        },
+    };
+    let workers = &state.workers;
+    let adapters = if !workers.enabled {
+        ReadinessCheck {
+            ok: true,
+            detail: "workers run in other processes".to_string(),
+        }
+    } else if workers.gpu_slots > 0 {
+        ReadinessCheck {
+            ok: true,
+            detail: format!(
+                "{} GPU worker slot(s) on {}",
+                workers.gpu_slots,
+                workers
+                    .adapters
+                    .iter()
+                    .map(|adapter| format!("{} ({})", adapter.name, adapter.backend))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        }
+    } else {
+        ReadinessCheck {
+            ok: false,
+            detail: if workers.problems.is_empty() {
+                "no GPU worker slots".to_string()
+            } else {
+                workers.problems.join("; ")
+            },
+        }
+    };
+    let (models_ok, models_detail) = state.models.readiness();
+    let models = ReadinessCheck {
+        ok: models_ok,
+        detail: models_detail,
+    };
+    let mut reasons = Vec::new();
+    for (name, check) in [
+        ("database", &database),
+        ("adapters", &adapters),
+        ("models", &models),
+    ] {
+        if !check.ok {
+            reasons.push(format!("{name}: {}", check.detail));
+        }
+    }
+    let ready = reasons.is_empty();
+    let body = ReadinessResponse {
+        ready,
+        reasons,
+        checks: ReadinessChecks {
+            database,
+            adapters,
+            models,
+        },
+        adapters: workers.adapters.clone(),
+    };
+    let status = if ready {
+        StatusCode::OK
+    } else {
+        StatusCode::SERVICE_UNAVAILABLE
+    };
+    (status, Json(body))
+}
+
+/// Prometheus metrics in the text exposition format.
+#[utoipa::path(get, path = "/metrics", tag = "ops",
+    responses((status = 200, description = "Prometheus text format", body = String)))]
+pub async fn metrics(State(state): State<AppState>) -> impl IntoResponse {
+    refresh_queue_gauges(&state.database).await;
+    state.metrics.run_upkeep();
+    (
+        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
+        state.metrics.render(),
+    )
+}

@@ -1,0 +1,151 @@
+//! The pinhole camera the renderer draws through.
+//!
+//! Conventions (OpenCV, as `scene::Frame`): camera x right, y down, z forward; pixel (u, v) has its
+//! centre at (u + 0.5, v + 0.5); a camera-space point projects to `(fx * x / z + cx, fy * y / z + cy)`.
+
+use glam::{Mat4, Vec3};
+
+use segsplat_scene::Frame;
+
+#[derive(Debug, thiserror::Error)]
+pub enum CameraError {
+    #[error("frame {frame:?}: {problem}")]
+    Invalid { frame: String, problem: String },
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RenderCamera {
+    pub width: u32,
+    pub height: u32,
+    pub fx: f32,
+    pub fy: f32,
+    pub cx: f32,
+    pub cy: f32,
+    /// World-to-camera rigid transform (OpenCV axes).
+    pub camera_from_world: Mat4,
+    /// Gaussians whose camera depth is at or below `near` (or at or beyond `far`) are culled.
+    pub near: f32,
+    pub far: f32,
+}
+
+/// Near plane used for frames (3DGS / gsplat default).
+pub const DEFAULT_NEAR: f32 = 0.01;
+/// Far plane used for frames.
+pub const DEFAULT_FAR: f32 = 1.0e10;
+
+impl RenderCamera {
+    /// The camera of `frame`, with the image scaled by `resolution_scale` (e.g. 0.5 halves width
+    /// and height; intrinsics scale with the pixel grid).
+    pub fn from_frame(frame: &Frame, resolution_scale: f32) -> Result<Self, CameraError> {
+        let invalid = |problem: String| CameraError::Invalid {
+            frame: frame.name.clone(),
+            problem,
+        };
+        if !(resolution_scale.is_finite() && resolution_scale > 0.0) {
+            return Err(invalid(format!(
+                "resolution scale {resolution_scale} must be a positive number"
+            )));
+        }
+        let intrinsics = &frame.intrinsics;
+        let width = (intrinsics.width as f32 * resolution_scale).round() as u32;
+        let height = (intrinsics.height as f32 * resolution_scale).round() as u32;
+        if width == 0 || height == 0 {
+            return Err(invalid(format!(
+                "image of {}x{} scaled by {resolution_scale} is empty",
+                intrinsics.width, intrinsics.height
+            )));
+        }
+        // Scale by the realised pixel grid so rounding keeps the field of view exact.
+        let scale_x = width as f64 / intrinsics.width as f64;
+        let scale_y = height as f64 / intrinsics.height as f64;
+        let determinant = frame.world_from_camera.determinant();
+        if !determinant.is_finite() || determinant.abs() < 1e-12 {
+            return Err(invalid("world_from_camera is not invertible".to_string()));
+        }
+        let camera = Self {
+            width,
+            height,
+            fx: (intrinsics.fx * scale_x) as f32,
+            fy: (intrinsics.fy * scale_y) as f32,
+            cx: (intrinsics.cx * scale_x) as f32,
+            cy: (intrinsics.cy * scale_y) as f32,
+            camera_from_world: frame.world_from_camera.inverse(),
+            near: DEFAULT_NEAR,
+            far: DEFAULT_FAR,
+        };
+        if !(camera.fx > 0.0 && camera.fy > 0.0) {
+            return Err(invalid(format!(
+                "focal lengths fx={} fy={} must be positive",
+                intrinsics.fx, intrinsics.fy
+            )));
+        }
+        Ok(camera)
+    }
+
+    /// Camera centre in world coordinates.
+    pub fn position(&self) -> Vec3 {
+        self.camera_from_world.inverse().w_axis.truncate()
+    }
+
+    /// Number of 16x16 tiles across and down.
+    pub fn tile_grid(&self) -> [u32; 2] {
+        [
+            self.width.div_ceil(crate::TILE_SIZE),
+            self.height.div_ceil(crate::TILE_SIZE),
+        ]
+    }
+
+    pub fn pixel_count(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use segsplat_scene::Intrinsics;
+
+    fn frame(world_from_camera: Mat4) -> Frame {
+        Frame {
+            name: "f0".to_string(),
+            image_path: "f0.png".into(),
+            intrinsics: Intrinsics {
+                width: 101,
+                height: 60,
+                fx: 100.0,
+                fy: 90.0,
+                cx: 50.5,
+                cy: 30.0,
+                model: "PINHOLE".to_string(),
+                distortion: vec![],
+            },
+            world_from_camera,
+            time: None,
+            source_id: None,
+            split: None,
+        }
+    }
+
+    #[test]
+    fn from_frame_inverts_pose_and_scales_intrinsics() {
+        let world_from_camera = Mat4::from_translation(Vec3::new(1.0, 2.0, 3.0));
+        let camera = RenderCamera::from_frame(&frame(world_from_camera), 0.5).unwrap();
+        assert_eq!((camera.width, camera.height), (51, 30));
+        assert!((camera.fx - 100.0 * 51.0 / 101.0).abs() < 1e-4);
+        assert!((camera.cy - 15.0).abs() < 1e-5);
+        let p = camera
+            .camera_from_world
+            .transform_point3(Vec3::new(1.0, 2.0, 4.0));
+        assert!((p - Vec3::new(0.0, 0.0, 1.0)).length() < 1e-6);
+        assert!((camera.position() - Vec3::new(1.0, 2.0, 3.0)).length() < 1e-6);
+    }
+
+    #[test]
+    fn from_frame_rejects_singular_pose_and_bad_scale() {
+        assert!(RenderCamera::from_frame(&frame(Mat4::ZERO), 1.0).is_err());
+        let error = RenderCamera::from_frame(&frame(Mat4::IDENTITY), 0.0)
+            .unwrap_err()
+            .to_string();
+        assert!(error.contains("f0") && error.contains("scale"), "{error}");
+    }
+}

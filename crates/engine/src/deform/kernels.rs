@@ -1,0 +1,343 @@
+//! The deformation field's pipelines and the small typed dispatch helpers over them.
+
+use wgpu::util::DeviceExt;
+
+use segsplat_gpu::GemmLayout;
+use segsplat_gpu::kernel::{workgroups_2d, workgroups_for};
+use segsplat_gpu::validation::validated;
+use segsplat_gpu::{GpuContext, GpuError, Kernel};
+
+const GEMM_COMMON: &str = include_str!("shaders/mlp_gemm_common.wgsl");
+const GEMM: &str = include_str!("shaders/mlp_gemm.wgsl");
+const GEMM_ROWS: &str = include_str!("shaders/mlp_gemm_rows.wgsl");
+const COLUMN_SUMS: &str = include_str!("shaders/mlp_column_sums.wgsl");
+const SPLIT_REDUCE: &str = include_str!("shaders/mlp_split_reduce.wgsl");
+const ENCODE: &str = include_str!("shaders/deform_encode.wgsl");
+const APPLY_COMMON: &str = include_str!("shaders/deform_apply_common.wgsl");
+const APPLY_FORWARD: &str = include_str!("shaders/deform_apply_forward.wgsl");
+const APPLY_BACKWARD: &str = include_str!("shaders/deform_apply_backward.wgsl");
+
+/// Output tile side of `mlp_gemm.wgsl`.
+const GEMM_TILE: u32 = 64;
+/// Depth tile of `mlp_gemm.wgsl`: split ranges are multiples of it.
+const GEMM_DEPTH_TILE: u32 = 16;
+/// Rows and columns of a `mlp_gemm_rows.wgsl` workgroup (64 invocations of 4 x 8 outputs).
+const GEMM_ROWS_ROWS: u32 = 256;
+const GEMM_ROWS_COLS: u32 = 8;
+pub const FLAG_BIAS: u32 = 1;
+pub const FLAG_RELU: u32 = 2;
+pub const FLAG_MASK: u32 = 4;
+
+/// Uniform block of the GEMM kernels (`mlp_gemm_common.wgsl` lists the three products).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct GemmParams {
+    pub rows: u32,
+    pub cols: u32,
+    pub depth: u32,
+    pub depth_per_split: u32,
+    pub a_offset: u32,
+    pub a_row_stride: u32,
+    pub a_depth_stride: u32,
+    pub b_offset: u32,
+    pub b_depth_stride: u32,
+    pub b_col_stride: u32,
+    pub c_offset: u32,
+    pub c_row_stride: u32,
+    pub c_split_stride: u32,
+    pub bias_offset: u32,
+    pub mask_offset: u32,
+    pub mask_row_stride: u32,
+    pub flags: u32,
+    pub _pad: [u32; 3],
+}
+
+/// The buffers of one GEMM; `bias` and `mask` are bound even when the flags ignore them.
+pub struct GemmBuffers<'a> {
+    pub a: &'a wgpu::Buffer,
+    pub b: &'a wgpu::Buffer,
+    pub bias: &'a wgpu::Buffer,
+    pub mask: &'a wgpu::Buffer,
+    pub c: &'a wgpu::Buffer,
+}
+
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ColumnSumParams {
+    rows: u32,
+    cols: u32,
+    rows_per_split: u32,
+    source_offset: u32,
+    source_row_stride: u32,
+    _pad: [u32; 3],
+}
+
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ReduceParams {
+    count: u32,
+    splits: u32,
+    target_offset: u32,
+    _pad: u32,
+}
+
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct EncodeParams {
+    pub count: u32,
+    pub first: u32,
+    pub row_stride: u32,
+    pub position_frequencies: u32,
+    pub time_frequencies: u32,
+    pub time: f32,
+    pub _pad: [u32; 2],
+}
+
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct ApplyParams {
+    pub count: u32,
+    pub first: u32,
+    pub head_stride: u32,
+    pub screw: u32,
+}
+
+/// How the rows summed by a weight or bias gradient are split: enough splits to fill a GPU when
+/// the output is small, each a whole number of depth tiles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RowSplit {
+    pub splits: u32,
+    pub rows_per_split: u32,
+}
+
+pub const MAX_SPLITS: u32 = 32;
+
+impl RowSplit {
+    pub fn for_rows(rows: u32) -> Self {
+        let wanted = rows.div_ceil(1024).clamp(1, MAX_SPLITS);
+        let rows_per_split =
+            rows.div_ceil(wanted).div_ceil(GEMM_DEPTH_TILE).max(1) * GEMM_DEPTH_TILE;
+        Self {
+            splits: rows.div_ceil(rows_per_split).max(1),
+            rows_per_split,
+        }
+    }
+}
+
+/// Which GEMM kernel the field runs: both compute the same products.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GemmKernel {
+    /// `mlp_gemm.wgsl`: 64x64 output tiles staged through workgroup memory (hardware GPUs).
+    Tiled,
+    /// `mlp_gemm_rows.wgsl`: a 4 x 8 output block per invocation, no workgroup memory or
+    /// barriers (software adapters, where a workgroup is a loop over SIMD lanes on a CPU core).
+    Rows,
+}
+
+impl GemmKernel {
+    /// The kernel that suits the adapter, unless the context forces one
+    /// ([`segsplat_gpu::KernelChoices`]).
+    pub fn for_adapter(ctx: &GpuContext) -> Self {
+        match ctx.kernel_choices.gemm {
+            Some(GemmLayout::Tiled) => Self::Tiled,
+            Some(GemmLayout::Rows) => Self::Rows,
+            None if ctx.report.is_software => Self::Rows,
+            None => Self::Tiled,
+        }
+    }
+}
+
+#[derive(Debug)]
+pub struct DeformKernels {
+    gemm: Kernel,
+    gemm_kind: GemmKernel,
+    column_sums: Kernel,
+    split_reduce: Kernel,
+    encode: Kernel,
+    apply_forward: Kernel,
+    apply_backward: Kernel,
+}
+
+fn uniform(ctx: &GpuContext, label: &str, bytes: &[u8]) -> wgpu::Buffer {
+    ctx.device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: bytes,
+            usage: wgpu::BufferUsages::UNIFORM,
+        })
+}
+
+fn per_item_grid(ctx: &GpuContext, items: u32) -> [u32; 3] {
+    workgroups_2d(
+        workgroups_for(items, 256),
+        ctx.limits.max_compute_workgroups_per_dimension,
+    )
+}
+
+impl DeformKernels {
+    pub fn with_gemm(ctx: &GpuContext, gemm_kind: GemmKernel) -> Result<Self, GpuError> {
+        let build = |label: &'static str, sources: &[&str], entry: &str| {
+            validated(ctx, label, || Kernel::new(ctx, label, sources, entry, &[]))
+        };
+        let gemm = match gemm_kind {
+            GemmKernel::Tiled => build("mlp_gemm", &[GEMM_COMMON, GEMM], "gemm")?,
+            GemmKernel::Rows => build("mlp_gemm_rows", &[GEMM_COMMON, GEMM_ROWS], "gemm_rows")?,
+        };
+        Ok(Self {
+            gemm,
+            gemm_kind,
+            column_sums: build("mlp_column_sums", &[COLUMN_SUMS], "column_sums")?,
+            split_reduce: build("mlp_split_reduce", &[SPLIT_REDUCE], "split_reduce")?,
+            encode: build("deform_encode", &[ENCODE], "deform_encode")?,
+            apply_forward: build(
+                "deform_apply_forward",
+                &[APPLY_COMMON, APPLY_FORWARD],
+                "deform_apply_forward",
+            )?,
+            apply_backward: build(
+                "deform_apply_backward",
+                &[APPLY_COMMON, APPLY_BACKWARD],
+                "deform_apply_backward",
+            )?,
+        })
+    }
+
+    /// Records `c = epilogue(a b)` over `splits` depth ranges (`params.c_split_stride` apart).
+    pub fn gemm(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        params: GemmParams,
+        splits: u32,
+        buffers: GemmBuffers<'_>,
+    ) {
+        let uniforms = uniform(ctx, "mlp_gemm params", bytemuck::bytes_of(&params));
+        let bind = self.gemm.bind(
+            ctx,
+            &[
+                &uniforms,
+                buffers.a,
+                buffers.b,
+                buffers.bias,
+                buffers.mask,
+                buffers.c,
+            ],
+        );
+        let (col_block, row_block) = match self.gemm_kind {
+            GemmKernel::Tiled => (GEMM_TILE, GEMM_TILE),
+            GemmKernel::Rows => (GEMM_ROWS_COLS, GEMM_ROWS_ROWS),
+        };
+        let grid = [
+            params.cols.div_ceil(col_block).max(1),
+            params.rows.div_ceil(row_block).max(1),
+            splits.max(1),
+        ];
+        self.gemm.dispatch(encoder, &bind, grid);
+    }
+
+    /// Records per-split column sums of `source` rows (`[rows, cols]`, row stride given) into
+    /// `partials[split * cols + col]`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn column_sums(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        source: &wgpu::Buffer,
+        source_offset: u32,
+        source_row_stride: u32,
+        rows: u32,
+        cols: u32,
+        split: RowSplit,
+        partials: &wgpu::Buffer,
+    ) {
+        let params = ColumnSumParams {
+            rows,
+            cols,
+            rows_per_split: split.rows_per_split,
+            source_offset,
+            source_row_stride,
+            _pad: [0; 3],
+        };
+        let uniforms = uniform(ctx, "mlp_column_sums params", bytemuck::bytes_of(&params));
+        let bind = self.column_sums.bind(ctx, &[&uniforms, source, partials]);
+        self.column_sums
+            .dispatch(encoder, &bind, [cols.div_ceil(64).max(1), split.splits, 1]);
+    }
+
+    /// Records `target[offset + i] += sum_s partials[s * count + i]`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn split_reduce(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        partials: &wgpu::Buffer,
+        count: u32,
+        splits: u32,
+        target: &wgpu::Buffer,
+        target_offset: u32,
+    ) {
+        let params = ReduceParams {
+            count,
+            splits,
+            target_offset,
+            _pad: 0,
+        };
+        let uniforms = uniform(ctx, "mlp_split_reduce params", bytemuck::bytes_of(&params));
+        let bind = self.split_reduce.bind(ctx, &[&uniforms, partials, target]);
+        self.split_reduce
+            .dispatch(encoder, &bind, per_item_grid(ctx, count));
+    }
+
+    pub fn encode(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        params: EncodeParams,
+        means: &wgpu::Buffer,
+        encoded: &wgpu::Buffer,
+    ) {
+        let uniforms = uniform(ctx, "deform_encode params", bytemuck::bytes_of(&params));
+        let bind = self.encode.bind(ctx, &[&uniforms, means, encoded]);
+        self.encode
+            .dispatch(encoder, &bind, per_item_grid(ctx, params.count));
+    }
+
+    /// Binding order: head, canonical means, rotations, log-scales, then the three deformed
+    /// outputs.
+    pub fn apply_forward(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        params: ApplyParams,
+        buffers: &[&wgpu::Buffer; 7],
+    ) {
+        dispatch_apply(&self.apply_forward, ctx, encoder, params, buffers);
+    }
+
+    /// Binding order: head, canonical means, rotations, grad means, grad rotations, grad
+    /// log-scales, grad head.
+    pub fn apply_backward(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        params: ApplyParams,
+        buffers: &[&wgpu::Buffer; 7],
+    ) {
+        dispatch_apply(&self.apply_backward, ctx, encoder, params, buffers);
+    }
+}
+
+/// One `deform_apply_*` dispatch: the uniforms, then `buffers` in binding order.
+fn dispatch_apply(
+    kernel: &Kernel,
+    ctx: &GpuContext,
+    encoder: &mut wgpu::CommandEncoder,
+    params: ApplyParams,
+    buffers: &[&wgpu::Buffer; 7],
+) {
+    let uniforms = uniform(ctx, "deform_apply params", bytemuck::bytes_of(&params));
+    let mut all = vec![&uniforms];
+    all.extend_from_slice(buffers);
+    let bind = kernel.bind(ctx, &all);
+    kernel.dispatch(encoder, &bind, per_item_grid(ctx, params.count));
+}

@@ -1,0 +1,413 @@
+//! Adaptive density control (3DGS): clone small Gaussians and split large ones where the
+//! accumulated screen-space gradient is high, prune transparent or oversized ones, with a hook
+//! ([`PruneGuard`]) that lets the caller veto pruning (Segment then Splat's per-object floor).
+//!
+//! Decisions are made once per densification interval from statistics the GPU accumulated, on the
+//! CPU: it is a few hundred thousand comparisons every 100 steps, and the resulting re-layout of
+//! every per-Gaussian buffer is a gather that [`DensifyPlan::gather`] applies uniformly to
+//! parameters and optimiser moments alike. Children inherit all three object ids.
+
+use glam::{Quat, Vec3};
+use rand::Rng;
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
+
+use crate::model::{GaussianModel, OBJECT_NONE};
+
+/// Thresholds (3DGS defaults, with the absolute-gradient threshold of the released
+/// Segment-then-Splat code).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DensifyConfig {
+    /// Mean accumulated |d loss / d mean2d| (NDC units) above which a Gaussian is densified.
+    pub gradient_threshold: f32,
+    /// Gaussians whose largest scale is at most this fraction of the scene extent are cloned,
+    /// larger ones split.
+    pub percent_dense: f32,
+    /// Gaussians with opacity below this are pruned.
+    pub min_opacity: f32,
+    /// Prune Gaussians whose projected radius exceeded this fraction of the image's longer side
+    /// (gsplat's `prune_scale2d`; None: no screen test).
+    pub max_screen_radius_fraction: Option<f32>,
+    /// Prune Gaussians whose largest scale exceeds this fraction of the extent (None: no test).
+    pub max_world_scale_fraction: Option<f32>,
+    /// Children per split (3DGS: 2); their scale is the parent's / (0.8 * children).
+    pub split_children: u32,
+}
+
+impl Default for DensifyConfig {
+    fn default() -> Self {
+        Self {
+            gradient_threshold: 0.0007,
+            percent_dense: 0.01,
+            min_opacity: 0.005,
+            max_screen_radius_fraction: None,
+            max_world_scale_fraction: None,
+            split_children: 2,
+        }
+    }
+}
+
+/// What the GPU accumulated since the last densification.
+#[derive(Debug, Clone, Default)]
+pub struct DensifyStats {
+    /// Sum over renders of the absolute 2D mean gradient norm (NDC units).
+    pub gradient_sums: Vec<f32>,
+    /// Renders in which the Gaussian was visible.
+    pub visible_counts: Vec<u32>,
+    /// Largest projected radius as a fraction of the image's longer side.
+    pub max_radii: Vec<f32>,
+}
+
+/// Where each output Gaussian comes from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Origin {
+    /// The Gaussian itself, with its optimiser state.
+    Keep(u32),
+    /// A copy of a small Gaussian (fresh optimiser state).
+    Clone(u32),
+    /// A child of a large Gaussian, displaced by `offset` in world space, scale shrunk.
+    Split { parent: u32, offset: [f32; 3] },
+}
+
+impl Origin {
+    fn source(&self) -> u32 {
+        match *self {
+            Origin::Keep(i) | Origin::Clone(i) => i,
+            Origin::Split { parent, .. } => parent,
+        }
+    }
+}
+
+/// Can veto pruning: set `prune[i] = false` to keep Gaussian `i`.
+pub trait PruneGuard {
+    fn spare(&self, model: &GaussianModel, prune: &mut [bool], survivors_after_split: &[u32]);
+}
+
+/// Never lets an object (per level) fall below `floors[level]` Gaussians, or below its current
+/// count if that is smaller: pruning candidates of a starving object are spared, most opaque
+/// first. This is the persistence rule the released Segment-then-Splat code intended.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObjectFloor {
+    pub floors: [usize; 3],
+}
+
+impl PruneGuard for ObjectFloor {
+    fn spare(&self, model: &GaussianModel, prune: &mut [bool], survivors_after_split: &[u32]) {
+        use std::collections::HashMap;
+        for level in 0..3 {
+            let floor = self.floors[level];
+            if floor == 0 {
+                continue;
+            }
+            // Per object: Gaussians now, Gaussians that would remain, and its prune candidates.
+            let mut current: HashMap<u32, usize> = HashMap::new();
+            let mut remaining: HashMap<u32, usize> = HashMap::new();
+            let mut candidates: HashMap<u32, Vec<usize>> = HashMap::new();
+            for (index, ids) in model.object_ids.iter().enumerate() {
+                let id = ids[level];
+                if id == OBJECT_NONE {
+                    continue;
+                }
+                *current.entry(id).or_default() += 1;
+                if prune[index] {
+                    candidates.entry(id).or_default().push(index);
+                } else {
+                    *remaining.entry(id).or_default() += survivors_after_split[index] as usize;
+                }
+            }
+            for (id, mut indices) in candidates {
+                let wanted = floor.min(current[&id]);
+                let mut kept = remaining.get(&id).copied().unwrap_or(0);
+                if kept >= wanted {
+                    continue;
+                }
+                indices
+                    .sort_by(|&a, &b| model.opacity_logits[b].total_cmp(&model.opacity_logits[a]));
+                for index in indices {
+                    if kept >= wanted {
+                        break;
+                    }
+                    prune[index] = false;
+                    kept += survivors_after_split[index] as usize;
+                }
+            }
+        }
+    }
+}
+
+/// The outcome of one densification: the new Gaussian order as origins.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct DensifyPlan {
+    pub origins: Vec<Origin>,
+    pub cloned: usize,
+    pub split: usize,
+    pub pruned: usize,
+    pub spared: usize,
+}
+
+impl DensifyPlan {
+    /// Re-lays out one per-Gaussian array: kept rows copy their value, new rows get `fresh(parent
+    /// value)` (e.g. the parent's parameters for clones, zeros for optimiser moments).
+    pub fn gather<T: Copy>(&self, rows: &[T], fresh: impl Fn(T) -> T) -> Vec<T> {
+        self.origins
+            .iter()
+            .map(|origin| match *origin {
+                Origin::Keep(i) => rows[i as usize],
+                other => fresh(rows[other.source() as usize]),
+            })
+            .collect()
+    }
+
+    /// Applies the plan to the model's parameters and ids.
+    pub fn apply(&self, model: &GaussianModel, split_children: u32) -> GaussianModel {
+        let shrink = (0.8 * split_children as f32).ln();
+        let mut out = GaussianModel::default();
+        for origin in &self.origins {
+            let i = origin.source() as usize;
+            let mut mean = model.means[i];
+            let mut log_scale = model.log_scales[i];
+            if let Origin::Split { offset, .. } = origin {
+                mean = (Vec3::from_array(mean) + Vec3::from_array(*offset)).to_array();
+                log_scale = log_scale.map(|s| s - shrink);
+            }
+            out.means.push(mean);
+            out.log_scales.push(log_scale);
+            out.rotations.push(model.rotations[i]);
+            out.opacity_logits.push(model.opacity_logits[i]);
+            out.sh_coefficients.push(model.sh_coefficients[i]);
+            out.object_ids.push(model.object_ids[i]);
+        }
+        out
+    }
+}
+
+fn sigmoid(x: f32) -> f32 {
+    1.0 / (1.0 + (-x).exp())
+}
+
+/// Decides clones, splits and prunes. `scene_extent` as in [`crate::schedule::scene_extent`].
+pub fn plan_densification<R: Rng>(
+    model: &GaussianModel,
+    stats: &DensifyStats,
+    config: &DensifyConfig,
+    scene_extent: f32,
+    guard: Option<&dyn PruneGuard>,
+    rng: &mut R,
+) -> DensifyPlan {
+    let count = model.len();
+    let children = config.split_children.max(1);
+    let mut growth = vec![Growth::None; count];
+    let mut prune = vec![false; count];
+    // Gaussians each index turns into if kept: 2 for a clone pair, `children` for a split.
+    let mut survivors = vec![1u32; count];
+    let dense_limit = config.percent_dense * scene_extent;
+    for i in 0..count {
+        let visible = stats.visible_counts.get(i).copied().unwrap_or(0);
+        let gradient = if visible > 0 {
+            stats.gradient_sums.get(i).copied().unwrap_or(0.0) / visible as f32
+        } else {
+            0.0
+        };
+        let max_scale = model.log_scales[i]
+            .iter()
+            .copied()
+            .fold(f32::MIN, f32::max)
+            .exp();
+        if gradient >= config.gradient_threshold {
+            if max_scale <= dense_limit {
+                growth[i] = Growth::Clone;
+                survivors[i] = 2;
+            } else {
+                growth[i] = Growth::Split;
+                survivors[i] = children;
+            }
+        }
+        let too_big_on_screen = config
+            .max_screen_radius_fraction
+            .is_some_and(|limit| stats.max_radii.get(i).copied().unwrap_or(0.0) > limit);
+        let too_big_in_world = config
+            .max_world_scale_fraction
+            .is_some_and(|fraction| max_scale > fraction * scene_extent);
+        prune[i] = sigmoid(model.opacity_logits[i]) < config.min_opacity
+            || too_big_on_screen
+            || too_big_in_world;
+    }
+    let candidates = prune.iter().filter(|&&p| p).count();
+    if let Some(guard) = guard {
+        guard.spare(model, &mut prune, &survivors);
+    }
+    let mut plan = DensifyPlan {
+        pruned: prune.iter().filter(|&&p| p).count(),
+        ..Default::default()
+    };
+    plan.spared = candidates - plan.pruned;
+    for i in 0..count {
+        if prune[i] {
+            continue;
+        }
+        let index = i as u32;
+        match growth[i] {
+            Growth::None => plan.origins.push(Origin::Keep(index)),
+            Growth::Clone => {
+                plan.origins.push(Origin::Keep(index));
+                plan.origins.push(Origin::Clone(index));
+                plan.cloned += 1;
+            }
+            Growth::Split => {
+                let scale = Vec3::from_array(model.log_scales[i].map(f32::exp));
+                let [w, x, y, z] = model.rotations[i];
+                let rotation = Quat::from_xyzw(x, y, z, w).normalize();
+                for _ in 0..children {
+                    let sample = Vec3::new(
+                        StandardNormal.sample(rng),
+                        StandardNormal.sample(rng),
+                        StandardNormal.sample(rng),
+                    ) * scale;
+                    plan.origins.push(Origin::Split {
+                        parent: index,
+                        offset: (rotation * sample).to_array(),
+                    });
+                }
+                plan.split += 1;
+            }
+        }
+    }
+    plan
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Growth {
+    None,
+    Clone,
+    Split,
+}
+
+/// 3DGS's periodic opacity reset: every opacity above `max_opacity` is lowered to it, so
+/// Gaussians that are not needed fade and get pruned.
+pub fn reset_opacity_logits(opacity_logits: &mut [f32], max_opacity: f32) {
+    let ceiling = (max_opacity / (1.0 - max_opacity)).ln();
+    for logit in opacity_logits {
+        *logit = logit.min(ceiling);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::init::logit;
+    use rand::SeedableRng;
+
+    fn model_with(scales: &[f32], opacities: &[f32], ids: &[[u32; 3]]) -> GaussianModel {
+        let mut model = GaussianModel::default();
+        for i in 0..scales.len() {
+            model.push_simple(
+                [i as f32, 0.0, 0.0],
+                [scales[i].ln(); 3],
+                [1.0, 0.0, 0.0, 0.0],
+                logit(opacities[i]),
+                [0.5; 3],
+                ids[i],
+            );
+        }
+        model
+    }
+
+    fn stats(gradients: &[f32]) -> DensifyStats {
+        DensifyStats {
+            gradient_sums: gradients.iter().map(|g| g * 2.0).collect(),
+            visible_counts: vec![2; gradients.len()],
+            max_radii: vec![0.01; gradients.len()],
+        }
+    }
+
+    #[test]
+    fn clones_small_splits_large_prunes_transparent_and_children_inherit_ids() {
+        let ids = [[1, 10, 100], [2, 20, 200], [3, 30, 300], [4, 40, 400]];
+        let model = model_with(&[0.001, 0.5, 0.001, 0.001], &[0.5, 0.5, 0.5, 0.001], &ids);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let plan = plan_densification(
+            &model,
+            &stats(&[0.01, 0.01, 0.0, 0.0]),
+            &DensifyConfig::default(),
+            1.0,
+            None,
+            &mut rng,
+        );
+        assert_eq!((plan.cloned, plan.split, plan.pruned), (1, 1, 1));
+        let out = plan.apply(&model, 2);
+        // 0 kept + clone, 1 split into two, 2 kept, 3 pruned.
+        assert_eq!(out.len(), 5);
+        assert_eq!(out.object_ids, vec![ids[0], ids[0], ids[1], ids[1], ids[2]]);
+        let child_scale = out.log_scales[2][0].exp();
+        assert!((child_scale - 0.5 / 1.6).abs() < 1e-5);
+        assert_ne!(out.means[2], out.means[3]);
+        // Optimiser moments: kept rows keep theirs, new rows start at zero.
+        let moments = plan.gather(&[1.0f32, 2.0, 3.0, 4.0], |_| 0.0);
+        assert_eq!(moments, vec![1.0, 0.0, 0.0, 0.0, 3.0]);
+    }
+
+    #[test]
+    fn object_floor_spares_most_opaque_candidates() {
+        // Object 7 (small level) has three Gaussians, all prune candidates; floor 2 keeps the two
+        // most opaque. Object 8 has plenty of survivors and loses its candidate.
+        let ids = [
+            [7, OBJECT_NONE, OBJECT_NONE],
+            [7, OBJECT_NONE, OBJECT_NONE],
+            [7, OBJECT_NONE, OBJECT_NONE],
+            [8, OBJECT_NONE, OBJECT_NONE],
+            [8, OBJECT_NONE, OBJECT_NONE],
+            [8, OBJECT_NONE, OBJECT_NONE],
+        ];
+        let model = model_with(&[0.01; 6], &[0.001, 0.004, 0.003, 0.9, 0.9, 0.001], &ids);
+        let guard = ObjectFloor { floors: [2, 0, 0] };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let plan = plan_densification(
+            &model,
+            &stats(&[0.0; 6]),
+            &DensifyConfig::default(),
+            1.0,
+            Some(&guard),
+            &mut rng,
+        );
+        assert_eq!(plan.spared, 2);
+        assert_eq!(plan.pruned, 2);
+        let kept: Vec<Origin> = plan.origins.clone();
+        assert_eq!(
+            kept,
+            vec![
+                Origin::Keep(1),
+                Origin::Keep(2),
+                Origin::Keep(3),
+                Origin::Keep(4)
+            ]
+        );
+    }
+
+    #[test]
+    fn floor_larger_than_object_keeps_it_whole() {
+        let ids = [[5, 5, 5]];
+        let model = model_with(&[0.01], &[0.001], &ids);
+        let guard = ObjectFloor {
+            floors: [1000, 1000, 10],
+        };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let plan = plan_densification(
+            &model,
+            &stats(&[0.0]),
+            &DensifyConfig::default(),
+            1.0,
+            Some(&guard),
+            &mut rng,
+        );
+        assert_eq!(plan.origins, vec![Origin::Keep(0)]);
+    }
+
+    #[test]
+    fn opacity_reset_caps_opacity() {
+        let mut logits = vec![logit(0.9), logit(0.001)];
+        reset_opacity_logits(&mut logits, 0.01);
+        assert!((sigmoid(logits[0]) - 0.01).abs() < 1e-6);
+        assert!((sigmoid(logits[1]) - 0.001).abs() < 1e-6);
+    }
+}

@@ -1,0 +1,632 @@
+//! [`Renderer`]: records forward and backward passes into the caller's command encoder.
+
+use std::sync::Arc;
+
+use wgpu::util::DeviceExt;
+
+use super::kernels::{RasterVariant, RenderKernels};
+use super::uniforms::RenderUniforms;
+use super::workspace::{
+    COUNT_SLOTS, INTERSECTION_COUNT_OFFSET, INTERSECTION_DISPATCH_OFFSET, RenderWorkspace,
+    WorkspacePool, WorkspaceSize,
+};
+use crate::model::GaussianView;
+use crate::{GpuGaussianGrads, RenderCamera, RenderSettings};
+use segsplat_gpu::kernel::{workgroups_2d, workgroups_for};
+use segsplat_gpu::sort::RadixSort;
+use segsplat_gpu::{ExclusiveScan, GpuContext, GpuError};
+
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    #[error("gradient buffers hold {capacity} Gaussians but the scene has {count}")]
+    GradsTooSmall { count: usize, capacity: usize },
+    #[error(
+        "grad_image holds {bytes} bytes but the render needs {needed} ({pixels} pixels x vec4<f32>)"
+    )]
+    GradImageTooSmall {
+        bytes: u64,
+        needed: u64,
+        pixels: usize,
+    },
+    #[error("render still overflowed its intersection buffers after {attempts} attempts")]
+    CapacityNotConverging { attempts: usize },
+    #[error("camera image is empty ({width}x{height})")]
+    EmptyImage { width: u32, height: u32 },
+    #[error(transparent)]
+    ObjectBatch(#[from] super::object_batch::ObjectBatchError),
+    #[error(
+        "a render needs {needed} tile intersections but one storage binding holds at most {limit}; \
+         lower the resolution or the Gaussian count"
+    )]
+    IntersectionsExceedAdapter { needed: u64, limit: u64 },
+}
+
+/// What [`Renderer::sync_capacity`] found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CapacityReport {
+    /// Largest intersection count of any render since the previous sync (unclamped).
+    pub peak_intersections: u32,
+    /// Capacity renders use from now on.
+    pub capacity: u32,
+    /// Some render since the previous sync needed more intersections than its buffers held, so
+    /// it dropped tile entries (its image and gradients are approximate).
+    pub overflowed: bool,
+}
+
+/// Grow when the peak passes this fraction of the capacity.
+const GROW_AT_FRACTION: f64 = 0.8;
+/// New capacity = peak x this.
+const GROWTH_FACTOR: f64 = 1.5;
+/// Initial intersections per Gaussian before any peak is known.
+const INITIAL_INTERSECTIONS_PER_GAUSSIAN: usize = 8;
+const MIN_INTERSECTION_CAPACITY: u32 = 1 << 16;
+/// Renders [`Renderer::render_checked`] tries before giving up.
+const RENDER_ATTEMPTS: usize = 3;
+
+/// A finished forward pass: the image and the state backward needs. Dropping it returns its
+/// buffers to the renderer's pool.
+#[derive(Debug)]
+pub struct RenderOutput {
+    pub(super) workspace: Option<RenderWorkspace>,
+    pub(super) pool: Arc<WorkspacePool>,
+    pub camera: RenderCamera,
+    pub settings: RenderSettings,
+    pub gaussian_count: u32,
+}
+
+impl Drop for RenderOutput {
+    fn drop(&mut self) {
+        if let Some(workspace) = self.workspace.take() {
+            self.pool.give_back(workspace);
+        }
+    }
+}
+
+impl RenderOutput {
+    pub(super) fn workspace(&self) -> &RenderWorkspace {
+        // Only `drop` takes the workspace out.
+        self.workspace
+            .as_ref()
+            .unwrap_or_else(|| unreachable!("workspace present until drop"))
+    }
+
+    /// `array<vec4<f32>>`, `width * height` entries row-major: rgb (background composited) and
+    /// alpha. The buffer may be longer than the image; bind with [`RenderOutput::image_bytes`].
+    pub fn image(&self) -> &wgpu::Buffer {
+        &self.workspace().image
+    }
+
+    /// Projected splats, 3 vec4 per Gaussian (layout in `project_common.wgsl`; `[3 i + 1].w` is
+    /// the screen radius in pixels, 0 when culled). Read by the densification statistics.
+    pub fn projected(&self) -> &wgpu::Buffer {
+        &self.workspace().projected
+    }
+
+    pub fn image_bytes(&self) -> u64 {
+        self.camera.pixel_count() as u64 * 16
+    }
+
+    /// Per pixel final transmittance (1 - alpha), f32.
+    pub fn final_transmittance(&self) -> &wgpu::Buffer {
+        &self.workspace().final_transmittance
+    }
+
+    /// Per pixel sum of weight x camera depth, f32 (divide by alpha for the mean depth).
+    pub fn depth(&self) -> &wgpu::Buffer {
+        &self.workspace().depth
+    }
+
+    /// Reads the image back (tests, masks, evaluation; never inside a training step).
+    pub fn read_image(&self, ctx: &GpuContext) -> Result<Vec<[f32; 4]>, GpuError> {
+        let bytes = ctx.read_buffer(self.image(), self.image_bytes())?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes))
+    }
+
+    pub fn read_depth(&self, ctx: &GpuContext) -> Result<Vec<f32>, GpuError> {
+        let bytes = ctx.read_buffer(self.depth(), self.camera.pixel_count() as u64 * 4)?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes))
+    }
+
+    /// Intersections the render produced (unclamped) and its capacity: a read-back, for tests.
+    pub fn read_intersection_count(&self, ctx: &GpuContext) -> Result<(u32, u32), GpuError> {
+        let counts: Vec<u32> = ctx.read_vec(&self.workspace().counts)?;
+        Ok((counts[5], self.workspace().size.intersections))
+    }
+}
+
+/// Records Gaussian-splat renders. One per device; cheap to keep for the process lifetime.
+///
+/// Capacity policy for tile intersections: the intersection buffers hold `capacity` entries
+/// (initially `max(65536, 8 x Gaussians)`, never above one storage binding). Every forward pass
+/// clamps its count to its capacity on the GPU (excess entries are dropped, never written out of
+/// bounds) and folds its unclamped count into a running peak on the GPU. The caller reads that
+/// peak lazily with [`Renderer::sync_capacity`] (the trainer: every few dozen steps and after
+/// densification; one-off renders: [`Renderer::render_checked`]), which grows the capacity to
+/// 1.5x the peak once the peak passes 80% and reports whether any render overflowed, so an
+/// overflow is never silent.
+pub struct Renderer {
+    pub(super) kernels: RenderKernels,
+    pub(super) scan: ExclusiveScan,
+    pub(super) sort: RadixSort,
+    pub(super) pool: Arc<WorkspacePool>,
+    /// One u32: running maximum of unclamped intersection counts since the last sync.
+    pub(super) peak_intersections: wgpu::Buffer,
+    intersection_capacity: u32,
+    /// Smallest capacity any render used since the last sync.
+    smallest_capacity_used: Option<u32>,
+}
+
+impl std::fmt::Debug for Renderer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Renderer")
+            .field("intersection_capacity", &self.intersection_capacity)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Renderer {
+    pub fn new(ctx: &GpuContext) -> Result<Self, RenderError> {
+        Self::with_variant(ctx, RasterVariant::for_adapter(ctx))
+    }
+
+    /// [`Self::new`] with chosen rasterize kernels rather than the adapter's (tests check each).
+    pub fn with_variant(ctx: &GpuContext, variant: RasterVariant) -> Result<Self, RenderError> {
+        Ok(Self {
+            kernels: RenderKernels::new(ctx, variant)?,
+            scan: ExclusiveScan::new(ctx)?,
+            sort: RadixSort::new(ctx)?,
+            pool: Arc::new(WorkspacePool::default()),
+            peak_intersections: ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("peak intersections"),
+                size: 4,
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_SRC
+                    | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+            intersection_capacity: MIN_INTERSECTION_CAPACITY,
+            smallest_capacity_used: None,
+        })
+    }
+
+    /// Current intersection capacity.
+    pub fn intersection_capacity(&self) -> u32 {
+        self.intersection_capacity
+    }
+
+    /// Sets the intersection capacity (e.g. restored from a previous run).
+    pub fn set_intersection_capacity(&mut self, capacity: u32) {
+        self.intersection_capacity = capacity.max(1);
+        self.pool.retire_smaller_than(self.intersection_capacity);
+    }
+
+    pub(super) fn max_intersections(ctx: &GpuContext) -> u64 {
+        ctx.limits.max_storage_buffer_binding_size / 4
+    }
+
+    /// Records a forward pass. The returned output holds the image (valid once the encoder is
+    /// submitted) and the state [`Renderer::backward`] needs.
+    pub fn forward<'g>(
+        &mut self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        gaussians: impl Into<GaussianView<'g>>,
+        camera: &RenderCamera,
+        settings: &RenderSettings,
+    ) -> Result<RenderOutput, RenderError> {
+        if camera.width == 0 || camera.height == 0 {
+            return Err(RenderError::EmptyImage {
+                width: camera.width,
+                height: camera.height,
+            });
+        }
+        let gaussians: GaussianView<'_> = gaussians.into();
+        let count = gaussians.count;
+        let [tiles_x, tiles_y] = camera.tile_grid();
+        let workspace = self.take_workspace(
+            ctx,
+            gaussians,
+            camera.pixel_count(),
+            (tiles_x * tiles_y) as usize,
+        )?;
+        let workspace_capacity = workspace.size.intersections;
+        let uniforms = RenderUniforms::new(camera, settings, count as u32, workspace_capacity);
+        self.upload_uniforms(ctx, encoder, &workspace, &uniforms);
+        encoder.clear_buffer(&workspace.tile_ranges, 0, None);
+        if count > 0 {
+            self.encode_tiles(
+                ctx,
+                encoder,
+                gaussians,
+                &workspace,
+                count as u32,
+                [tiles_x, tiles_y],
+            );
+        }
+        let k = &self.kernels;
+        let rasterize = k.rasterize_forward.bind(
+            ctx,
+            &[
+                &workspace.uniforms,
+                &workspace.tile_ranges,
+                &workspace.intersection_gaussians,
+                &workspace.projected,
+                &workspace.image,
+                &workspace.final_transmittance,
+                &workspace.last_contributor,
+                &workspace.depth,
+            ],
+        );
+        k.rasterize_forward
+            .dispatch(encoder, &rasterize, [tiles_x, tiles_y, 1]);
+        Ok(RenderOutput {
+            workspace: Some(workspace),
+            pool: Arc::clone(&self.pool),
+            camera: *camera,
+            settings: *settings,
+            gaussian_count: count as u32,
+        })
+    }
+
+    /// A pooled workspace for a render of `gaussians` over `pixels` and `tiles` (all slots of a
+    /// batched render), with the current intersection capacity, recorded for the next sync.
+    pub(super) fn take_workspace(
+        &mut self,
+        ctx: &GpuContext,
+        gaussians: GaussianView<'_>,
+        pixels: usize,
+        tiles: usize,
+    ) -> Result<RenderWorkspace, RenderError> {
+        let limit = Self::max_intersections(ctx);
+        let wanted = (gaussians.count * INITIAL_INTERSECTIONS_PER_GAUSSIAN) as u64;
+        let capacity = (self.intersection_capacity as u64)
+            .max(wanted)
+            .min(limit)
+            .min(u32::MAX as u64) as u32;
+        self.intersection_capacity = capacity;
+        let size = WorkspaceSize {
+            gaussians: gaussians.capacity.max(1),
+            pixels,
+            tiles,
+            intersections: capacity,
+        };
+        let workspace = self.pool.take(ctx, size)?;
+        let workspace_capacity = workspace.size.intersections;
+        self.smallest_capacity_used = Some(
+            self.smallest_capacity_used
+                .map_or(workspace_capacity, |c| c.min(workspace_capacity)),
+        );
+        Ok(workspace)
+    }
+
+    /// Writes the uniforms and the Gaussian count through the encoder (not `queue.write_buffer`),
+    /// so several renders recorded into one encoder each see their own values.
+    pub(super) fn upload_uniforms(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        workspace: &RenderWorkspace,
+        uniforms: &RenderUniforms,
+    ) {
+        let uniform_bytes = std::mem::size_of::<RenderUniforms>() as u64;
+        let mut counts = [0u32; COUNT_SLOTS];
+        counts[0] = uniforms.gaussian_count;
+        let mut contents = bytemuck::bytes_of(uniforms).to_vec();
+        contents.extend_from_slice(bytemuck::cast_slice(&counts));
+        let staging = ctx
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("render uniforms upload"),
+                contents: &contents,
+                usage: wgpu::BufferUsages::COPY_SRC,
+            });
+        encoder.copy_buffer_to_buffer(&staging, 0, &workspace.uniforms, 0, uniform_bytes);
+        encoder.copy_buffer_to_buffer(
+            &staging,
+            uniform_bytes,
+            &workspace.counts,
+            0,
+            (COUNT_SLOTS * 4) as u64,
+        );
+    }
+
+    /// Steps 1-8 of the module doc: projection to per-tile depth-ordered ranges.
+    fn encode_tiles(
+        &mut self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        gaussians: GaussianView<'_>,
+        workspace: &RenderWorkspace,
+        count: u32,
+        [tiles_x, tiles_y]: [u32; 2],
+    ) {
+        let max_groups = ctx.limits.max_compute_workgroups_per_dimension;
+        let per_gaussian = workgroups_2d(workgroups_for(count, 256), max_groups);
+        let k = &self.kernels;
+        let p = gaussians;
+        let project = k.project_forward.bind(
+            ctx,
+            &[
+                &workspace.uniforms,
+                p.means,
+                p.log_scales,
+                p.rotations,
+                p.opacity_logits,
+                p.sh_dc,
+                p.sh_rest[0],
+                p.sh_rest[1],
+                p.sh_rest[2],
+                gaussians.object_ids,
+                &workspace.projected,
+                &workspace.tile_counts,
+                &workspace.depth_keys,
+                &workspace.depth_values,
+            ],
+        );
+        k.project_forward.dispatch(encoder, &project, per_gaussian);
+        self.sort.encode(
+            ctx,
+            encoder,
+            &workspace.depth_keys,
+            &workspace.depth_values,
+            &workspace.counts,
+            0,
+            count,
+            32,
+        );
+        let k = &self.kernels;
+        let gather = k.tile_count_in_depth_order.bind(
+            ctx,
+            &[
+                &workspace.uniforms,
+                &workspace.depth_values,
+                &workspace.tile_counts,
+                &workspace.tile_counts_in_depth_order,
+            ],
+        );
+        k.tile_count_in_depth_order
+            .dispatch(encoder, &gather, per_gaussian);
+        self.scan.encode(
+            ctx,
+            encoder,
+            &workspace.tile_counts_in_depth_order,
+            &workspace.tile_offsets,
+            count,
+        );
+        let budget = k.tile_budget.bind(
+            ctx,
+            &[
+                &workspace.uniforms,
+                &workspace.tile_offsets,
+                &workspace.counts,
+                &self.peak_intersections,
+            ],
+        );
+        k.tile_budget.dispatch(encoder, &budget, [1, 1, 1]);
+        let emit = k.tile_emit.bind(
+            ctx,
+            &[
+                &workspace.uniforms,
+                &workspace.depth_values,
+                &workspace.tile_offsets,
+                &workspace.projected,
+                &workspace.intersection_tiles,
+                &workspace.intersection_gaussians,
+            ],
+        );
+        k.tile_emit.dispatch(encoder, &emit, per_gaussian);
+        self.encode_tile_ranges(ctx, encoder, workspace, tiles_x * tiles_y);
+    }
+
+    /// Steps 7-8 of the module doc: sorts the emitted (key, Gaussian) pairs stably by key
+    /// (`key_count` distinct keys: tiles, or (slot, tile) for an object batch) and writes each
+    /// key's range.
+    pub(super) fn encode_tile_ranges(
+        &mut self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        workspace: &RenderWorkspace,
+        key_count: u32,
+    ) {
+        let key_bits = (u32::BITS - (key_count.max(2) - 1).leading_zeros()).max(1);
+        self.sort.encode(
+            ctx,
+            encoder,
+            &workspace.intersection_tiles,
+            &workspace.intersection_gaussians,
+            &workspace.counts,
+            INTERSECTION_COUNT_OFFSET,
+            workspace.size.intersections,
+            key_bits,
+        );
+        let k = &self.kernels;
+        let ranges = k.tile_ranges.bind(
+            ctx,
+            &[
+                &workspace.counts,
+                &workspace.intersection_tiles,
+                &workspace.tile_ranges,
+            ],
+        );
+        k.tile_ranges.dispatch_indirect(
+            encoder,
+            &ranges,
+            &workspace.counts,
+            INTERSECTION_DISPATCH_OFFSET,
+        );
+    }
+
+    /// Records the backward pass of `output` given `grad_image` (d loss / d image, the image's
+    /// layout: `width * height` vec4 of d/d(r, g, b, alpha)). ADDS parameter gradients and the
+    /// |d mean2d| statistic into `grads`; zero them once per step, not per render.
+    pub fn backward<'g>(
+        &mut self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        gaussians: impl Into<GaussianView<'g>>,
+        output: &RenderOutput,
+        grad_image: &wgpu::Buffer,
+        grads: &mut GpuGaussianGrads,
+    ) -> Result<(), RenderError> {
+        let gaussians: GaussianView<'_> = gaussians.into();
+        let count = output.gaussian_count as usize;
+        if grads.capacity() < count {
+            return Err(RenderError::GradsTooSmall {
+                count,
+                capacity: grads.capacity(),
+            });
+        }
+        if grad_image.size() < output.image_bytes() {
+            return Err(RenderError::GradImageTooSmall {
+                bytes: grad_image.size(),
+                needed: output.image_bytes(),
+                pixels: output.camera.pixel_count(),
+            });
+        }
+        if count == 0 {
+            return Ok(());
+        }
+        let workspace = output.workspace();
+        let k = &self.kernels;
+        encoder.clear_buffer(&workspace.grad_projected, 0, None);
+        let [tiles_x, tiles_y] = output.camera.tile_grid();
+        let rasterize = k.rasterize_backward.bind(
+            ctx,
+            &[
+                &workspace.uniforms,
+                &workspace.tile_ranges,
+                &workspace.intersection_gaussians,
+                &workspace.projected,
+                &workspace.final_transmittance,
+                &workspace.last_contributor,
+                grad_image,
+                &workspace.grad_projected,
+            ],
+        );
+        k.rasterize_backward
+            .dispatch(encoder, &rasterize, [tiles_x, tiles_y, 1]);
+        self.encode_projection_backward(ctx, encoder, gaussians, workspace, count as u32, grads);
+        Ok(())
+    }
+
+    /// The backward of the projection (geometry, then colour) from `workspace.grad_projected`,
+    /// adding into `grads`. Runs once per set of rasterize backwards that share the projection.
+    pub(super) fn encode_projection_backward(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        gaussians: GaussianView<'_>,
+        workspace: &RenderWorkspace,
+        count: u32,
+        grads: &mut GpuGaussianGrads,
+    ) {
+        let k = &self.kernels;
+        let per_gaussian = workgroups_2d(
+            workgroups_for(count, 256),
+            ctx.limits.max_compute_workgroups_per_dimension,
+        );
+        let p = gaussians;
+        let g = &grads.parameters;
+        let geometry = k.project_backward.bind(
+            ctx,
+            &[
+                &workspace.uniforms,
+                p.means,
+                p.log_scales,
+                p.rotations,
+                &workspace.projected,
+                &workspace.grad_projected,
+                &g.means,
+                &g.log_scales,
+                &g.rotations,
+                &g.opacity_logits,
+                &grads.mean2d_abs,
+            ],
+        );
+        k.project_backward
+            .dispatch(encoder, &geometry, per_gaussian);
+        let colour = k.sh_backward.bind(
+            ctx,
+            &[
+                &workspace.uniforms,
+                p.means,
+                p.sh_dc,
+                p.sh_rest[0],
+                p.sh_rest[1],
+                p.sh_rest[2],
+                &workspace.projected,
+                &workspace.grad_projected,
+                &g.means,
+                &g.sh_dc,
+                &g.sh_rest[0],
+                &g.sh_rest[1],
+                &g.sh_rest[2],
+            ],
+        );
+        k.sh_backward.dispatch(encoder, &colour, per_gaussian);
+    }
+
+    /// Reads the peak intersection count of the renders since the last sync (one small
+    /// read-back; waits for submitted work), grows the capacity when the peak nears it, and
+    /// reports whether any of those renders overflowed.
+    pub fn sync_capacity(&mut self, ctx: &GpuContext) -> Result<CapacityReport, RenderError> {
+        let peak = ctx.read_vec::<u32>(&self.peak_intersections)?[0];
+        ctx.queue
+            .write_buffer(&self.peak_intersections, 0, bytemuck::bytes_of(&0u32));
+        let used = self
+            .smallest_capacity_used
+            .take()
+            .unwrap_or(self.intersection_capacity);
+        let overflowed = peak > used;
+        let limit = Self::max_intersections(ctx);
+        if peak as f64 > GROW_AT_FRACTION * self.intersection_capacity as f64 {
+            let grown = (peak as f64 * GROWTH_FACTOR).ceil() as u64;
+            if peak as u64 > limit {
+                return Err(RenderError::IntersectionsExceedAdapter {
+                    needed: peak as u64,
+                    limit,
+                });
+            }
+            self.set_intersection_capacity(grown.min(limit) as u32);
+        }
+        Ok(CapacityReport {
+            peak_intersections: peak,
+            capacity: self.intersection_capacity,
+            overflowed,
+        })
+    }
+
+    /// Renders now (own encoder, submitted), re-rendering with grown buffers when the first
+    /// attempt overflowed: for one-off renders (masks, evaluation, tests).
+    pub fn render_checked<'g>(
+        &mut self,
+        ctx: &GpuContext,
+        gaussians: impl Into<GaussianView<'g>>,
+        camera: &RenderCamera,
+        settings: &RenderSettings,
+    ) -> Result<RenderOutput, RenderError> {
+        let gaussians: GaussianView<'_> = gaussians.into();
+        // A pending sync from earlier renders must not be mistaken for this render's.
+        self.sync_capacity(ctx)?;
+        // Each retry grows the capacity to 1.5x the needed count, so the second attempt fits
+        // unless the scene exceeds the adapter (an error from sync_capacity).
+        for _ in 0..RENDER_ATTEMPTS {
+            let mut encoder = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("render"),
+                });
+            let output = self.forward(ctx, &mut encoder, gaussians, camera, settings)?;
+            ctx.queue.submit([encoder.finish()]);
+            let report = self.sync_capacity(ctx)?;
+            if !report.overflowed {
+                return Ok(output);
+            }
+        }
+        Err(RenderError::CapacityNotConverging {
+            attempts: RENDER_ATTEMPTS,
+        })
+    }
+}

@@ -1,0 +1,247 @@
+//! The Segment-then-Splat object loss (docs/method.md, stage 3): every step, for each active level,
+//! `m` objects present in the view's masks are rendered alone (only their Gaussians, on black)
+//! and compared with `image x mask` by the same fused L1 + D-SSIM loss as the full render. The
+//! levels join coarse-ward in stages (small; + middle; + large), and near the end of training the
+//! (object, view) pairs whose render disagrees with the mask (IoU < 0.3: the 2D mask is a partial,
+//! occluded view) are left out and recorded, so the language stage can skip them too.
+
+use rand::Rng;
+use rand::seq::IndexedRandom;
+use serde::{Deserialize, Serialize};
+
+use segsplat_gpu::GpuContext;
+use segsplat_scene::Level;
+
+/// When and how strongly the object loss acts. Stage boundaries are fractions of the run's
+/// steps so one config serves short and long runs (released: 5k / 5k / rest of 40k).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ObjectLossConfig {
+    /// Objects rendered per active level per step (`m`; paper: 3, 1 for small scenes).
+    pub objects_per_level: u32,
+    /// Weight of each object render's loss, relative to the full render's.
+    pub weight: f32,
+    /// Fraction of the steps after which the middle level joins the small one.
+    pub middle_from: f32,
+    /// Fraction of the steps after which the large level joins.
+    pub large_from: f32,
+    /// Fraction of the steps from which partial masks are filtered (released: 30k of 40k).
+    pub partial_filter_from: f32,
+    /// An (object, view) pair whose rendered mask (alpha > 0.5) has IoU below this with the
+    /// 2D mask is skipped from then on.
+    pub partial_iou_threshold: f32,
+}
+
+impl Default for ObjectLossConfig {
+    fn default() -> Self {
+        Self {
+            objects_per_level: 3,
+            weight: 1.0,
+            middle_from: 0.125,
+            large_from: 0.25,
+            partial_filter_from: 0.75,
+            partial_iou_threshold: 0.3,
+        }
+    }
+}
+
+impl ObjectLossConfig {
+    /// Checks ranges; names the offending field.
+    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        let fraction = |name, value: f32| {
+            if (0.0..=1.0).contains(&value) {
+                Ok(())
+            } else {
+                Err((name, format!("{value} must be within 0..=1")))
+            }
+        };
+        fraction("object_loss.middle_from", self.middle_from)?;
+        fraction("object_loss.large_from", self.large_from)?;
+        fraction("object_loss.partial_filter_from", self.partial_filter_from)?;
+        fraction(
+            "object_loss.partial_iou_threshold",
+            self.partial_iou_threshold,
+        )?;
+        if self.middle_from > self.large_from {
+            return Err((
+                "object_loss.middle_from",
+                "must not be after large_from (levels join small to large)".to_string(),
+            ));
+        }
+        if !(self.weight.is_finite() && self.weight >= 0.0) {
+            return Err(("object_loss.weight", "must be a finite number >= 0".into()));
+        }
+        if self.objects_per_level > MAX_OBJECTS_PER_LEVEL {
+            return Err((
+                "object_loss.objects_per_level",
+                format!("at most {MAX_OBJECTS_PER_LEVEL}"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Levels whose objects are trained at `step` of `total_steps`.
+    pub fn active_levels(&self, step: u32, total_steps: u32) -> Vec<Level> {
+        let progress = step as f32 / total_steps.max(1) as f32;
+        let mut levels = vec![Level::Small];
+        if progress >= self.middle_from {
+            levels.push(Level::Middle);
+        }
+        if progress >= self.large_from {
+            levels.push(Level::Large);
+        }
+        levels
+    }
+
+    /// The first step at which partial masks are filtered.
+    pub fn partial_filter_step(&self, total_steps: u32) -> u32 {
+        (self.partial_filter_from * total_steps as f32).round() as u32
+    }
+}
+
+/// Bounds the loss slots a step needs (1 + 3 levels x m).
+pub const MAX_OBJECTS_PER_LEVEL: u32 = 16;
+
+/// One training view's object masks on the GPU.
+pub struct ViewObjectMasks {
+    /// Per level: `width * height` u32 object ids (0 = none), the loss kernel's mask layout.
+    pub ids: [wgpu::Buffer; 3],
+    /// Per level: the objects present, sorted.
+    pub present: [Vec<u32>; 3],
+    /// Per level: the CPU ids, for partial-mask IoUs.
+    pub ids_cpu: [Vec<u32>; 3],
+}
+
+/// The object masks of every training view, in the trainer's training-view order.
+pub struct ObjectTargets {
+    pub views: Vec<ViewObjectMasks>,
+}
+
+impl ObjectTargets {
+    /// Uploads per-view id maps. `masks[v][level]` must have the training view's pixel count.
+    pub fn upload(ctx: &GpuContext, masks: Vec<[Vec<u32>; 3]>) -> Self {
+        let views = masks
+            .into_iter()
+            .map(|levels| {
+                let present = std::array::from_fn(|level| present_objects(&levels[level]));
+                let ids = std::array::from_fn(|level| {
+                    wgpu::util::DeviceExt::create_buffer_init(
+                        &ctx.device,
+                        &wgpu::util::BufferInitDescriptor {
+                            label: Some("object mask"),
+                            contents: bytemuck::cast_slice(&levels[level]),
+                            usage: wgpu::BufferUsages::STORAGE,
+                        },
+                    )
+                });
+                ViewObjectMasks {
+                    ids,
+                    present,
+                    ids_cpu: levels,
+                }
+            })
+            .collect();
+        Self { views }
+    }
+}
+
+fn present_objects(ids: &[u32]) -> Vec<u32> {
+    let mut present: Vec<u32> = ids.iter().copied().filter(|&id| id != 0).collect();
+    present.sort_unstable();
+    present.dedup();
+    present
+}
+
+/// An (object, view) pair left out as a partial mask.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+pub struct SkippedPair {
+    /// Index into the trainer's training views.
+    pub train_view: usize,
+    pub level: Level,
+    pub object_id: u32,
+}
+
+/// Picks up to `count` distinct objects of `present` that are not skipped for this view.
+pub fn sample_objects<R: Rng>(
+    present: &[u32],
+    count: u32,
+    is_skipped: impl Fn(u32) -> bool,
+    rng: &mut R,
+) -> Vec<u32> {
+    let eligible: Vec<u32> = present
+        .iter()
+        .copied()
+        .filter(|&id| !is_skipped(id))
+        .collect();
+    eligible
+        .choose_multiple(rng, count as usize)
+        .copied()
+        .collect()
+}
+
+/// IoU of `alpha > 0.5` with `ids == object_id`.
+pub fn rendered_mask_iou(alpha: impl Iterator<Item = f32>, ids: &[u32], object_id: u32) -> f32 {
+    let (mut intersection, mut union) = (0u64, 0u64);
+    for (a, &id) in alpha.zip(ids) {
+        let rendered = a > 0.5;
+        let masked = id == object_id;
+        intersection += u64::from(rendered && masked);
+        union += u64::from(rendered || masked);
+    }
+    if union == 0 {
+        0.0
+    } else {
+        intersection as f32 / union as f32
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    #[test]
+    fn levels_join_small_to_large() {
+        let config = ObjectLossConfig::default();
+        assert_eq!(config.active_levels(0, 800), vec![Level::Small]);
+        assert_eq!(
+            config.active_levels(100, 800),
+            vec![Level::Small, Level::Middle]
+        );
+        assert_eq!(config.active_levels(200, 800), Level::ALL.to_vec());
+        assert_eq!(config.partial_filter_step(800), 600);
+    }
+
+    #[test]
+    fn sampling_skips_and_never_repeats() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        for _ in 0..50 {
+            let picked = sample_objects(&[1, 2, 3, 4], 3, |id| id == 2, &mut rng);
+            assert_eq!(picked.len(), 3);
+            assert!(!picked.contains(&2));
+            let mut unique = picked.clone();
+            unique.sort_unstable();
+            unique.dedup();
+            assert_eq!(unique.len(), 3);
+        }
+        assert!(sample_objects(&[], 3, |_| false, &mut rng).is_empty());
+    }
+
+    #[test]
+    fn mask_iou_counts_alpha_over_half() {
+        let alpha = [0.9, 0.6, 0.4, 0.0];
+        let ids = [5, 0, 5, 5];
+        // rendered: {0, 1}; mask: {0, 2, 3}; intersection 1, union 4.
+        assert!((rendered_mask_iou(alpha.into_iter(), &ids, 5) - 0.25).abs() < 1e-6);
+    }
+
+    #[test]
+    fn invalid_configs_name_their_field() {
+        let config = ObjectLossConfig {
+            middle_from: 0.5,
+            large_from: 0.2,
+            ..Default::default()
+        };
+        assert_eq!(config.validate().unwrap_err().0, "object_loss.middle_from");
+    }
+}

@@ -1,0 +1,328 @@
+//! When each stage of training happens, as a function of the job's length.
+//!
+//! The 3DGS recipe's constants are absolute and tuned for 30,000 steps: densify every 100 steps
+//! from step 500 to 15,000, one more SH band every 1,000, opacity reset every 3,000, position
+//! learning rate decaying over 30,000 and, for dynamic scenes (Deformable 3DGS), a 3,000-step
+//! warm-up before the deformation field trains. Applied to a 500-step job they densify once, at
+//! the last step, and never raise the SH degree; a dynamic job under 3,000 steps never trains its
+//! field. Here every value a config leaves out is the 30k value scaled by `steps / 30000`, as
+//! gsplat's `steps_scaler` scales its refine / reset / SH intervals, so a 30k-step job keeps
+//! exactly the recipe, within floors that keep short jobs sensible (densification statistics
+//! need several views, an opacity reset needs time to recover). Values a config gives are kept.
+//! Either way nothing densifies or resets opacity in the last [`settle_margin`] steps, so the
+//! model that is evaluated has trained after its last re-layout.
+
+use serde::Serialize;
+
+use crate::deform::DeformationConfig;
+use crate::train::TrainConfig;
+
+/// The job length the 3DGS constants were tuned for.
+pub const RECIPE_STEPS: u32 = 30_000;
+
+/// The recipe's values at [`RECIPE_STEPS`] (3DGS; Deformable 3DGS for the field).
+pub const RECIPE_DENSIFY_FROM: u32 = 500;
+pub const RECIPE_DENSIFY_UNTIL: u32 = 15_000;
+pub const RECIPE_DENSIFY_INTERVAL: u32 = 100;
+pub const RECIPE_OPACITY_RESET_INTERVAL: u32 = 3_000;
+pub const RECIPE_SH_DEGREE_INTERVAL: u32 = 1_000;
+pub const RECIPE_POSITION_DECAY_STEPS: u32 = 30_000;
+pub const RECIPE_WARM_UP_STEPS: u32 = 3_000;
+pub const RECIPE_FIELD_DECAY_STEPS: u32 = 40_000;
+pub const RECIPE_TIME_NOISE_STEPS: u32 = 20_000;
+
+/// Fewest steps between two default densifications: each one judges the gradients accumulated
+/// since the last, which should come from several training views (the recipe's 100 is kept for
+/// every job up to 30k steps). On the figurine at 500 steps a floor of 50 (densifying at 50, 100,
+/// 150, 200) ended with 9.8k Gaussians and 19.11 dB, 100 (at 100 and 200) with 5.3k and 19.00
+/// dB at about 1.5x its step rate (docs/benchmarks.md).
+pub const MIN_DENSIFY_INTERVAL: u32 = 100;
+/// Fewest steps between two default opacity resets: every reset costs the scene its opacities,
+/// which take hundreds of steps to come back.
+pub const MIN_OPACITY_RESET_INTERVAL: u32 = 1_000;
+/// Share of the job, at its end, in which nothing densifies or resets opacity.
+pub const SETTLE_FRACTION: f64 = 0.1;
+
+/// `value` (tuned for [`RECIPE_STEPS`]) scaled to a job of `steps`, rounded; exact at 30k.
+pub fn scaled(value: u32, steps: u32) -> u32 {
+    let scaled = (value as u64 * steps as u64 + RECIPE_STEPS as u64 / 2) / RECIPE_STEPS as u64;
+    scaled.min(u32::MAX as u64) as u32
+}
+
+/// Steps at the end of a job of `steps` in which nothing densifies or resets opacity.
+pub fn settle_margin(steps: u32) -> u32 {
+    (steps as f64 * SETTLE_FRACTION).ceil() as u32
+}
+
+/// The resolved schedule of one job: every stage boundary in steps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct TrainSchedule {
+    pub steps: u32,
+    pub densify_from: u32,
+    pub densify_until: u32,
+    pub densify_interval: u32,
+    /// 0: no opacity reset.
+    pub opacity_reset_interval: u32,
+    pub sh_degree_interval: u32,
+    pub max_sh_degree: u32,
+    pub position_decay_steps: u32,
+    pub settle_margin: u32,
+    /// Present for a dynamic scene's job.
+    pub deformation: Option<DeformationSchedule>,
+}
+
+/// When the deformation field trains, in steps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct DeformationSchedule {
+    /// Steps trained as a static scene before the field moves Gaussians.
+    pub warm_up_steps: u32,
+    /// Steps over which the field's learning rate decays.
+    pub learning_rate_decay_steps: u32,
+    /// Steps over which the time noise anneals to zero.
+    pub time_noise_steps: u32,
+}
+
+impl DeformationSchedule {
+    /// The config's values, or the recipe's scaled to `steps`.
+    pub fn resolve(config: &DeformationConfig, steps: u32) -> Self {
+        Self {
+            warm_up_steps: config
+                .warm_up_steps
+                .unwrap_or_else(|| scaled(RECIPE_WARM_UP_STEPS, steps)),
+            learning_rate_decay_steps: config
+                .learning_rate_decay_steps
+                .unwrap_or_else(|| scaled(RECIPE_FIELD_DECAY_STEPS, steps).max(1)),
+            time_noise_steps: config
+                .time_noise_steps
+                .unwrap_or_else(|| scaled(RECIPE_TIME_NOISE_STEPS, steps)),
+        }
+    }
+
+    /// Whether the field moves Gaussians in step `step` (0-based count of finished steps).
+    pub fn active_at(&self, step: u32) -> bool {
+        step >= self.warm_up_steps
+    }
+}
+
+impl TrainSchedule {
+    /// The schedule of `config`: its own values where it gives them, else the recipe's scaled to
+    /// its `steps` (see the module documentation).
+    pub fn resolve(config: &TrainConfig) -> Self {
+        let steps = config.steps.max(1);
+        let densify_interval = config.densify_interval.unwrap_or_else(|| {
+            scaled(RECIPE_DENSIFY_INTERVAL, steps).max(MIN_DENSIFY_INTERVAL.min(steps))
+        });
+        let densify_from = config
+            .densify_from
+            .unwrap_or_else(|| scaled(RECIPE_DENSIFY_FROM, steps).max(densify_interval));
+        let densify_until = config
+            .densify_until
+            .unwrap_or_else(|| scaled(RECIPE_DENSIFY_UNTIL, steps));
+        let opacity_reset_interval = config.opacity_reset_interval.unwrap_or_else(|| {
+            scaled(RECIPE_OPACITY_RESET_INTERVAL, steps).max(MIN_OPACITY_RESET_INTERVAL)
+        });
+        let sh_degree_interval = config
+            .sh_degree_interval
+            .unwrap_or_else(|| scaled(RECIPE_SH_DEGREE_INTERVAL, steps).max(1));
+        let position_decay_steps = config
+            .learning_rates
+            .position_decay_steps
+            .unwrap_or_else(|| scaled(RECIPE_POSITION_DECAY_STEPS, steps).max(1));
+        Self {
+            steps,
+            densify_from,
+            densify_until,
+            densify_interval: densify_interval.max(1),
+            opacity_reset_interval,
+            sh_degree_interval: sh_degree_interval.max(1),
+            max_sh_degree: config.max_sh_degree,
+            position_decay_steps,
+            settle_margin: settle_margin(steps),
+            deformation: config
+                .deformation
+                .as_ref()
+                .map(|deformation| DeformationSchedule::resolve(deformation, steps)),
+        }
+    }
+
+    /// The last step after which densification or an opacity reset may run.
+    fn last_relayout_step(&self) -> u32 {
+        self.steps.saturating_sub(self.settle_margin)
+    }
+
+    /// Whether densification runs after `step` (1-based count of finished steps).
+    pub fn densifies_at(&self, step: u32) -> bool {
+        step >= self.densify_from
+            && step < self.densify_until
+            && step <= self.last_relayout_step()
+            && step.is_multiple_of(self.densify_interval)
+    }
+
+    /// Whether the opacity reset runs after `step`.
+    pub fn resets_opacity_at(&self, step: u32) -> bool {
+        self.opacity_reset_interval > 0
+            && step < self.densify_until
+            && step <= self.last_relayout_step()
+            && step.is_multiple_of(self.opacity_reset_interval)
+    }
+
+    /// Whether an opacity reset has happened before `step` (densification then also prunes
+    /// oversized splats, as 3DGS does).
+    pub fn after_first_reset(&self, step: u32) -> bool {
+        self.opacity_reset_interval > 0 && step > self.opacity_reset_interval
+    }
+
+    /// Active SH degree in step `step` (0-based): one more band every `sh_degree_interval`.
+    pub fn sh_degree_at(&self, step: u32) -> u32 {
+        crate::schedule::sh_degree_at(step, self.sh_degree_interval, self.max_sh_degree)
+    }
+
+    /// The steps after which densification runs.
+    pub fn densify_steps(&self) -> impl Iterator<Item = u32> + '_ {
+        (1..=self.steps).filter(|&step| self.densifies_at(step))
+    }
+
+    /// The steps after which opacities are reset.
+    pub fn reset_steps(&self) -> impl Iterator<Item = u32> + '_ {
+        (1..=self.steps).filter(|&step| self.resets_opacity_at(step))
+    }
+
+    /// Stages the config asks for that this job cannot reach, in words (empty when all can).
+    pub fn warnings(&self) -> Vec<String> {
+        let mut warnings = Vec::new();
+        let steps = self.steps;
+        if self.densify_until > 0 && self.densify_steps().next().is_none() {
+            warnings.push(format!(
+                "densification never runs: it starts at step {} (every {} steps, before step {}) \
+                 and nothing densifies in the last {} of the {steps} steps",
+                self.densify_from, self.densify_interval, self.densify_until, self.settle_margin
+            ));
+        }
+        if self.max_sh_degree > 0 && self.sh_degree_interval >= steps {
+            warnings.push(format!(
+                "the SH degree stays 0: one more band every {} steps, the job has {steps}",
+                self.sh_degree_interval
+            ));
+        } else if self.max_sh_degree > 0
+            && self.sh_degree_interval.saturating_mul(self.max_sh_degree) >= steps
+        {
+            warnings.push(format!(
+                "SH degree {} is never reached: one more band every {} steps, the job has {steps}",
+                self.max_sh_degree, self.sh_degree_interval
+            ));
+        }
+        if let Some(deformation) = &self.deformation
+            && deformation.warm_up_steps >= steps
+        {
+            warnings.push(format!(
+                "the deformation field never trains: its warm-up is {} steps, the job has \
+                 {steps}; the scene trains static",
+                deformation.warm_up_steps
+            ));
+        }
+        warnings
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn defaults(steps: u32) -> TrainSchedule {
+        TrainSchedule::resolve(&TrainConfig {
+            steps,
+            deformation: Some(DeformationConfig::default()),
+            ..TrainConfig::default()
+        })
+    }
+
+    #[test]
+    fn thirty_thousand_steps_keep_the_recipe_exactly() {
+        let schedule = defaults(30_000);
+        assert_eq!(schedule.densify_from, 500);
+        assert_eq!(schedule.densify_until, 15_000);
+        assert_eq!(schedule.densify_interval, 100);
+        assert_eq!(schedule.opacity_reset_interval, 3_000);
+        assert_eq!(schedule.sh_degree_interval, 1_000);
+        assert_eq!(schedule.position_decay_steps, 30_000);
+        let deformation = schedule.deformation.expect("dynamic");
+        assert_eq!(deformation.warm_up_steps, 3_000);
+        assert_eq!(deformation.learning_rate_decay_steps, 40_000);
+        assert_eq!(deformation.time_noise_steps, 20_000);
+        // The same stages as the fixed recipe: densify 500, 600, ... 14900; reset 3000 ... 12000.
+        let densify: Vec<u32> = schedule.densify_steps().collect();
+        assert_eq!(densify.first(), Some(&500));
+        assert_eq!(densify.last(), Some(&14_900));
+        assert_eq!(densify.len(), 145);
+        let resets: Vec<u32> = schedule.reset_steps().collect();
+        assert_eq!(resets, vec![3_000, 6_000, 9_000, 12_000]);
+        assert_eq!(schedule.sh_degree_at(999), 0);
+        assert_eq!(schedule.sh_degree_at(3_000), 3);
+        assert!(schedule.warnings().is_empty());
+    }
+
+    #[test]
+    fn a_short_job_densifies_more_than_once_and_settles_before_the_end() {
+        let schedule = defaults(500);
+        let densify: Vec<u32> = schedule.densify_steps().collect();
+        assert_eq!(densify, vec![100, 200], "densifies at {densify:?}");
+        let margin = settle_margin(500);
+        assert!(margin >= 50);
+        assert!(
+            densify.iter().all(|&step| step + margin <= 500),
+            "{densify:?}"
+        );
+        assert!(schedule.reset_steps().all(|step| step + margin <= 500));
+        // Every SH band is reached well before the end.
+        assert_eq!(schedule.sh_degree_at(100), 3);
+        assert_eq!(schedule.position_decay_steps, 500);
+        assert!(schedule.warnings().is_empty(), "{:?}", schedule.warnings());
+    }
+
+    #[test]
+    fn explicit_values_win_but_never_inside_the_settle_margin() {
+        let config = TrainConfig {
+            steps: 1_000,
+            densify_from: Some(100),
+            densify_until: Some(1_000),
+            densify_interval: Some(100),
+            opacity_reset_interval: Some(0),
+            sh_degree_interval: Some(250),
+            ..TrainConfig::default()
+        };
+        let schedule = TrainSchedule::resolve(&config);
+        assert_eq!(schedule.sh_degree_interval, 250);
+        let densify: Vec<u32> = schedule.densify_steps().collect();
+        assert_eq!(densify, vec![100, 200, 300, 400, 500, 600, 700, 800, 900]);
+        assert_eq!(schedule.reset_steps().count(), 0);
+    }
+
+    #[test]
+    fn the_dynamic_warm_up_scales_with_the_job() {
+        for (steps, warm_up) in [(600, 60), (3_000, 300), (30_000, 3_000), (60_000, 6_000)] {
+            let deformation = defaults(steps).deformation.expect("dynamic");
+            assert_eq!(deformation.warm_up_steps, warm_up, "{steps} steps");
+            assert!(deformation.active_at(warm_up) && !deformation.active_at(warm_up - 1));
+            assert!(defaults(steps).warnings().is_empty());
+        }
+    }
+
+    #[test]
+    fn impossible_stages_are_named() {
+        let config = TrainConfig {
+            steps: 600,
+            sh_degree_interval: Some(1_000),
+            densify_from: Some(700),
+            deformation: Some(DeformationConfig {
+                warm_up_steps: Some(3_000),
+                ..DeformationConfig::default()
+            }),
+            ..TrainConfig::default()
+        };
+        let warnings = TrainSchedule::resolve(&config).warnings();
+        assert_eq!(warnings.len(), 3, "{warnings:?}");
+        assert!(warnings[0].contains("densification never runs"));
+        assert!(warnings[1].contains("SH degree stays 0"));
+        assert!(warnings[2].contains("deformation field never trains"));
+    }
+}

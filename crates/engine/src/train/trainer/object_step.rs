@@ -1,0 +1,188 @@
+//! The trainer's Segment-then-Splat extension: the object renders inside each step (see
+//! [`crate::train::object_loss`]), batched on the step's full render
+//! ([`Renderer::forward_objects`](crate::render::Renderer::forward_objects)). The
+//! separate per-object renders they replace stay as the reference (`object_separate.rs`).
+
+use super::{TrainError, Trainer};
+use crate::loss::{LossImages, LossOutputs, ObjectMask};
+use crate::render::{ObjectSlot, RenderOutput};
+use crate::train::object_loss::{ObjectTargets, SkippedPair, sample_objects};
+use segsplat_scene::Level;
+
+#[derive(Debug, thiserror::Error)]
+pub enum ObjectTargetsError {
+    #[error(
+        "object masks are given for {given} views but the trainer has {expected} training views"
+    )]
+    ViewCount { given: usize, expected: usize },
+    #[error(
+        "training view {view}: {level:?} object mask has {given} pixels, the view has {expected}"
+    )]
+    PixelCount {
+        view: usize,
+        level: Level,
+        given: usize,
+        expected: usize,
+    },
+}
+
+impl Trainer {
+    /// Gives the trainer each training view's object masks (in [`Trainer::views`]'s training
+    /// order, at the training resolution), which turns on the object loss configured in
+    /// `TrainConfig::object_loss`.
+    pub fn set_object_targets(&mut self, targets: ObjectTargets) -> Result<(), TrainError> {
+        let expected = self.views.train.len();
+        if targets.views.len() != expected {
+            return Err(TrainError::ObjectTargets(ObjectTargetsError::ViewCount {
+                given: targets.views.len(),
+                expected,
+            }));
+        }
+        for (view, (masks, train_view)) in targets.views.iter().zip(&self.views.train).enumerate() {
+            let pixels = train_view.camera.pixel_count();
+            for level in Level::ALL {
+                let given = masks.ids_cpu[level.index()].len();
+                if given != pixels {
+                    return Err(TrainError::ObjectTargets(ObjectTargetsError::PixelCount {
+                        view,
+                        level,
+                        given,
+                        expected: pixels,
+                    }));
+                }
+            }
+        }
+        self.object_targets = Some(targets);
+        Ok(())
+    }
+
+    /// (object, view) pairs the partial-mask filter has left out so far, sorted.
+    pub fn skipped_pairs(&self) -> Vec<SkippedPair> {
+        self.skipped_pairs.iter().copied().collect()
+    }
+
+    /// Renders each step's objects separately (the path before batching: every object
+    /// re-projected, re-sorted and back-propagated alone) rather than batched on the step's full
+    /// render. Same gradients up to float-atomic order; for tests and benchmarks.
+    pub fn set_separate_object_renders(&mut self, separate: bool) {
+        self.separate_object_renders = separate;
+    }
+
+    /// This step's object slots: for each active level, `m` objects of the view (not skipped
+    /// by the partial-mask filter), drawn from the trainer's RNG.
+    fn sample_object_slots(&mut self, view_index: usize) -> Vec<ObjectSlot> {
+        let (Some(config), Some(targets)) = (&self.config.object_loss, &self.object_targets) else {
+            return Vec::new();
+        };
+        let masks = &targets.views[view_index];
+        let mut slots = Vec::new();
+        for level in config.active_levels(self.step, self.config.steps) {
+            let skipped = &self.skipped_pairs;
+            let objects = sample_objects(
+                &masks.present[level.index()],
+                config.objects_per_level,
+                |object_id| {
+                    skipped.contains(&SkippedPair {
+                        train_view: view_index,
+                        level,
+                        object_id,
+                    })
+                },
+                &mut self.rng,
+            );
+            slots.extend(objects.into_iter().map(|id| ObjectSlot { level, id }));
+        }
+        slots
+    }
+
+    /// Records the object renders of one step: this step's object slots, each rendered alone on
+    /// black with its own loss slot, on top of `base` (the step's full render, whose backward is
+    /// already recorded), backward adding into the gradients.
+    pub(super) fn encode_object_losses(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        view_index: usize,
+        sh_degree: u32,
+        base: &RenderOutput,
+    ) -> Result<(), TrainError> {
+        let slots = self.sample_object_slots(view_index);
+        if slots.is_empty() {
+            return Ok(());
+        }
+        if self.separate_object_renders {
+            return self.encode_separate_object_losses(encoder, view_index, sh_degree, &slots);
+        }
+        let camera = self.views.train[view_index].camera;
+        self.object_buffers
+            .reserve(&self.ctx, camera.pixel_count(), slots.len())?;
+        let (Some(config), Some(targets)) = (&self.config.object_loss, &self.object_targets) else {
+            return Ok(());
+        };
+        let Some(grad_images) = &self.object_buffers.grad_images else {
+            return Ok(());
+        };
+        let masks = &targets.views[view_index];
+        let view = &self.views.train[view_index];
+        let scene = super::dynamics::render_view(&self.gaussians, &self.dynamics);
+        let batch = self
+            .renderer
+            .forward_objects(&self.ctx, encoder, scene, base, &slots)?;
+        for (index, slot) in (0u32..).zip(&slots) {
+            self.loss.encode(
+                &self.ctx,
+                encoder,
+                &LossImages {
+                    rendered: batch.images(),
+                    rendered_index: index,
+                    target: &view.target,
+                    target_mask: Some(ObjectMask {
+                        object_ids: &masks.ids[slot.level.index()],
+                        object_id: slot.id,
+                    }),
+                    width: camera.width,
+                    height: camera.height,
+                },
+                config.weight,
+                &LossOutputs {
+                    rendered_grad: grad_images,
+                    grad_index: index,
+                    loss_values: &self.loss_values,
+                    loss_slot: 1 + index,
+                },
+            )?;
+        }
+        self.renderer.backward_objects(
+            &self.ctx,
+            encoder,
+            scene,
+            &batch,
+            grad_images,
+            &mut self.grads,
+        )?;
+        Ok(())
+    }
+}
+
+/// The step's object loss gradients, grown on demand (a trainer without the object loss never
+/// allocates them).
+#[derive(Debug, Default)]
+pub(super) struct ObjectBuffers {
+    /// Every slot's d loss / d image, slot after slot, as the batched backward reads them.
+    grad_images: Option<wgpu::Buffer>,
+}
+
+impl ObjectBuffers {
+    fn reserve(
+        &mut self,
+        ctx: &segsplat_gpu::GpuContext,
+        pixels: usize,
+        slots: usize,
+    ) -> Result<(), segsplat_gpu::GpuError> {
+        let bytes = pixels as u64 * 16 * slots as u64;
+        if self.grad_images.as_ref().is_some_and(|b| b.size() >= bytes) {
+            return Ok(());
+        }
+        self.grad_images = Some(ctx.storage_buffer("object grad images", bytes)?);
+        Ok(())
+    }
+}

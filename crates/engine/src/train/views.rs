@@ -1,0 +1,121 @@
+//! The training and evaluation views of a scene: cameras at the training resolution and the
+//! target images, resident on the GPU in the renderer's image layout (`vec4<f32>` per pixel).
+
+use crate::camera::{CameraError, RenderCamera};
+use segsplat_gpu::GpuContext;
+use segsplat_scene::{FrameSplit, Scene, SceneError, load_frame_rgb};
+
+#[derive(Debug, thiserror::Error)]
+pub enum ViewsError {
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error(transparent)]
+    Camera(#[from] CameraError),
+    #[error("frame {frame:?}: image is {image:?} but its camera at that scale is {camera:?}")]
+    SizeMismatch {
+        frame: String,
+        image: [u32; 2],
+        camera: [u32; 2],
+    },
+    #[error("the scene has no training views")]
+    NoTrainingViews,
+}
+
+/// One view: its camera, target image on the GPU, and a CPU copy for evaluation.
+pub struct View {
+    pub frame_index: usize,
+    pub name: String,
+    pub camera: RenderCamera,
+    /// The frame's normalised capture time (0 for static scenes).
+    pub time: f32,
+    /// `width * height` vec4 (rgb, 1), row-major.
+    pub target: wgpu::Buffer,
+    /// RGB, row-major; kept for held-out views only (evaluation), empty otherwise.
+    pub target_rgb: Vec<[f32; 3]>,
+}
+
+pub struct Views {
+    pub train: Vec<View>,
+    pub test: Vec<View>,
+}
+
+/// Which frames are held out: the dataset's own split when it has one, else every
+/// `split_every`-th frame in capture order (the first included), as 3DGS does.
+pub fn is_held_out(scene: &Scene, frame_index: usize, split_every: u32) -> bool {
+    let own_split = scene.frames.iter().any(|f| f.split.is_some());
+    if own_split {
+        return matches!(
+            scene.frames[frame_index].split,
+            Some(FrameSplit::Test) | Some(FrameSplit::Val)
+        );
+    }
+    split_every > 0 && frame_index.is_multiple_of(split_every as usize)
+}
+
+impl Views {
+    pub fn load(
+        ctx: &GpuContext,
+        scene: &Scene,
+        max_resolution: Option<u32>,
+        split_every: u32,
+    ) -> Result<Self, ViewsError> {
+        let mut views = Views {
+            train: Vec::new(),
+            test: Vec::new(),
+        };
+        for (frame_index, frame) in scene.frames.iter().enumerate() {
+            let held_out = is_held_out(scene, frame_index, split_every);
+            let image = load_frame_rgb(scene, frame_index, max_resolution)?;
+            let (width, height) = image.dimensions();
+            let scale = width as f32 / frame.intrinsics.width as f32;
+            let camera = RenderCamera::from_frame(frame, scale)?;
+            if (camera.width, camera.height) != (width, height) {
+                return Err(ViewsError::SizeMismatch {
+                    frame: frame.name.clone(),
+                    image: [width, height],
+                    camera: [camera.width, camera.height],
+                });
+            }
+            let pixels: Vec<[f32; 4]> = image.pixels().map(|p| [p[0], p[1], p[2], 1.0]).collect();
+            let target = wgpu::util::DeviceExt::create_buffer_init(
+                &ctx.device,
+                &wgpu::util::BufferInitDescriptor {
+                    label: Some("target image"),
+                    contents: bytemuck::cast_slice(&pixels),
+                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                },
+            );
+            let view = View {
+                frame_index,
+                name: frame.name.clone(),
+                camera,
+                time: frame.time.unwrap_or(0.0),
+                target,
+                target_rgb: if held_out {
+                    pixels.iter().map(|p| [p[0], p[1], p[2]]).collect()
+                } else {
+                    Vec::new()
+                },
+            };
+            if held_out {
+                views.test.push(view);
+            } else {
+                views.train.push(view);
+            }
+        }
+        if views.train.is_empty() {
+            return Err(ViewsError::NoTrainingViews);
+        }
+        Ok(views)
+    }
+
+    /// Largest image in pixels (sizes the loss scratch buffers).
+    pub fn max_size(&self) -> [u32; 2] {
+        self.train
+            .iter()
+            .chain(&self.test)
+            .fold([1, 1], |[w, h], v| {
+                [w.max(v.camera.width), h.max(v.camera.height)]
+            })
+    }
+}

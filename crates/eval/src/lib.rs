@@ -1,0 +1,22 @@
+//! Evaluation: image quality of held-out views, and open-vocabulary segmentation against the
+//! LERF_OVS and 3D-OVS benchmark ground truth (loaders, mIoU as the papers compute it, and the
+//! oracle that scores the 3D segmentation apart from language). Pure CPU code: no GPU, no store.
+
+pub mod error;
+pub mod ground_truth;
+mod lerf_ovs;
+mod opencv_line;
+pub mod polygon;
+pub mod report_table;
+pub mod resize;
+pub mod segmentation_metrics;
+mod three_d_ovs;
+
+pub use error::EvalError;
+pub use ground_truth::{GroundTruthFormat, GroundTruthFrame, GroundTruthQuery, load_ground_truth};
+pub use report_table::report_table;
+pub use resize::resize_nearest;
+pub use segmentation_metrics::{
+    FrameQueryScore, FrameScore, SegmentationReport, evaluate, mask_iou, oracle_choice,
+    score_frame, summarize,
+};

@@ -1,0 +1,358 @@
+//! Adapter discovery and device creation.
+//!
+//! Every adapter wgpu can see is reported (name, backend, type, the limits and features the engine
+//! cares about) so operators can tell at start which GPU a worker got. Devices are created with the
+//! adapter's own limits (the engine sizes buffers against them, e.g. lavapipe's 128 MiB storage
+//! bindings) and with the optional features the kernels exploit when present: native f32 atomics and
+//! subgroups. Kernels fall back to CAS loops / shared memory when they are absent.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use serde::Serialize;
+
+use crate::kernel_choices::KernelChoices;
+
+use super::profiler::KernelProfiler;
+
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    #[error("no GPU adapter matches {filter} (found: {found})")]
+    NoAdapter { filter: String, found: String },
+    #[error("adapter {adapter:?} refused a device: {source}")]
+    RequestDevice {
+        adapter: String,
+        #[source]
+        source: wgpu::RequestDeviceError,
+    },
+    #[error("GPU poll failed: {0}")]
+    Poll(#[from] wgpu::PollError),
+    #[error("GPU buffer mapping failed: {0}")]
+    Map(#[from] wgpu::BufferAsyncError),
+    #[error("GPU reported an error: {0}")]
+    Device(String),
+    #[error(
+        "{what} needs {needed_bytes} bytes in one storage binding but the adapter allows {limit_bytes}"
+    )]
+    BindingTooLarge {
+        what: String,
+        needed_bytes: u64,
+        limit_bytes: u64,
+    },
+    #[error("the adapter cannot run this: {0}")]
+    Unsupported(String),
+}
+
+/// Which adapters a worker may use, and how to open them. Empty fields match everything.
+#[derive(Debug, Clone, Default, serde::Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AdapterFilter {
+    /// Case-insensitive substring of the adapter name (e.g. "nvidia", "llvmpipe").
+    pub name_contains: Option<String>,
+    /// Backends by name: "vulkan", "metal", "dx12", "gl".
+    pub backends: Vec<String>,
+    /// Include software (CPU) adapters. Used anyway when no hardware adapter matches.
+    pub allow_software: Option<bool>,
+    /// Kernel variants to force on the opened adapters, for comparisons (default: each
+    /// adapter's own).
+    pub kernels: KernelChoices,
+}
+
+impl AdapterFilter {
+    fn matches(&self, info: &wgpu::AdapterInfo) -> bool {
+        let name_ok = self
+            .name_contains
+            .as_ref()
+            .is_none_or(|needle| info.name.to_lowercase().contains(&needle.to_lowercase()));
+        let backend = backend_name(info.backend);
+        let backend_ok = self.backends.is_empty()
+            || self
+                .backends
+                .iter()
+                .any(|b| b.eq_ignore_ascii_case(backend));
+        name_ok && backend_ok
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "name_contains={:?} backends={:?}",
+            self.name_contains, self.backends
+        )
+    }
+}
+
+/// What an adapter offers, as logged at start and served by `/readyz`.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct AdapterReport {
+    pub name: String,
+    pub backend: String,
+    pub device_type: String,
+    pub driver: String,
+    pub is_software: bool,
+    pub max_storage_buffer_binding_bytes: u64,
+    pub max_buffer_bytes: u64,
+    pub max_compute_workgroup_storage_bytes: u32,
+    pub max_compute_invocations_per_workgroup: u32,
+    pub float32_atomics: bool,
+    pub subgroups: bool,
+    pub timestamp_queries: bool,
+}
+
+impl AdapterReport {
+    fn new(adapter: &wgpu::Adapter) -> Self {
+        let info = adapter.get_info();
+        let limits = adapter.limits();
+        let features = adapter.features();
+        Self {
+            name: info.name.clone(),
+            backend: backend_name(info.backend).to_string(),
+            device_type: format!("{:?}", info.device_type),
+            driver: format!("{} {}", info.driver, info.driver_info)
+                .trim()
+                .to_string(),
+            is_software: info.device_type == wgpu::DeviceType::Cpu,
+            max_storage_buffer_binding_bytes: limits.max_storage_buffer_binding_size,
+            max_buffer_bytes: limits.max_buffer_size,
+            max_compute_workgroup_storage_bytes: limits.max_compute_workgroup_storage_size,
+            max_compute_invocations_per_workgroup: limits.max_compute_invocations_per_workgroup,
+            float32_atomics: features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC),
+            subgroups: features.contains(wgpu::Features::SUBGROUP),
+            timestamp_queries: features.contains(wgpu::Features::TIMESTAMP_QUERY),
+        }
+    }
+}
+
+fn backend_name(backend: wgpu::Backend) -> &'static str {
+    match backend {
+        wgpu::Backend::Vulkan => "vulkan",
+        wgpu::Backend::Metal => "metal",
+        wgpu::Backend::Dx12 => "dx12",
+        wgpu::Backend::Gl => "gl",
+        wgpu::Backend::BrowserWebGpu => "webgpu",
+        _ => "other",
+    }
+}
+
+fn new_instance() -> wgpu::Instance {
+    wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env())
+}
+
+/// All adapters wgpu can see, hardware first.
+pub fn enumerate_adapters() -> Vec<(wgpu::Adapter, AdapterReport)> {
+    let instance = new_instance();
+    let mut adapters: Vec<_> =
+        pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()))
+            .into_iter()
+            .map(|adapter| {
+                let report = AdapterReport::new(&adapter);
+                (adapter, report)
+            })
+            .collect();
+    adapters.sort_by_key(|(_, report)| report.is_software);
+    adapters
+}
+
+/// Adapters the filter admits. Software adapters are admitted when the filter allows them, or when
+/// no hardware adapter matched (so a GPU-less machine still works, on lavapipe).
+pub fn select_adapters(filter: &AdapterFilter) -> Vec<(wgpu::Adapter, AdapterReport)> {
+    let matching: Vec<_> = enumerate_adapters()
+        .into_iter()
+        .filter(|(adapter, _)| filter.matches(&adapter.get_info()))
+        .collect();
+    let any_hardware = matching.iter().any(|(_, report)| !report.is_software);
+    let allow_software = filter.allow_software.unwrap_or(!any_hardware);
+    matching
+        .into_iter()
+        .filter(|(_, report)| !report.is_software || allow_software)
+        .collect()
+}
+
+/// A device and queue on one adapter, with what the kernels need to know about it.
+#[derive(Debug, Clone)]
+pub struct GpuContext {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub report: AdapterReport,
+    pub limits: wgpu::Limits,
+    pub features: wgpu::Features,
+    /// Per-kernel timestamps, when turned on by [`GpuContext::enable_kernel_profiling`].
+    pub profiler: Option<Arc<KernelProfiler>>,
+    /// Dispatches recorded by every kernel built on this context: for small scenes a step costs
+    /// dispatch overhead more than arithmetic, so benchmarks report the count.
+    pub dispatches: Arc<AtomicU64>,
+    /// Variants forced instead of the adapter's own (see [`KernelChoices`]).
+    pub kernel_choices: KernelChoices,
+}
+
+impl GpuContext {
+    /// The first adapter the filter admits (hardware preferred).
+    pub fn new(filter: &AdapterFilter) -> Result<Self, GpuError> {
+        let mut adapters = select_adapters(filter);
+        if adapters.is_empty() {
+            let found: Vec<String> = enumerate_adapters()
+                .into_iter()
+                .map(|(_, r)| format!("{} ({})", r.name, r.backend))
+                .collect();
+            return Err(GpuError::NoAdapter {
+                filter: filter.describe(),
+                found: if found.is_empty() {
+                    "none".to_string()
+                } else {
+                    found.join(", ")
+                },
+            });
+        }
+        let (adapter, _) = adapters.remove(0);
+        Ok(Self::from_adapter(&adapter)?.with_kernel_choices(filter.kernels))
+    }
+
+    /// Any adapter at all; what tests and the CLI use.
+    pub fn new_default() -> Result<Self, GpuError> {
+        Self::new(&AdapterFilter::default())
+    }
+
+    pub fn from_adapter(adapter: &wgpu::Adapter) -> Result<Self, GpuError> {
+        let report = AdapterReport::new(adapter);
+        let wanted = wgpu::Features::SHADER_FLOAT32_ATOMIC
+            | wgpu::Features::SUBGROUP
+            | wgpu::Features::TIMESTAMP_QUERY;
+        let features = adapter.features() & wanted;
+        let limits = adapter.limits();
+        let descriptor = wgpu::DeviceDescriptor {
+            label: Some("segsplat"),
+            required_features: features,
+            required_limits: limits.clone(),
+            memory_hints: wgpu::MemoryHints::Performance,
+            ..Default::default()
+        };
+        let (device, queue) =
+            pollster::block_on(adapter.request_device(&descriptor)).map_err(|source| {
+                GpuError::RequestDevice {
+                    adapter: report.name.clone(),
+                    source,
+                }
+            })?;
+        Ok(Self {
+            device,
+            queue,
+            report,
+            limits,
+            features,
+            profiler: None,
+            dispatches: Arc::new(AtomicU64::new(0)),
+            kernel_choices: KernelChoices::default(),
+        })
+    }
+
+    /// Dispatches recorded so far by the kernels built on this context.
+    pub fn dispatch_count(&self) -> u64 {
+        self.dispatches.load(Ordering::Relaxed)
+    }
+
+    /// Times every pass of the kernels built on this context from now on (see
+    /// [`KernelProfiler`]); fails when the adapter has no timestamp queries.
+    pub fn enable_kernel_profiling(&mut self) -> Result<(), GpuError> {
+        self.profiler = Some(Arc::new(KernelProfiler::new(self)?));
+        Ok(())
+    }
+
+    pub fn has_float32_atomics(&self) -> bool {
+        self.features
+            .contains(wgpu::Features::SHADER_FLOAT32_ATOMIC)
+    }
+
+    /// This context with `choices` forced (the kernels built on it afterwards follow them).
+    pub fn with_kernel_choices(mut self, choices: KernelChoices) -> Self {
+        self.kernel_choices = choices;
+        self
+    }
+
+    pub fn has_subgroups(&self) -> bool {
+        self.features.contains(wgpu::Features::SUBGROUP)
+    }
+
+    /// Fails with a message naming `what` when `bytes` exceed one storage binding.
+    pub fn check_binding_size(&self, what: &str, bytes: u64) -> Result<(), GpuError> {
+        let limit = self.limits.max_storage_buffer_binding_size;
+        if bytes > limit {
+            return Err(GpuError::BindingTooLarge {
+                what: what.to_string(),
+                needed_bytes: bytes,
+                limit_bytes: limit,
+            });
+        }
+        Ok(())
+    }
+
+    /// A storage buffer of at least `bytes` (never empty, so it always binds) that can be copied
+    /// to and from, after checking that it fits one binding. Every GPU array of the engine is
+    /// one of these.
+    pub fn storage_buffer(&self, label: &str, bytes: u64) -> Result<wgpu::Buffer, GpuError> {
+        self.storage_buffer_with_usage(label, bytes, wgpu::BufferUsages::empty())
+    }
+
+    /// [`Self::storage_buffer`] with `extra` usages (e.g. `INDIRECT`).
+    pub fn storage_buffer_with_usage(
+        &self,
+        label: &str,
+        bytes: u64,
+        extra: wgpu::BufferUsages,
+    ) -> Result<wgpu::Buffer, GpuError> {
+        let bytes = bytes.max(16);
+        self.check_binding_size(label, bytes)?;
+        Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: bytes,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST
+                | extra,
+            mapped_at_creation: false,
+        }))
+    }
+
+    /// Blocks until all submitted work is done.
+    pub fn wait_idle(&self) -> Result<(), GpuError> {
+        self.device.poll(wgpu::PollType::wait_indefinitely())?;
+        Ok(())
+    }
+
+    /// Copies `buffer[..size_bytes]` to the CPU (a staging copy, submit, map, wait).
+    /// For tests, checkpoints and the few unavoidable read-backs; never inside a training step.
+    pub fn read_buffer(&self, buffer: &wgpu::Buffer, size_bytes: u64) -> Result<Vec<u8>, GpuError> {
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size: size_bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("readback"),
+            });
+        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size_bytes);
+        self.queue.submit([encoder.finish()]);
+        let slice = staging.slice(..);
+        let (sender, receiver) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |result| {
+            let _ = sender.send(result);
+        });
+        self.wait_idle()?;
+        receiver
+            .recv()
+            .map_err(|_| GpuError::Device("map callback dropped".to_string()))??;
+        let bytes = slice
+            .get_mapped_range()
+            .map_err(|error| GpuError::Device(format!("mapping the read-back buffer: {error}")))?
+            .to_vec();
+        staging.unmap();
+        Ok(bytes)
+    }
+
+    /// Typed read-back of a whole buffer of plain values.
+    pub fn read_vec<T: bytemuck::Pod>(&self, buffer: &wgpu::Buffer) -> Result<Vec<T>, GpuError> {
+        let bytes = self.read_buffer(buffer, buffer.size())?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes))
+    }
+}

@@ -1,0 +1,171 @@
+//! Defaults that depend on the scene's size (docs/method.md stage 3): the released code trains small
+//! scenes (a few dozen views, e.g. 3D-OVS) for 20k steps with one object per level per step and
+//! large ones (LERF-style captures of hundreds of frames) for 40k with three, with the middle and
+//! large levels joining after 5k and 10k steps in both. A job takes these for every field its
+//! config leaves out.
+
+use serde::{Deserialize, Serialize};
+
+use segsplat_engine::deform::DeformationConfig;
+use segsplat_engine::train::{ObjectLossConfig, TrainConfig};
+
+/// Scenes with fewer training views than this are "small".
+pub const SMALL_SCENE_MAX_VIEWS: usize = 100;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SceneSize {
+    Small,
+    Large,
+}
+
+impl SceneSize {
+    pub fn of(training_views: usize) -> Self {
+        if training_views < SMALL_SCENE_MAX_VIEWS {
+            SceneSize::Small
+        } else {
+            SceneSize::Large
+        }
+    }
+
+    pub fn steps(self) -> u32 {
+        match self {
+            SceneSize::Small => 20_000,
+            SceneSize::Large => 40_000,
+        }
+    }
+
+    pub fn objects_per_level(self) -> u32 {
+        match self {
+            SceneSize::Small => 1,
+            SceneSize::Large => 3,
+        }
+    }
+}
+
+/// Steps after which the middle level joins, and then the large one (released: 5k and 10k).
+const MIDDLE_FROM_STEP: f32 = 5_000.0;
+const LARGE_FROM_STEP: f32 = 10_000.0;
+
+/// Which fields of a job's config were left out, and so come from the scene's size.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SceneSizedFields {
+    pub steps: bool,
+    pub objects_per_level: bool,
+    /// `object_loss.middle_from` and `large_from`: 5k and 10k steps of the run.
+    pub level_schedule: bool,
+    /// `deformation`: the deformation field (docs/method.md "Dynamic scenes") for scenes whose
+    /// frames carry times, none for static ones.
+    pub deformation: bool,
+    /// `background`: for scenes of RGBA images (Blender, D-NeRF), the colour they are composited
+    /// on (white), so transparent pixels are not learnt as a haze of that colour.
+    pub background: bool,
+}
+
+impl SceneSizedFields {
+    /// Reads which fields the submitted JSON config leaves out.
+    pub fn left_out_of(submitted: &serde_json::Value) -> Self {
+        let absent = |pointer: &str| submitted.pointer(pointer).is_none();
+        Self {
+            steps: absent("/steps"),
+            objects_per_level: absent("/object_loss/objects_per_level"),
+            level_schedule: absent("/object_loss/middle_from") && absent("/object_loss/large_from"),
+            deformation: absent("/deformation"),
+            background: absent("/background"),
+        }
+    }
+
+    /// Uses the colour transparent images were composited on (`Some` for scenes with RGBA
+    /// images: Blender / D-NeRF) when the config left `background` out.
+    pub fn apply_background(self, composited_on: Option<[f32; 3]>, config: &mut TrainConfig) {
+        if let (true, Some(background)) = (self.background, composited_on) {
+            config.background = background;
+        }
+    }
+
+    /// Turns the deformation field on for a dynamic scene when the config left it out.
+    pub fn apply_deformation(self, dynamic: bool, config: &mut TrainConfig) {
+        if self.deformation && dynamic && config.deformation.is_none() {
+            config.deformation = Some(DeformationConfig::default());
+        }
+    }
+
+    /// Fills the scene-sized fields of `config` for a scene of `size`.
+    pub fn apply(self, size: SceneSize, config: &mut TrainConfig) {
+        if self.steps {
+            config.steps = size.steps();
+        }
+        let steps = config.steps.max(1) as f32;
+        let object_loss = config
+            .object_loss
+            .get_or_insert_with(ObjectLossConfig::default);
+        if self.objects_per_level {
+            object_loss.objects_per_level = size.objects_per_level();
+        }
+        if self.level_schedule {
+            object_loss.middle_from = (MIDDLE_FROM_STEP / steps).min(1.0);
+            object_loss.large_from = (LARGE_FROM_STEP / steps).min(1.0);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn left_out_fields_follow_the_scene_size_and_given_ones_stay() {
+        let submitted = serde_json::json!({"object_loss": {"objects_per_level": 2}});
+        let sized = SceneSizedFields::left_out_of(&submitted);
+        assert_eq!(
+            sized,
+            SceneSizedFields {
+                steps: true,
+                objects_per_level: false,
+                level_schedule: true,
+                deformation: true,
+                background: true,
+            }
+        );
+        let mut config = TrainConfig {
+            object_loss: Some(ObjectLossConfig {
+                objects_per_level: 2,
+                ..ObjectLossConfig::default()
+            }),
+            ..TrainConfig::default()
+        };
+        sized.apply(SceneSize::of(23), &mut config);
+        let object_loss = config.object_loss.unwrap();
+        assert_eq!(config.steps, 20_000);
+        assert_eq!(object_loss.objects_per_level, 2);
+        assert!((object_loss.middle_from - 0.25).abs() < 1e-6);
+        assert!((object_loss.large_from - 0.5).abs() < 1e-6);
+
+        let mut large = TrainConfig::default();
+        SceneSizedFields::left_out_of(&serde_json::json!({})).apply(SceneSize::of(180), &mut large);
+        let object_loss = large.object_loss.unwrap();
+        assert_eq!((large.steps, object_loss.objects_per_level), (40_000, 3));
+        assert!((object_loss.middle_from - 0.125).abs() < 1e-6);
+
+        let mut given = TrainConfig::default();
+        SceneSizedFields::default().apply(SceneSize::Small, &mut given);
+        assert_eq!(given.steps, TrainConfig::default().steps);
+    }
+
+    #[test]
+    fn deformation_follows_the_scene_unless_given() {
+        let left_out = SceneSizedFields::left_out_of(&serde_json::json!({}));
+        let mut dynamic = TrainConfig::default();
+        left_out.apply_deformation(true, &mut dynamic);
+        assert_eq!(dynamic.deformation, Some(DeformationConfig::default()));
+        let mut static_scene = TrainConfig::default();
+        left_out.apply_deformation(false, &mut static_scene);
+        assert_eq!(static_scene.deformation, None);
+        // An explicit `"deformation": null` keeps a dynamic scene static.
+        let given = SceneSizedFields::left_out_of(&serde_json::json!({"deformation": null}));
+        let mut forced_static = TrainConfig::default();
+        given.apply_deformation(true, &mut forced_static);
+        assert_eq!(forced_static.deformation, None);
+    }
+}

@@ -1,0 +1,156 @@
+//! What the training job kinds share: failure classification, progress reports, checkpointed
+//! training that honours cancel and shutdown at step boundaries.
+
+use crate::jobs::{JobContext, JobFailure, Progress};
+use segsplat_engine::GaussianModel;
+use segsplat_engine::model::ModelError;
+use segsplat_engine::train::{EvalReport, TrainError, TrainProgress, Trainer};
+use segsplat_method::cameras::CAMERAS_FILE;
+use segsplat_method::scene_files::write_scene_files;
+use segsplat_method::scene_files::{LABELS_FILE, SCENE_FILE};
+use segsplat_scene::Scene;
+
+pub fn fatal(error: impl std::fmt::Display) -> JobFailure {
+    JobFailure::Fatal(error.to_string())
+}
+
+pub fn retryable(error: impl std::fmt::Display) -> JobFailure {
+    JobFailure::Retryable(error.to_string())
+}
+
+/// Bad config or data cannot succeed on retry; GPU and I/O trouble might.
+pub fn train_failure(error: TrainError) -> JobFailure {
+    match error {
+        // A retry would fail the same way: the config or the data, not the moment, is wrong.
+        TrainError::Config(_)
+        | TrainError::Views(_)
+        | TrainError::EmptyModel
+        | TrainError::ObjectTargets(_)
+        | TrainError::Model(ModelError::TooLargeForAdapter { .. }) => fatal(error),
+        other => retryable(other),
+    }
+}
+
+/// Reports one stage's progress; a failed report is logged, never fatal.
+pub fn report(ctx: &JobContext, stage: &str, step: u64, total_steps: u64, metrics: &[(&str, f64)]) {
+    let progress = Progress {
+        stage: stage.to_string(),
+        step,
+        total_steps,
+        metrics: metrics
+            .iter()
+            .map(|(name, value)| (name.to_string(), *value))
+            .collect(),
+        eta_secs: None,
+    };
+    if let Err(error) = ctx.progress.report_blocking(progress) {
+        tracing::warn!(%error, "progress report failed");
+    }
+}
+
+/// Records a `warning` job event for every stage the trainer's config makes impossible (a
+/// deformation warm-up longer than the job, densification that never starts, ...), and logs it.
+pub fn warn_about_schedule(ctx: &JobContext, trainer: &Trainer) {
+    for message in trainer.schedule().warnings() {
+        tracing::warn!(job = %ctx.job_id, "{message}");
+        if let Err(error) = ctx.progress.warn_blocking("train", &message) {
+            tracing::warn!(%error, "warning event not recorded");
+        }
+    }
+}
+
+fn report_training(ctx: &JobContext, progress: &TrainProgress) {
+    let mut metrics = vec![
+        ("loss", progress.loss as f64),
+        ("gaussians", progress.gaussians as f64),
+        ("steps_per_sec", progress.steps_per_sec),
+    ];
+    if progress.object_loss != 0.0 {
+        metrics.push(("object_loss", progress.object_loss as f64));
+    }
+    report(
+        ctx,
+        "train",
+        progress.step as u64,
+        progress.total_steps as u64,
+        &metrics,
+    );
+}
+
+fn save_checkpoint(ctx: &JobContext, name: &str, trainer: &Trainer) -> Result<(), JobFailure> {
+    let bytes = trainer
+        .checkpoint()
+        .and_then(|c| Ok(c.to_bytes()?))
+        .map_err(train_failure)?;
+    ctx.save_checkpoint(name, &bytes).map_err(retryable)
+}
+
+/// Trains to the configured end, saving a checkpoint named `checkpoint_name` every
+/// `checkpoint_every` steps (0 = only at the end) and stopping at the next report when the job
+/// is cancelled or the service shuts down. Returns this attempt's training seconds.
+pub fn train_with_checkpoints(
+    ctx: &JobContext,
+    trainer: &mut Trainer,
+    checkpoint_name: &str,
+    checkpoint_every: u32,
+) -> Result<f64, JobFailure> {
+    let total = trainer.config().steps;
+    if trainer.step() == 0 {
+        warn_about_schedule(ctx, trainer);
+    }
+    let started = std::time::Instant::now();
+    while trainer.step() < total {
+        let next_checkpoint = match checkpoint_every {
+            0 => total,
+            every => (trainer.step() / every + 1) * every,
+        };
+        trainer
+            .run_until(next_checkpoint, |progress| {
+                report_training(ctx, progress);
+                ctx.stop_requested().is_ok()
+            })
+            .map_err(train_failure)?;
+        ctx.stop_requested()?;
+        save_checkpoint(ctx, checkpoint_name, trainer)?;
+    }
+    Ok(started.elapsed().as_secs_f64())
+}
+
+/// Stores a finished job's outputs under its output prefix: the trained scene (`scene.ply`,
+/// Inria layout, `labels.npy`, object ids in PLY order, and `cameras.json`) and the given JSON
+/// documents.
+pub fn store_outputs(
+    ctx: &JobContext,
+    model: &GaussianModel,
+    scene: &Scene,
+    documents: &[(&str, Vec<u8>)],
+) -> Result<(), JobFailure> {
+    write_scene_files(model, scene, &ctx.work_dir).map_err(retryable)?;
+    let prefix = ctx.output_prefix();
+    for file in [SCENE_FILE, LABELS_FILE, CAMERAS_FILE] {
+        ctx.blobs
+            .put_file(&format!("{prefix}/{file}"), &ctx.work_dir.join(file))
+            .map_err(retryable)?;
+    }
+    for (file, bytes) in documents {
+        ctx.blobs
+            .put_bytes(&format!("{prefix}/{file}"), bytes)
+            .map_err(retryable)?;
+    }
+    Ok(())
+}
+
+/// Reports the held-out evaluation as the "evaluate" stage.
+pub fn report_evaluation(ctx: &JobContext, held_out: &EvalReport, gaussians: usize) {
+    report(
+        ctx,
+        "evaluate",
+        1,
+        1,
+        &[
+            ("psnr", held_out.psnr),
+            ("ssim", held_out.ssim),
+            ("gaussians", gaussians as f64),
+        ],
+    );
+}

@@ -1,0 +1,207 @@
+//! The worker pool (one worker per GPU slot, plus optional CPU-only slots) and the lease reaper
+//! that re-queues jobs whose worker stopped renewing its lease.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+use tokio::sync::Notify;
+use tokio::task::JoinHandle;
+use tokio_util::sync::CancellationToken;
+use tracing::{info, warn};
+
+use super::worker::{Worker, WorkerShared};
+use super::{HandlerRegistry, JobEventBus};
+use crate::config::JobsConfig;
+use crate::store::{BlobStore, Database};
+use segsplat_gpu::context::select_adapters;
+use segsplat_gpu::{AdapterFilter, AdapterReport, GpuContext};
+use segsplat_vision::models::ModelsStatus;
+
+/// One concurrent job runner; `gpu: None` is a CPU-only slot.
+#[derive(Clone)]
+pub struct WorkerSlot {
+    pub gpu: Option<Arc<GpuContext>>,
+}
+
+pub struct WorkerPoolOptions {
+    pub database: Database,
+    pub blobs: Arc<dyn BlobStore>,
+    /// Handed to every job (CLIP embeddings in `segment_then_splat`).
+    pub models: Arc<ModelsStatus>,
+    pub handlers: HandlerRegistry,
+    pub bus: JobEventBus,
+    pub jobs: JobsConfig,
+    pub scratch_dir: PathBuf,
+    pub slots: Vec<WorkerSlot>,
+    /// Woken when a job is queued in this process, so idle workers need not wait for a poll.
+    pub job_queued: Arc<Notify>,
+    /// Lease owner names are `{instance}/{slot}`.
+    pub instance: String,
+    pub shutdown_grace: Duration,
+}
+
+pub struct WorkerPool {
+    shutdown: CancellationToken,
+    tasks: Vec<JoinHandle<()>>,
+}
+
+impl WorkerPool {
+    pub fn start(options: WorkerPoolOptions) -> Self {
+        let shutdown = CancellationToken::new();
+        let shared = WorkerShared {
+            database: options.database,
+            blobs: options.blobs,
+            models: options.models,
+            handlers: options.handlers,
+            bus: options.bus,
+            jobs: options.jobs,
+            job_queued: options.job_queued,
+            shutdown: shutdown.clone(),
+            scratch_dir: options.scratch_dir,
+            shutdown_grace: options.shutdown_grace,
+        };
+        metrics::gauge!("segsplat_workers_total").set(options.slots.len() as f64);
+        let tasks = options
+            .slots
+            .into_iter()
+            .enumerate()
+            .map(|(index, slot)| {
+                let device = slot
+                    .gpu
+                    .as_ref()
+                    .map_or("cpu".to_string(), |gpu| gpu.report.name.clone());
+                let worker = Worker {
+                    shared: shared.clone(),
+                    name: format!("{}/{index}", options.instance),
+                    gpu: slot.gpu,
+                };
+                info!(worker = %worker.name, %device, "starting worker");
+                tokio::spawn(worker.run())
+            })
+            .collect();
+        Self { shutdown, tasks }
+    }
+
+    pub fn slot_count(&self) -> usize {
+        self.tasks.len()
+    }
+
+    /// Stops claiming, asks running handlers to stop, and waits until every running job is
+    /// finished or handed back to the queue.
+    pub async fn shutdown(self) {
+        self.shutdown.cancel();
+        for task in self.tasks {
+            if let Err(error) = task.await {
+                warn!(%error, "worker task ended abnormally");
+            }
+        }
+    }
+}
+
+/// Periodically re-queues (or fails) jobs whose lease expired or whose worker's process on this
+/// host has exited.
+pub struct LeaseReaper {
+    shutdown: CancellationToken,
+    task: JoinHandle<()>,
+}
+
+impl LeaseReaper {
+    pub fn start(
+        database: Database,
+        identity: super::ProcessIdentity,
+        bus: JobEventBus,
+        job_queued: Arc<Notify>,
+        every: Duration,
+    ) -> Self {
+        let shutdown = CancellationToken::new();
+        let stop = shutdown.clone();
+        let task = tokio::spawn(async move {
+            let mut ticker = tokio::time::interval(every);
+            loop {
+                tokio::select! {
+                    _ = ticker.tick() => {}
+                    _ = stop.cancelled() => break,
+                }
+                let reaped = match database.requeue_expired_leases().await {
+                    Ok(mut expired) => database
+                        .requeue_leases_of_gone_owners(|owner| {
+                            identity.owned_by_a_stopped_local_process(owner)
+                        })
+                        .await
+                        .map(|gone| {
+                            expired.extend(gone);
+                            expired
+                        }),
+                    Err(error) => Err(error),
+                };
+                match reaped {
+                    Ok(expired) => {
+                        for lease in &expired {
+                            warn!(job_id = %lease.job_id, owner = ?lease.previous_owner,
+                                state = lease.new_state.as_str(), "job lease expired");
+                            bus.notify(&lease.job_id);
+                        }
+                        if !expired.is_empty() {
+                            metrics::counter!("segsplat_job_leases_expired_total")
+                                .increment(expired.len() as u64);
+                            job_queued.notify_waiters();
+                        }
+                    }
+                    Err(error) => warn!(%error, "re-queueing expired leases failed"),
+                }
+            }
+        });
+        Self { shutdown, task }
+    }
+
+    pub async fn shutdown(self) {
+        self.shutdown.cancel();
+        let _ = self.task.await;
+    }
+}
+
+/// GPUs for workers: every adapter the filter admits, with a device each. Blocking (adapter
+/// enumeration and device creation); run it in `spawn_blocking`. Returns the opened contexts and,
+/// for each adapter that could not be opened or when none was found, a reason.
+pub fn open_adapters(filter: &AdapterFilter) -> (Vec<Arc<GpuContext>>, Vec<String>) {
+    let mut contexts = Vec::new();
+    let mut problems = Vec::new();
+    let adapters = select_adapters(filter);
+    if adapters.is_empty() {
+        problems.push(format!(
+            "no GPU adapter matches workers.adapters (name_contains={:?}, backends={:?}); \
+             jobs stay queued",
+            filter.name_contains, filter.backends
+        ));
+    }
+    for (adapter, report) in adapters {
+        log_adapter(&report);
+        match GpuContext::from_adapter(&adapter) {
+            Ok(context) => contexts.push(Arc::new(context.with_kernel_choices(filter.kernels))),
+            Err(error) => {
+                warn!(adapter = %report.name, %error, "cannot open GPU adapter");
+                problems.push(format!("adapter {}: {error}", report.name));
+            }
+        }
+    }
+    (contexts, problems)
+}
+
+fn log_adapter(report: &AdapterReport) {
+    info!(
+        name = %report.name,
+        backend = %report.backend,
+        device_type = %report.device_type,
+        driver = %report.driver,
+        software = report.is_software,
+        max_storage_buffer_binding_bytes = report.max_storage_buffer_binding_bytes,
+        max_buffer_bytes = report.max_buffer_bytes,
+        max_compute_workgroup_storage_bytes = report.max_compute_workgroup_storage_bytes,
+        max_compute_invocations_per_workgroup = report.max_compute_invocations_per_workgroup,
+        float32_atomics = report.float32_atomics,
+        subgroups = report.subgroups,
+        timestamp_queries = report.timestamp_queries,
+        "GPU adapter"
+    );
+}

@@ -1,0 +1,282 @@
+//! One worker slot: lease a job, run its handler with a heartbeat alongside, record the outcome.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use tokio::sync::Notify;
+use tokio_util::sync::CancellationToken;
+use tracing::{Instrument, info, info_span, warn};
+
+use super::{HandlerRegistry, JobContext, JobEventBus, JobFailure, ProgressReporter};
+use crate::config::JobsConfig;
+use crate::store::jobs::{AttemptOutcome, HeartbeatOutcome, JobRecord, JobState};
+use crate::store::{BlobStore, Database};
+use segsplat_gpu::GpuContext;
+use segsplat_vision::models::ModelsStatus;
+
+/// What every worker shares.
+#[derive(Clone)]
+pub(crate) struct WorkerShared {
+    pub database: Database,
+    pub blobs: Arc<dyn BlobStore>,
+    pub models: Arc<ModelsStatus>,
+    pub handlers: HandlerRegistry,
+    pub bus: JobEventBus,
+    pub jobs: JobsConfig,
+    /// Woken when a job is queued in this process.
+    pub job_queued: Arc<Notify>,
+    pub shutdown: CancellationToken,
+    /// Per-attempt scratch folders live here.
+    pub scratch_dir: PathBuf,
+    /// How long a stopping worker waits for its handler before handing the job back anyway.
+    pub shutdown_grace: Duration,
+}
+
+pub(crate) struct Worker {
+    pub shared: WorkerShared,
+    /// Lease owner name, unique per process and slot.
+    pub name: String,
+    pub gpu: Option<Arc<GpuContext>>,
+}
+
+impl Worker {
+    pub async fn run(self) {
+        let kinds = self.shared.handlers.kinds_for(self.gpu.is_some());
+        let poll = Duration::from_millis(self.shared.jobs.poll_interval_ms);
+        let lease_ms = (self.shared.jobs.lease_secs * 1000.0).ceil() as i64;
+        info!(worker = %self.name, ?kinds, "worker started");
+        metrics::gauge!("segsplat_workers_idle").increment(1.0);
+        while !self.shared.shutdown.is_cancelled() {
+            let claimed = self
+                .shared
+                .database
+                .claim_job(&self.name, &kinds, lease_ms)
+                .await;
+            match claimed {
+                Ok(Some(job)) => {
+                    self.shared.bus.notify(&job.id);
+                    metrics::gauge!("segsplat_workers_idle").decrement(1.0);
+                    metrics::gauge!("segsplat_workers_busy").increment(1.0);
+                    let span = info_span!("job", job_id = %job.id, kind = %job.kind,
+                        attempt = job.attempts, worker = %self.name);
+                    self.run_job(job).instrument(span).await;
+                    metrics::gauge!("segsplat_workers_busy").decrement(1.0);
+                    metrics::gauge!("segsplat_workers_idle").increment(1.0);
+                }
+                Ok(None) => {
+                    tokio::select! {
+                        _ = self.shared.job_queued.notified() => {}
+                        _ = tokio::time::sleep(poll) => {}
+                        _ = self.shared.shutdown.cancelled() => {}
+                    }
+                }
+                Err(error) => {
+                    warn!(worker = %self.name, %error, "claiming a job failed; retrying");
+                    tokio::select! {
+                        _ = tokio::time::sleep(poll) => {}
+                        _ = self.shared.shutdown.cancelled() => {}
+                    }
+                }
+            }
+        }
+        metrics::gauge!("segsplat_workers_idle").decrement(1.0);
+        info!(worker = %self.name, "worker stopped");
+    }
+
+    async fn run_job(&self, job: JobRecord) {
+        let started = Instant::now();
+        let outcome = self.attempt(&job).await;
+        let Some(outcome) = outcome else {
+            warn!("lease lost while running; another worker owns the job now");
+            metrics::counter!("segsplat_job_outcomes_total", "kind" => job.kind.clone(),
+                "outcome" => "lease_lost")
+            .increment(1);
+            return;
+        };
+        let outcome_label = match &outcome {
+            AttemptOutcome::Succeeded => "succeeded",
+            AttemptOutcome::Failed(_) => "failed",
+            AttemptOutcome::Retry(_) => "retry",
+            AttemptOutcome::Cancelled => "cancelled",
+            AttemptOutcome::HandBack => "handed_back",
+        };
+        match self
+            .shared
+            .database
+            .finish_attempt(&job.id, &self.name, &outcome)
+            .await
+        {
+            Ok(Some(finished)) => {
+                info!(
+                    outcome = outcome_label,
+                    state = finished.state.as_str(),
+                    elapsed_secs = started.elapsed().as_secs_f64(),
+                    "attempt finished"
+                );
+                if finished.state == JobState::Succeeded && !self.shared.jobs.keep_final_checkpoint
+                {
+                    self.delete_checkpoints(&job.id).await;
+                }
+            }
+            Ok(None) => warn!(
+                outcome = outcome_label,
+                "lease lost before the outcome was recorded"
+            ),
+            Err(error) => warn!(%error, "recording the outcome failed; the lease will expire"),
+        }
+        metrics::counter!("segsplat_job_outcomes_total", "kind" => job.kind.clone(),
+            "outcome" => outcome_label)
+        .increment(1);
+        metrics::histogram!("segsplat_job_attempt_seconds", "kind" => job.kind.clone())
+            .record(started.elapsed().as_secs_f64());
+        self.shared.bus.notify(&job.id);
+    }
+
+    /// Runs the handler; `None` when the lease was lost (nothing may be recorded then).
+    async fn attempt(&self, job: &JobRecord) -> Option<AttemptOutcome> {
+        let Some(handler) = self.shared.handlers.get(&job.kind).cloned() else {
+            return Some(AttemptOutcome::Failed(format!(
+                "no handler for job kind {:?} in this worker",
+                job.kind
+            )));
+        };
+        let work_dir = self
+            .shared
+            .scratch_dir
+            .join(format!("job-{}-{}", job.id, job.attempts));
+        let scene_dir = match self.prepare_dirs(job, &work_dir).await {
+            Ok(scene_dir) => scene_dir,
+            Err(message) => return Some(AttemptOutcome::Retry(message)),
+        };
+        let cancel = CancellationToken::new();
+        let handler_shutdown = CancellationToken::new();
+        let context = JobContext {
+            job_id: job.id.clone(),
+            scene_id: job.scene_id.clone(),
+            kind: job.kind.clone(),
+            attempt: job.attempts,
+            scene_dir,
+            work_dir: work_dir.clone(),
+            config: job.config.clone(),
+            gpu: self.gpu.clone(),
+            blobs: self.shared.blobs.clone(),
+            models: self.shared.models.clone(),
+            database: self.shared.database.clone(),
+            progress: ProgressReporter::new(
+                self.shared.database.clone(),
+                self.shared.bus.clone(),
+                job.id.clone(),
+                self.name.clone(),
+            ),
+            cancel: cancel.clone(),
+            shutdown: handler_shutdown.clone(),
+        };
+        let mut handler_task = tokio::spawn(handler.run(context).in_current_span());
+        let heartbeat_every = Duration::from_secs_f64(self.shared.jobs.heartbeat_secs);
+        let lease_ms = (self.shared.jobs.lease_secs * 1000.0).ceil() as i64;
+        let mut heartbeat = tokio::time::interval(heartbeat_every);
+        heartbeat.tick().await;
+        let mut lease_lost = false;
+        let mut grace_deadline: Option<tokio::time::Instant> = None;
+        let result = loop {
+            let grace = async {
+                match grace_deadline {
+                    Some(deadline) => tokio::time::sleep_until(deadline).await,
+                    None => std::future::pending().await,
+                }
+            };
+            tokio::select! {
+                joined = &mut handler_task => break Some(joined),
+                _ = heartbeat.tick() => {
+                    match self.shared.database.heartbeat(&job.id, &self.name, lease_ms).await {
+                        Ok(HeartbeatOutcome::Renewed { cancel_requested }) => {
+                            if cancel_requested && !cancel.is_cancelled() {
+                                info!("cancel requested; stopping at the next step boundary");
+                                cancel.cancel();
+                            }
+                        }
+                        Ok(HeartbeatOutcome::LeaseLost) => {
+                            lease_lost = true;
+                            cancel.cancel();
+                        }
+                        Err(error) => warn!(%error, "heartbeat failed; will retry"),
+                    }
+                }
+                _ = self.shared.shutdown.cancelled(), if grace_deadline.is_none() => {
+                    handler_shutdown.cancel();
+                    grace_deadline = Some(tokio::time::Instant::now() + self.shared.shutdown_grace);
+                }
+                _ = grace => {
+                    warn!("handler did not stop within the shutdown grace period; handing the job back");
+                    handler_task.abort();
+                    break None;
+                }
+            }
+        };
+        if let Err(error) = tokio::fs::remove_dir_all(&work_dir).await
+            && error.kind() != std::io::ErrorKind::NotFound
+        {
+            warn!(%error, path = %work_dir.display(), "could not remove the job's scratch folder");
+        }
+        if lease_lost {
+            return None;
+        }
+        Some(match result {
+            None => AttemptOutcome::HandBack,
+            Some(Ok(Ok(()))) => AttemptOutcome::Succeeded,
+            Some(Ok(Err(JobFailure::Cancelled))) => AttemptOutcome::Cancelled,
+            Some(Ok(Err(JobFailure::Interrupted))) => AttemptOutcome::HandBack,
+            Some(Ok(Err(JobFailure::Fatal(message)))) => AttemptOutcome::Failed(message),
+            Some(Ok(Err(JobFailure::Retryable(message)))) => AttemptOutcome::Retry(message),
+            Some(Err(join_error)) => {
+                AttemptOutcome::Retry(format!("job handler crashed: {join_error}"))
+            }
+        })
+    }
+
+    /// Removes a finished job's checkpoints: they only serve a resume, and the last one of a
+    /// training job can be hundreds of MB.
+    async fn delete_checkpoints(&self, job_id: &str) {
+        let blobs = self.shared.blobs.clone();
+        let prefix = format!("jobs/{job_id}/checkpoints");
+        let deleted = tokio::task::spawn_blocking(move || blobs.delete_prefix(&prefix)).await;
+        match deleted {
+            Ok(Ok(_)) => {}
+            Ok(Err(error)) => warn!(%error, "cannot delete the finished job's checkpoints"),
+            Err(error) => warn!(%error, "deleting the finished job's checkpoints crashed"),
+        }
+    }
+
+    /// Creates the scratch folder and finds (or fetches) the scene's files.
+    async fn prepare_dirs(&self, job: &JobRecord, work_dir: &Path) -> Result<PathBuf, String> {
+        let blobs = self.shared.blobs.clone();
+        let scene_prefix = format!("scenes/{}/files", job.scene_id);
+        let work_dir = work_dir.to_path_buf();
+        tokio::task::spawn_blocking(move || {
+            std::fs::create_dir_all(&work_dir)
+                .map_err(|error| format!("cannot create {}: {error}", work_dir.display()))?;
+            if let Some(local) = blobs.local_path(&scene_prefix)
+                && local.is_dir()
+            {
+                return Ok(local);
+            }
+            let scene_dir = work_dir.join("scene");
+            let keys = blobs
+                .list_prefix(&scene_prefix)
+                .map_err(|error| error.to_string())?;
+            for key in keys {
+                let relative = key
+                    .strip_prefix(&scene_prefix)
+                    .unwrap_or(&key)
+                    .trim_start_matches('/');
+                blobs
+                    .get_to_path(&key, &scene_dir.join(relative))
+                    .map_err(|error| error.to_string())?;
+            }
+            Ok(scene_dir)
+        })
+        .await
+        .map_err(|error| format!("preparing the job's folders crashed: {error}"))?
+    }
+}

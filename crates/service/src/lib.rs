@@ -1,0 +1,10 @@
+//! The service core: the store (database and blobs), jobs and their workers, the job kinds,
+//! the serving cache for trained scenes, the use cases REST, gRPC and the CLI share, and the
+//! service config that composes every crate's options. No HTTP or gRPC types.
+
+pub mod config;
+pub mod job_kinds;
+pub mod jobs;
+pub mod serving;
+pub mod store;
+pub mod usecases;

@@ -1,0 +1,8 @@
+//! The use cases REST, gRPC and the CLI share, typed and free of HTTP and gRPC types: each
+//! interface parses its input, calls one of these, and maps the result and the error.
+
+pub mod ingest;
+pub mod job_bounds;
+pub mod objects;
+pub mod query;
+pub mod serving;

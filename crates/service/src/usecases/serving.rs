@@ -1,0 +1,293 @@
+//! The serving core REST and gRPC share for masks and exports: which job's results a scene
+//! serves, loading them into the GPU scene cache, rendering and encoding masks, and reading the
+//! trained files.
+
+use std::sync::Arc;
+
+use crate::job_kinds::segment_then_splat::KIND as SEGMENT_THEN_SPLAT;
+use crate::jobs::job_output_prefix as output_prefix;
+use crate::serving::{
+    EncodedMask, LoadedScene, MaskFormat, MaskView, ObjectMasks, SceneCache, ServingError,
+    TrainedScene, encode_mask, object_ply,
+};
+use crate::store::jobs::JobRecord;
+use crate::store::{BlobError, BlobStore, Caller, Database, StoreError};
+use segsplat_method::segment_then_splat::objects::ObjectSummary;
+use segsplat_scene::Level;
+
+/// Results files a client may download from a scene's trained version (the deformation
+/// field's two files exist for dynamic scenes only).
+pub const DOWNLOADABLE_FILES: [&str; 8] = [
+    "scene.ply",
+    "labels.npy",
+    "cameras.json",
+    "objects.json",
+    "metrics.json",
+    "skipped_pairs.json",
+    "deformation.json",
+    "deformation.bin",
+];
+
+/// Why a mask or export request got no answer; each maps to one REST status and one gRPC code.
+#[derive(Debug, thiserror::Error)]
+pub enum ServeFailure {
+    #[error("scene {0} not found")]
+    SceneNotFound(String),
+    #[error("scene {0} has no finished segment_then_splat (or reconstruct) job yet")]
+    NotTrained(String),
+    #[error("{0} is not a downloadable file; choose one of {files}", files = DOWNLOADABLE_FILES.join(", "))]
+    UnknownFile(String),
+    #[error("{file} is not among this scene's results (job {job_id})")]
+    FileNotStored { file: String, job_id: String },
+    #[error(transparent)]
+    Serving(#[from] ServingError),
+    #[error(transparent)]
+    Store(#[from] StoreError),
+    #[error("{0}")]
+    Worker(String),
+}
+
+/// One object's encoded masks.
+#[derive(Debug, Clone)]
+pub struct EncodedObjectMasks {
+    pub level: Level,
+    pub object_id: u32,
+    pub mask: EncodedMask,
+    pub visible_mask: Option<EncodedMask>,
+}
+
+#[derive(Clone)]
+pub struct Serving {
+    database: Database,
+    blobs: Arc<dyn BlobStore>,
+    cache: Arc<SceneCache>,
+    max_mask_side: u32,
+}
+
+impl Serving {
+    pub fn new(
+        database: Database,
+        blobs: Arc<dyn BlobStore>,
+        cache: Arc<SceneCache>,
+        max_mask_side: u32,
+    ) -> Self {
+        Self {
+            database,
+            blobs,
+            cache,
+            max_mask_side,
+        }
+    }
+
+    /// The serving core as `config` sets it up: a scene cache with the configured budget that
+    /// opens the first adapter the workers' filter admits on its first mask request.
+    pub fn from_config(
+        config: &crate::config::Config,
+        database: Database,
+        blobs: Arc<dyn BlobStore>,
+    ) -> Self {
+        let adapters = config.workers.adapters.clone();
+        let cache = Arc::new(SceneCache::new(
+            config.query.cache_budget_mib.saturating_mul(1024 * 1024),
+            move || segsplat_gpu::GpuContext::new(&adapters).map_err(|error| error.to_string()),
+        ));
+        Self::new(database, blobs, cache, config.query.max_mask_side)
+    }
+
+    pub fn cache(&self) -> &SceneCache {
+        &self.cache
+    }
+
+    /// The job whose results the scene serves: its latest finished `segment_then_splat` job
+    /// (whose objects the object table holds), else its latest `reconstruct` job. A scene
+    /// `caller` does not see is [`ServeFailure::SceneNotFound`]: every method here starts
+    /// from this check.
+    pub async fn serving_job(
+        &self,
+        scene_id: &str,
+        caller: &Caller,
+    ) -> Result<JobRecord, ServeFailure> {
+        if self.database.get_scene(scene_id, caller).await?.is_none() {
+            return Err(ServeFailure::SceneNotFound(scene_id.to_string()));
+        }
+        for kind in [SEGMENT_THEN_SPLAT, crate::job_kinds::reconstruct::KIND] {
+            if let Some(job) = self.database.latest_succeeded_job(scene_id, kind).await? {
+                return Ok(job);
+            }
+        }
+        Err(ServeFailure::NotTrained(scene_id.to_string()))
+    }
+
+    /// The scene's served version, resident on the GPU.
+    pub async fn loaded_scene(
+        &self,
+        scene_id: &str,
+        caller: &Caller,
+    ) -> Result<Arc<LoadedScene>, ServeFailure> {
+        let job = self.serving_job(scene_id, caller).await?;
+        self.load_job(job).await
+    }
+
+    async fn load_job(&self, job: JobRecord) -> Result<Arc<LoadedScene>, ServeFailure> {
+        let cache = Arc::clone(&self.cache);
+        let blobs = Arc::clone(&self.blobs);
+        blocking(move || {
+            let prefix = output_prefix(&job.id);
+            Ok(cache.get_or_load(&job.id, || {
+                TrainedScene::from_blobs(blobs.as_ref(), &prefix)
+            })?)
+        })
+        .await
+    }
+
+    /// Renders and encodes the masks of `objects` for `view` (at `time` for a dynamic scene).
+    // The scene, who asks, and the render settings each caller passes straight from its request.
+    #[allow(clippy::too_many_arguments)]
+    pub async fn render_masks(
+        &self,
+        scene_id: &str,
+        caller: &Caller,
+        view: MaskView,
+        time: Option<f32>,
+        objects: Vec<(Level, u32)>,
+        visible_too: bool,
+        format: MaskFormat,
+    ) -> Result<Vec<EncodedObjectMasks>, ServeFailure> {
+        let rendered = self
+            .render_bit_masks(scene_id, caller, view, time, objects, visible_too)
+            .await?;
+        blocking(move || {
+            rendered
+                .iter()
+                .map(|masks| {
+                    Ok(EncodedObjectMasks {
+                        level: masks.level,
+                        object_id: masks.object_id,
+                        mask: encode_mask(&masks.full, format)?,
+                        visible_mask: masks
+                            .visible
+                            .as_ref()
+                            .map(|visible| encode_mask(visible, format))
+                            .transpose()?,
+                    })
+                })
+                .collect::<Result<Vec<_>, ServingError>>()
+                .map_err(ServeFailure::from)
+        })
+        .await
+    }
+
+    /// Renders the masks of `objects` for `view` (unencoded: evaluation and the CLI). A
+    /// dynamic scene renders at `time`, else at the frame's own time for a frame view, else at
+    /// its first time; a static scene ignores `time`.
+    pub async fn render_bit_masks(
+        &self,
+        scene_id: &str,
+        caller: &Caller,
+        view: MaskView,
+        time: Option<f32>,
+        objects: Vec<(Level, u32)>,
+        visible_too: bool,
+    ) -> Result<Vec<ObjectMasks>, ServeFailure> {
+        let started = std::time::Instant::now();
+        let job = self.serving_job(scene_id, caller).await?;
+        // Unknown ids would render as empty masks; say so instead.
+        let known = self.database.list_objects(scene_id, None).await?;
+        if let Some(&(level, object_id)) = objects.iter().find(|(level, object_id)| {
+            !known
+                .iter()
+                .any(|known| known.level == *level && known.object_id == *object_id)
+        }) {
+            return Err(ServingError::NoSuchObject { level, object_id }.into());
+        }
+        let scene = self.load_job(job).await?;
+        let cache = Arc::clone(&self.cache);
+        let max_mask_side = self.max_mask_side;
+        let masks = blocking(move || {
+            let camera = view.render_camera(&scene.cameras, max_mask_side)?;
+            let time = scene.effective_time(time, view.frame_time(&scene.cameras));
+            Ok(cache.render_masks(&scene, &camera, &objects, visible_too, time)?)
+        })
+        .await?;
+        metrics::histogram!("segsplat_mask_render_seconds").record(started.elapsed().as_secs_f64());
+        Ok(masks)
+    }
+
+    /// The objects where they are at `time` (or the frame's time) when the scene is dynamic;
+    /// `None` for a static scene, whose stored object table holds at every time.
+    pub async fn objects_at(
+        &self,
+        scene_id: &str,
+        caller: &Caller,
+        time: Option<f32>,
+        view: Option<&MaskView>,
+    ) -> Result<Option<Vec<ObjectSummary>>, ServeFailure> {
+        // Static scenes answer from the object table without claiming the GPU.
+        let dynamic = self
+            .database
+            .get_scene(scene_id, caller)
+            .await?
+            .is_some_and(|scene| scene.summary.time_count > 0);
+        if !dynamic {
+            return Ok(None);
+        }
+        let scene = self.loaded_scene(scene_id, caller).await?;
+        let frame_time = view.and_then(|view| view.frame_time(&scene.cameras));
+        let Some(time) = scene.effective_time(time, frame_time) else {
+            return Ok(None);
+        };
+        let cache = Arc::clone(&self.cache);
+        blocking(move || Ok(cache.objects_at(&scene, time)?)).await
+    }
+
+    /// One trained file of the scene's served version.
+    pub async fn trained_file(
+        &self,
+        scene_id: &str,
+        caller: &Caller,
+        file: &str,
+    ) -> Result<Vec<u8>, ServeFailure> {
+        if !DOWNLOADABLE_FILES.contains(&file) {
+            return Err(ServeFailure::UnknownFile(file.to_string()));
+        }
+        let job = self.serving_job(scene_id, caller).await?;
+        let blobs = Arc::clone(&self.blobs);
+        let file = file.to_string();
+        blocking(move || {
+            let key = format!("{}/{file}", output_prefix(&job.id));
+            blobs.get_bytes(&key).map_err(|error| match error {
+                BlobError::NotFound { .. } => ServeFailure::FileNotStored {
+                    file,
+                    job_id: job.id.clone(),
+                },
+                other => ServeFailure::Worker(other.to_string()),
+            })
+        })
+        .await
+    }
+
+    /// One object's Gaussians as their own PLY.
+    pub async fn object_ply(
+        &self,
+        scene_id: &str,
+        caller: &Caller,
+        level: Level,
+        object_id: u32,
+    ) -> Result<Vec<u8>, ServeFailure> {
+        let job = self.serving_job(scene_id, caller).await?;
+        let blobs = Arc::clone(&self.blobs);
+        blocking(move || {
+            let trained = TrainedScene::from_blobs(blobs.as_ref(), &output_prefix(&job.id))?;
+            Ok(object_ply(&trained.model, level, object_id)?)
+        })
+        .await
+    }
+}
+
+async fn blocking<T: Send + 'static>(
+    work: impl FnOnce() -> Result<T, ServeFailure> + Send + 'static,
+) -> Result<T, ServeFailure> {
+    tokio::task::spawn_blocking(work)
+        .await
+        .map_err(|error| ServeFailure::Worker(format!("worker thread failed: {error}")))?
+}
