@@ -38,7 +38,7 @@ pub const SSIM_WINDOW_SIGMA: f64 = 1.5;
 /// Pixels per side of the per-pixel kernels' workgroups (prepended as `LOSS_TILE`).
 const LOSS_TILE: u32 = 16;
 /// Pixels each per-pixel invocation filters (prepended as `LOSS_RUN`).
-const LOSS_RUN: u32 = 4;
+const LOSS_RUN: u32 = 8;
 /// Invocations of a per-pixel workgroup, each writing one loss partial sum.
 const PER_PIXEL_INVOCATIONS: u32 = LOSS_TILE * LOSS_TILE / LOSS_RUN;
 /// Bytes per pixel of the scratch images: four vec4 of filtered moments, three of partials.

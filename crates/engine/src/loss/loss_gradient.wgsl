@@ -45,4 +45,8 @@ fn loss_gradient(@builtin(global_invocation_id) id: vec3<u32>) {
     store_gradient(x, y + 1, run.s1);
     store_gradient(x, y + 2, run.s2);
     store_gradient(x, y + 3, run.s3);
+    store_gradient(x, y + 4, run.s4);
+    store_gradient(x, y + 5, run.s5);
+    store_gradient(x, y + 6, run.s6);
+    store_gradient(x, y + 7, run.s7);
 }

@@ -38,10 +38,14 @@ fn store_moments(x: i32, y: i32, m: Moments) {
     }
 }
 
-@compute @workgroup_size(LOSS_TILE / LOSS_RUN, LOSS_TILE)
-fn filter_moments_horizontal(@builtin(global_invocation_id) id: vec3<u32>) {
-    let x = i32(id.x * LOSS_RUN);
-    let y = i32(id.y);
+@compute @workgroup_size(LOSS_TILE, LOSS_TILE / LOSS_RUN)
+fn filter_moments_horizontal(
+    @builtin(workgroup_id) workgroup: vec3<u32>,
+    @builtin(local_invocation_id) local: vec3<u32>,
+) {
+    let start = horizontal_run(workgroup, local);
+    let x = start.x;
+    let y = start.y;
     if !inside(x, y) || !tile_in_reach(x, y, SKIP_REACH) {
         return;
     }
@@ -49,6 +53,10 @@ fn filter_moments_horizontal(@builtin(global_invocation_id) id: vec3<u32>) {
     var m1 = no_moments();
     var m2 = no_moments();
     var m3 = no_moments();
+    var m4 = no_moments();
+    var m5 = no_moments();
+    var m6 = no_moments();
+    var m7 = no_moments();
     for (var j = 0; j < RUN_INPUTS; j++) {
         let sx = x + j - WINDOW_RADIUS;
         if sx >= 0 && sx < i32(params.width) {
@@ -59,10 +67,18 @@ fn filter_moments_horizontal(@builtin(global_invocation_id) id: vec3<u32>) {
             m1 = add_moments(m1, tap_weight(j - 1), r, t);
             m2 = add_moments(m2, tap_weight(j - 2), r, t);
             m3 = add_moments(m3, tap_weight(j - 3), r, t);
+            m4 = add_moments(m4, tap_weight(j - 4), r, t);
+            m5 = add_moments(m5, tap_weight(j - 5), r, t);
+            m6 = add_moments(m6, tap_weight(j - 6), r, t);
+            m7 = add_moments(m7, tap_weight(j - 7), r, t);
         }
     }
     store_moments(x, y, m0);
     store_moments(x + 1, y, m1);
     store_moments(x + 2, y, m2);
     store_moments(x + 3, y, m3);
+    store_moments(x + 4, y, m4);
+    store_moments(x + 5, y, m5);
+    store_moments(x + 6, y, m6);
+    store_moments(x + 7, y, m7);
 }

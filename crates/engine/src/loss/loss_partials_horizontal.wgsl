@@ -20,10 +20,14 @@ fn store_partials(x: i32, y: i32, sum: Partials) {
     }
 }
 
-@compute @workgroup_size(LOSS_TILE / LOSS_RUN, LOSS_TILE)
-fn filter_partials_horizontal(@builtin(global_invocation_id) id: vec3<u32>) {
-    let x = i32(id.x * LOSS_RUN);
-    let y = i32(id.y);
+@compute @workgroup_size(LOSS_TILE, LOSS_TILE / LOSS_RUN)
+fn filter_partials_horizontal(
+    @builtin(workgroup_id) workgroup: vec3<u32>,
+    @builtin(local_invocation_id) local: vec3<u32>,
+) {
+    let start = horizontal_run(workgroup, local);
+    let x = start.x;
+    let y = start.y;
     if !inside(x, y) || !tile_in_reach(x, y, SKIP_REACH) {
         return;
     }
@@ -32,4 +36,8 @@ fn filter_partials_horizontal(@builtin(global_invocation_id) id: vec3<u32>) {
     store_partials(x + 1, y, run.s1);
     store_partials(x + 2, y, run.s2);
     store_partials(x + 3, y, run.s3);
+    store_partials(x + 4, y, run.s4);
+    store_partials(x + 5, y, run.s5);
+    store_partials(x + 6, y, run.s6);
+    store_partials(x + 7, y, run.s7);
 }

@@ -24,13 +24,20 @@ struct PartialsRun {
     s1: Partials,
     s2: Partials,
     s3: Partials,
+    s4: Partials,
+    s5: Partials,
+    s6: Partials,
+    s7: Partials,
 }
 
 // `extent` is the image's size along `step` (width or height), `along` the run's first
 // coordinate on that axis. Inputs the previous pass skipped read as zero (loss_skip.wgsl).
 fn filter_partials_run(x: i32, y: i32, step: vec2<i32>, along: i32, extent: i32) -> PartialsRun {
     let reach = run_reach(x, y, step, along, extent);
-    var run = PartialsRun(no_partials(), no_partials(), no_partials(), no_partials());
+    var run = PartialsRun(
+        no_partials(), no_partials(), no_partials(), no_partials(),
+        no_partials(), no_partials(), no_partials(), no_partials(),
+    );
     for (var j = 0; j < RUN_INPUTS; j++) {
         let offset = j - WINDOW_RADIUS;
         if along + offset >= 0 && along + offset < extent {
@@ -43,6 +50,10 @@ fn filter_partials_run(x: i32, y: i32, step: vec2<i32>, along: i32, extent: i32)
             run.s1 = add_partials(run.s1, tap_weight(j - 1), value);
             run.s2 = add_partials(run.s2, tap_weight(j - 2), value);
             run.s3 = add_partials(run.s3, tap_weight(j - 3), value);
+            run.s4 = add_partials(run.s4, tap_weight(j - 4), value);
+            run.s5 = add_partials(run.s5, tap_weight(j - 5), value);
+            run.s6 = add_partials(run.s6, tap_weight(j - 6), value);
+            run.s7 = add_partials(run.s7, tap_weight(j - 7), value);
         }
     }
     return run;

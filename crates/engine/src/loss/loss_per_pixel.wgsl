@@ -87,6 +87,10 @@ fn ssim_per_pixel(
         var m1 = no_packed_moments();
         var m2 = no_packed_moments();
         var m3 = no_packed_moments();
+        var m4 = no_packed_moments();
+        var m5 = no_packed_moments();
+        var m6 = no_packed_moments();
+        var m7 = no_packed_moments();
         for (var j = 0; j < RUN_INPUTS; j++) {
             let sy = y + j - WINDOW_RADIUS;
             if sy >= 0 && sy < i32(params.height) && input_computed(reach, sy) {
@@ -101,10 +105,16 @@ fn ssim_per_pixel(
                 m1 = add_packed_moments(m1, tap_weight(j - 1), row);
                 m2 = add_packed_moments(m2, tap_weight(j - 2), row);
                 m3 = add_packed_moments(m3, tap_weight(j - 3), row);
+                m4 = add_packed_moments(m4, tap_weight(j - 4), row);
+                m5 = add_packed_moments(m5, tap_weight(j - 5), row);
+                m6 = add_packed_moments(m6, tap_weight(j - 6), row);
+                m7 = add_packed_moments(m7, tap_weight(j - 7), row);
             }
         }
         run_loss = ssim_pixel(x, y, m0) + ssim_pixel(x, y + 1, m1) + ssim_pixel(x, y + 2, m2)
             + ssim_pixel(x, y + 3, m3);
+        run_loss += ssim_pixel(x, y + 4, m4) + ssim_pixel(x, y + 5, m5)
+            + ssim_pixel(x, y + 6, m6) + ssim_pixel(x, y + 7, m7);
     }
     loss_partials[(workgroup.x + workgroup.y * workgroups.x) * INVOCATIONS + thread] = run_loss;
 }

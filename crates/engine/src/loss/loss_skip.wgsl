@@ -25,7 +25,8 @@ fn tile_in_reach(x: i32, y: i32, reach: u32) -> bool {
 }
 
 // Whether the inputs of a run were computed by the pass that wrote them. A run reads
-// RUN_INPUTS (< LOSS_TILE) pixels along one axis, so at most two tiles: those before `boundary`
+// RUN_INPUTS pixels along one axis, from 5 before its start to 5 past its end; runs start at
+// multiples of LOSS_RUN, so that span stays within two tiles: those before `boundary`
 // (the axis coordinate where the second tile starts) in the first, the rest in the second.
 struct RunReach {
     boundary: i32,
@@ -52,3 +53,8 @@ fn run_reach(x: i32, y: i32, step: vec2<i32>, along: i32, extent: i32) -> RunRea
 fn input_computed(reach: RunReach, coordinate: i32) -> bool {
     return select(reach.second, reach.first, coordinate < reach.boundary);
 }
+
+// The span fits two tiles while the last run starting within WINDOW_RADIUS of a tile's start
+// also ends WINDOW_RADIUS before the tile's end.
+const_assert LOSS_TILE % LOSS_RUN == 0u
+    && (u32(WINDOW_RADIUS) - 1u) / LOSS_RUN * LOSS_RUN + LOSS_RUN + u32(WINDOW_RADIUS) <= LOSS_TILE;
