@@ -84,16 +84,12 @@ fn fibonacci_sphere(count: usize) -> Vec<Vec3> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn synthetic_scene(dir: &std::path::Path, frames: usize) -> segsplat_scene::Scene {
-        segsplat_scene::synthetic::load_three_spheres(dir, frames, 128, 96)
-            .expect("synthetic scene")
-    }
+    use segsplat_scene::synthetic::load_three_spheres;
 
     #[test]
     fn the_shell_surrounds_cameras_and_points_evenly() {
         let dir = tempfile::tempdir().expect("tempdir");
-        let scene = synthetic_scene(dir.path(), 8);
+        let scene = load_three_spheres(dir.path(), 8, 128, 96).expect("synthetic scene");
         let shell = background_shell_points(&scene, 500);
         assert_eq!(shell.len(), 500);
         let centre = scene

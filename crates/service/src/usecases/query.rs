@@ -219,7 +219,7 @@ pub async fn query_with_masks(
     let moved = serving
         .objects_at(&request.scene_id, caller, request.time, view)
         .await?;
-    let mut masks: Vec<EncodedObjectMasks> = match request.masks {
+    let masks: Vec<EncodedObjectMasks> = match request.masks {
         Some(asked) => {
             let objects = outcome
                 .matches
@@ -240,7 +240,7 @@ pub async fn query_with_masks(
         }
         None => Vec::new(),
     };
-    masks.truncate(outcome.matches.len());
+    // `render_masks` answers in the order it was asked, one per match.
     let mut masks = masks.into_iter();
     let objects = outcome
         .matches
