@@ -8,6 +8,8 @@ use utoipa::ToSchema;
 
 use segsplat_scene::InputErrorClass;
 use segsplat_service::store::{BlobError, StoreError};
+use segsplat_service::usecases::jobs::JobFailure;
+use segsplat_service::usecases::scenes::SceneFailure;
 
 #[derive(Debug, Clone)]
 pub struct ApiError {
@@ -115,6 +117,33 @@ impl From<StoreError> for ApiError {
 impl From<BlobError> for ApiError {
     fn from(error: BlobError) -> Self {
         ApiError::internal(error.to_string())
+    }
+}
+
+impl From<SceneFailure> for ApiError {
+    fn from(failure: SceneFailure) -> Self {
+        let message = failure.to_string();
+        match failure {
+            SceneFailure::NotFound(_) => ApiError::not_found(message),
+            SceneFailure::Rejected { class, .. } => ApiError::from_input_class(class, message),
+            SceneFailure::Busy { .. } => ApiError::conflict(message),
+            SceneFailure::Store(_) | SceneFailure::Blob(_) | SceneFailure::Internal(_) => {
+                ApiError::internal(message)
+            }
+        }
+    }
+}
+
+impl From<JobFailure> for ApiError {
+    fn from(failure: JobFailure) -> Self {
+        let message = failure.to_string();
+        match failure {
+            JobFailure::NotFound(_) | JobFailure::SceneNotFound(_) => ApiError::not_found(message),
+            JobFailure::Invalid(_) => ApiError::unprocessable(message),
+            JobFailure::UnknownState(_) => ApiError::bad_request(message),
+            JobFailure::AlreadyFinished { .. } => ApiError::conflict(message),
+            JobFailure::Store(_) => ApiError::internal(message),
+        }
     }
 }
 

@@ -46,7 +46,7 @@ pub async fn trained_file(
     Extension(caller): Extension<Caller>,
     UrlPath((id, file)): UrlPath<(String, String)>,
 ) -> ApiResult<Response> {
-    let bytes = state.serving.trained_file(&id, &caller, &file).await?;
+    let bytes = state.core.serving.trained_file(&id, &caller, &file).await?;
     Ok(attachment(&file, content_type(&file), bytes))
 }
 
@@ -65,6 +65,7 @@ pub async fn object_ply(
 ) -> ApiResult<Response> {
     let level = parse_level(&level)?;
     let bytes = state
+        .core
         .serving
         .object_ply(&id, &caller, level, object_id)
         .await?;

@@ -3,7 +3,6 @@
 //! cache when a view is given; and `RenderMask` for one object.
 
 use std::pin::Pin;
-use std::sync::Arc;
 use std::time::Instant;
 
 use futures::Stream;
@@ -13,39 +12,34 @@ use super::auth::grpc_caller;
 use crate::proto;
 use crate::proto::scene_query_server::SceneQuery;
 use segsplat_scene::Level;
+use segsplat_service::core::ServiceCore;
 use segsplat_service::serving::{
     EncodedMask, EncodedMaskData, MaskFormat, MaskView, PinholeIntrinsics, ServingError,
 };
 use segsplat_service::store::jobs::{JobRecord, JobState};
 use segsplat_service::store::objects::ObjectRecord;
 use segsplat_service::store::scenes::SceneRecord;
-use segsplat_service::store::{Caller, Database, StoreError};
+use segsplat_service::store::{Caller, StoreError};
+use segsplat_service::usecases::jobs::{self, JobFailure};
 use segsplat_service::usecases::objects::{ListObjectsError, list_objects};
 use segsplat_service::usecases::query::{
     MaskRequest, QueryError, QueryFailure, QueryRequest as CoreQuery, query_with_masks,
 };
-use segsplat_service::usecases::serving::{ServeFailure, Serving};
-use segsplat_vision::language::{
-    DEFAULT_RELEVANCY_THRESHOLD, Granularity, QueryOptions, SharedTextEncoder,
-};
+use segsplat_service::usecases::scenes::{self, SceneFailure};
+use segsplat_service::usecases::serving::ServeFailure;
+use segsplat_vision::language::{DEFAULT_RELEVANCY_THRESHOLD, Granularity, QueryOptions};
 
 /// Replies a stream query may have waiting before the client reads them.
 const STREAM_BUFFER: usize = 4;
 
 #[derive(Clone)]
 pub struct SceneQueryService {
-    database: Database,
-    text_encoder: Arc<SharedTextEncoder>,
-    serving: Serving,
+    core: ServiceCore,
 }
 
 impl SceneQueryService {
-    pub fn new(database: Database, text_encoder: Arc<SharedTextEncoder>, serving: Serving) -> Self {
-        Self {
-            database,
-            text_encoder,
-            serving,
-        }
+    pub fn new(core: ServiceCore) -> Self {
+        Self { core }
     }
 
     /// One query with optional masks: the core of `Query` and of each `StreamQuery` message.
@@ -80,9 +74,9 @@ impl SceneQueryService {
             _ => None,
         };
         let answer = query_with_masks(
-            &self.database,
-            &self.text_encoder,
-            &self.serving,
+            &self.core.database,
+            &self.core.text_encoder,
+            &self.core.serving,
             caller,
             CoreQuery {
                 scene_id: query.scene_id,
@@ -301,6 +295,32 @@ fn granularity_from_proto(value: i32) -> Result<Granularity, Status> {
     }
 }
 
+fn scene_failure_status(failure: SceneFailure) -> Status {
+    let message = failure.to_string();
+    match failure {
+        SceneFailure::NotFound(_) => Status::not_found(message),
+        SceneFailure::Rejected { .. } => Status::invalid_argument(message),
+        SceneFailure::Busy { .. } => Status::failed_precondition(message),
+        SceneFailure::Store(_) | SceneFailure::Blob(_) | SceneFailure::Internal(_) => {
+            tracing::error!(%message, "gRPC scene request failed");
+            Status::internal(message)
+        }
+    }
+}
+
+fn job_failure_status(failure: JobFailure) -> Status {
+    let message = failure.to_string();
+    match failure {
+        JobFailure::NotFound(_) | JobFailure::SceneNotFound(_) => Status::not_found(message),
+        JobFailure::Invalid(_) | JobFailure::UnknownState(_) => Status::invalid_argument(message),
+        JobFailure::AlreadyFinished { .. } => Status::failed_precondition(message),
+        JobFailure::Store(_) => {
+            tracing::error!(%message, "gRPC job request failed");
+            Status::internal(message)
+        }
+    }
+}
+
 fn internal(error: StoreError) -> Status {
     tracing::error!(%error, "gRPC request failed");
     Status::internal(error.to_string())
@@ -476,8 +496,8 @@ impl SceneQuery for SceneQueryService {
             Status::invalid_argument(format!("level: unknown value {}", request.level))
         })?;
         let objects = list_objects(
-            &self.database,
-            &self.serving,
+            &self.core.database,
+            &self.core.serving,
             &caller,
             &request.scene_id,
             level_from_proto(level),
@@ -517,6 +537,7 @@ impl SceneQuery for SceneQueryService {
         let format = mask_format_from_proto(request.mask_encoding)?.unwrap_or_default();
         let time = time_from_proto(request.view.as_ref().and_then(|v| v.time))?;
         let masks = self
+            .core
             .serving
             .render_masks(
                 &request.scene_id,
@@ -547,12 +568,9 @@ impl SceneQuery for SceneQueryService {
     ) -> Result<Response<proto::Job>, Status> {
         let caller = grpc_caller(&request)?;
         let job_id = request.into_inner().job_id;
-        let job = self
-            .database
-            .get_job(&job_id, &caller)
+        let job = jobs::get_job(&self.core, &caller, &job_id)
             .await
-            .map_err(internal)?
-            .ok_or_else(|| Status::not_found(format!("job {job_id} not found")))?;
+            .map_err(job_failure_status)?;
         Ok(Response::new(job_to_proto(job)))
     }
 
@@ -562,12 +580,9 @@ impl SceneQuery for SceneQueryService {
     ) -> Result<Response<proto::Scene>, Status> {
         let caller = grpc_caller(&request)?;
         let scene_id = request.into_inner().scene_id;
-        let scene = self
-            .database
-            .get_scene(&scene_id, &caller)
+        let scene = scenes::get_scene(&self.core, &caller, &scene_id)
             .await
-            .map_err(internal)?
-            .ok_or_else(|| Status::not_found(format!("scene {scene_id} not found")))?;
+            .map_err(scene_failure_status)?;
         Ok(Response::new(scene_to_proto(scene)))
     }
 
@@ -576,9 +591,11 @@ impl SceneQuery for SceneQueryService {
         request: Request<proto::ListScenesRequest>,
     ) -> Result<Response<proto::ListScenesResponse>, Status> {
         let caller = grpc_caller(&request)?;
-        let scenes = self.database.list_scenes(&caller).await.map_err(internal)?;
+        let records = scenes::list_scenes(&self.core, &caller)
+            .await
+            .map_err(scene_failure_status)?;
         Ok(Response::new(proto::ListScenesResponse {
-            scenes: scenes.into_iter().map(scene_to_proto).collect(),
+            scenes: records.into_iter().map(scene_to_proto).collect(),
         }))
     }
 }

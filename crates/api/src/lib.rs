@@ -17,7 +17,6 @@ mod router;
 mod scenes;
 mod server;
 mod state;
-mod upload_commit;
 
 pub use openapi::ApiDoc;
 pub use server::{RunningService, ServiceBuilder, ServiceError, ServiceMode};

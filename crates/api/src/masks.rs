@@ -201,6 +201,7 @@ pub async fn render_masks(
     let time = request.view.time()?;
     let format = parse_mask_format(request.mask_format.as_deref())?;
     let masks = state
+        .core
         .serving
         .render_masks(
             &id,
@@ -251,6 +252,7 @@ pub async fn object_mask_png(
         max_side: params.max_side,
     };
     let masks = state
+        .core
         .serving
         .render_masks(
             &id,

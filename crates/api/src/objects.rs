@@ -68,9 +68,15 @@ pub async fn list_objects(
 ) -> ApiResult<Json<ObjectList>> {
     let level = params.level.as_deref().map(parse_level).transpose()?;
     let time = parse_time(params.time)?;
-    let records =
-        usecases::objects::list_objects(&state.database, &state.serving, &caller, &id, level, time)
-            .await?;
+    let records = usecases::objects::list_objects(
+        &state.core.database,
+        &state.core.serving,
+        &caller,
+        &id,
+        level,
+        time,
+    )
+    .await?;
     Ok(Json(ObjectList {
         objects: records.iter().map(ObjectResponse::from).collect(),
     }))

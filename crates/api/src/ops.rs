@@ -52,7 +52,7 @@ pub async fn healthz() -> Json<HealthResponse> {
 #[utoipa::path(get, path = "/readyz", tag = "ops",
     responses((status = 200, body = ReadinessResponse), (status = 503, body = ReadinessResponse)))]
 pub async fn readyz(State(state): State<AppState>) -> impl IntoResponse {
-    let database = match state.database.ping().await {
+    let database = match state.core.database.ping().await {
         Ok(()) => ReadinessCheck {
             ok: true,
             detail: "reachable".to_string(),
@@ -130,7 +130,7 @@ pub async fn readyz(State(state): State<AppState>) -> impl IntoResponse {
 #[utoipa::path(get, path = "/metrics", tag = "ops",
     responses((status = 200, description = "Prometheus text format", body = String)))]
 pub async fn metrics(State(state): State<AppState>) -> impl IntoResponse {
-    refresh_queue_gauges(&state.database).await;
+    refresh_queue_gauges(&state.core.database).await;
     state.metrics.run_upkeep();
     (
         [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],

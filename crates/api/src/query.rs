@@ -153,9 +153,9 @@ pub async fn query_scene(
         visible: request.visible_masks.unwrap_or(false),
     });
     let answer = query_with_masks(
-        &state.database,
-        &state.text_encoder,
-        &state.serving,
+        &state.core.database,
+        &state.core.text_encoder,
+        &state.core.serving,
         &caller,
         CoreQuery {
             scene_id: id,

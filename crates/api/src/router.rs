@@ -11,7 +11,7 @@ use super::state::AppState;
 use super::{exports, jobs, masks, objects, openapi, ops, query, scenes};
 
 pub fn router(state: AppState) -> Router {
-    let tokens = TokenCheck::from_config(&state.config.auth);
+    let tokens = TokenCheck::from_config(&state.core.config.auth);
     Router::new()
         .route(
             "/v1/scenes",

@@ -13,10 +13,10 @@ use utoipa::{IntoParams, ToSchema};
 
 use super::error::{ApiError, ApiResult, ErrorBody};
 use super::state::AppState;
-use super::upload_commit::ingest_and_record;
 use segsplat_service::store::Caller;
 use segsplat_service::store::process_tag::process_tag;
-use segsplat_service::store::scenes::{DeleteSceneError, SceneRecord};
+use segsplat_service::store::scenes::SceneRecord;
+use segsplat_service::usecases::scenes;
 
 /// Raw upload bodies we accept; the archive kind itself is sniffed from the bytes.
 const RAW_ARCHIVE_TYPES: [&str; 7] = [
@@ -113,7 +113,7 @@ pub async fn upload_scene(
     Query(params): Query<UploadParams>,
     request: Request,
 ) -> ApiResult<(StatusCode, HeaderMap, Json<SceneResponse>)> {
-    let config = &state.config;
+    let config = &state.core.config;
     let scratch_dir = config.scratch_dir();
     tokio::fs::create_dir_all(&scratch_dir)
         .await
@@ -132,7 +132,7 @@ pub async fn upload_scene(
         .name
         .filter(|name| !name.trim().is_empty())
         .or(uploaded_name);
-    let record = ingest_and_record(state.clone(), temp, name, caller.tenant).await?;
+    let record = scenes::create_scene(&state.core, temp, name, caller.tenant).await?;
     let mut headers = HeaderMap::new();
     if let Ok(location) = format!("/v1/scenes/{}", record.id).parse() {
         headers.insert(header::LOCATION, location);
@@ -151,7 +151,7 @@ async fn receive_upload(
     request: Request,
     file: &std::fs::File,
 ) -> ApiResult<Option<String>> {
-    let max_bytes = state.config.limits.max_upload_bytes;
+    let max_bytes = state.core.config.limits.max_upload_bytes;
     let too_large = || {
         ApiError::payload_too_large(format!(
             "upload exceeds limits.max_upload_bytes ({max_bytes} bytes)"
@@ -280,9 +280,9 @@ pub async fn list_scenes(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
 ) -> ApiResult<Json<SceneList>> {
-    let scenes = state.database.list_scenes(&caller).await?;
+    let records = scenes::list_scenes(&state.core, &caller).await?;
     Ok(Json(SceneList {
-        scenes: scenes.iter().map(SceneResponse::from).collect(),
+        scenes: records.iter().map(SceneResponse::from).collect(),
     }))
 }
 
@@ -294,11 +294,7 @@ pub async fn get_scene(
     Extension(caller): Extension<Caller>,
     UrlPath(id): UrlPath<String>,
 ) -> ApiResult<Json<SceneResponse>> {
-    let record = state
-        .database
-        .get_scene(&id, &caller)
-        .await?
-        .ok_or_else(|| ApiError::not_found(format!("scene {id} not found")))?;
+    let record = scenes::get_scene(&state.core, &caller, &id).await?;
     Ok(Json(SceneResponse::from(&record)))
 }
 
@@ -312,24 +308,6 @@ pub async fn delete_scene(
     Extension(caller): Extension<Caller>,
     UrlPath(id): UrlPath<String>,
 ) -> ApiResult<StatusCode> {
-    let (record, job_ids) = state
-        .database
-        .delete_scene(&id, &caller)
-        .await
-        .map_err(|error| match error {
-            DeleteSceneError::NotFound(_) => ApiError::not_found(error.to_string()),
-            DeleteSceneError::Busy { .. } => ApiError::conflict(error.to_string()),
-            DeleteSceneError::Store(store) => store.into(),
-        })?;
-    let blobs = state.blobs.clone();
-    tokio::task::spawn_blocking(move || {
-        blobs.delete_prefix(&record.blob_prefix)?;
-        for job_id in job_ids {
-            blobs.delete_prefix(&format!("jobs/{job_id}"))?;
-        }
-        Ok::<(), segsplat_service::store::BlobError>(())
-    })
-    .await
-    .map_err(|error| ApiError::internal(format!("deleting scene files crashed: {error}")))??;
+    scenes::delete_scene(&state.core, &caller, &id).await?;
     Ok(StatusCode::NO_CONTENT)
 }

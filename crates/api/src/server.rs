@@ -19,6 +19,7 @@ use super::router::router;
 use super::state::{AppState, WorkerReadiness};
 use crate::proto::scene_query_server::SceneQueryServer;
 use segsplat_service::config::Config;
+use segsplat_service::core::ServiceCore;
 use segsplat_service::jobs::{
     HandlerRegistry, JobEventBus, JobHandler, LeaseReaper, ProcessIdentity, SweepPlaces,
     WorkerPool, WorkerPoolOptions, WorkerSlot, open_adapters, sweep_leftovers,
@@ -225,31 +226,28 @@ impl ServiceBuilder {
             })
         });
 
-        let state = AppState {
+        let core = ServiceCore {
             config: config.clone(),
             database: database.clone(),
             blobs,
             handlers: self.handlers,
             bus,
             job_queued,
+            adapters: readiness.adapters.clone().into(),
+            text_encoder,
+            serving,
+        };
+        let state = AppState {
+            core: core.clone(),
             workers: Arc::new(readiness),
             models,
-            text_encoder: text_encoder.clone(),
-            serving: serving.clone(),
             metrics,
             shutdown: shutdown.clone(),
         };
         let (http, grpc) = match self.mode {
             ServiceMode::All => {
                 let http = start_http(&config, state.clone()).await?;
-                let grpc = start_grpc(
-                    &config,
-                    database.clone(),
-                    text_encoder.clone(),
-                    serving.clone(),
-                    shutdown.clone(),
-                )
-                .await?;
+                let grpc = start_grpc(&config, core, shutdown.clone()).await?;
                 (Some(http), Some(grpc))
             }
             ServiceMode::WorkersOnly => (None, None),
@@ -299,9 +297,7 @@ async fn start_http(
 
 async fn start_grpc(
     config: &Config,
-    database: Database,
-    text_encoder: Arc<SharedTextEncoder>,
-    serving: Serving,
+    core: ServiceCore,
     shutdown: CancellationToken,
 ) -> Result<(SocketAddr, JoinHandle<()>), ServiceError> {
     let listener = TcpListener::bind(config.grpc_addr)
@@ -332,10 +328,8 @@ async fn start_grpc(
         reflection,
         grpc_interceptor(tokens.clone()),
     );
-    let scene_query = SceneQueryServer::with_interceptor(
-        SceneQueryService::new(database, text_encoder, serving),
-        grpc_interceptor(tokens),
-    );
+    let scene_query =
+        SceneQueryServer::with_interceptor(SceneQueryService::new(core), grpc_interceptor(tokens));
     let task = tokio::spawn(async move {
         let served = tonic::transport::Server::builder()
             .trace_fn(|request| tracing::info_span!("grpc", path = %request.uri().path()))
@@ -400,12 +394,18 @@ impl RunningService {
     }
 
     pub fn blobs(&self) -> Arc<dyn BlobStore> {
-        self.state.blobs.clone()
+        self.state.core.blobs.clone()
+    }
+
+    /// The core the REST and gRPC listeners call, for embedding callers (the console, tests)
+    /// that use the use cases without going through HTTP.
+    pub fn core(&self) -> &ServiceCore {
+        &self.state.core
     }
 
     /// Loads and hits of the GPU scene cache masks are rendered from.
     pub fn serving_stats(&self) -> segsplat_service::serving::CacheStats {
-        self.state.serving.cache().stats()
+        self.state.core.serving.cache().stats()
     }
 
     /// Runs until SIGINT or SIGTERM, then shuts down gracefully.

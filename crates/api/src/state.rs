@@ -4,30 +4,18 @@ use std::sync::Arc;
 
 use metrics_exporter_prometheus::PrometheusHandle;
 use serde::Serialize;
-use tokio::sync::Notify;
 use tokio_util::sync::CancellationToken;
 
 use segsplat_gpu::AdapterReport;
-use segsplat_service::config::Config;
-use segsplat_service::jobs::{HandlerRegistry, JobEventBus};
-use segsplat_service::store::{BlobStore, Database};
+use segsplat_service::core::ServiceCore;
 
 #[derive(Clone)]
 pub struct AppState {
-    pub config: Arc<Config>,
-    pub database: Database,
-    pub blobs: Arc<dyn BlobStore>,
-    pub handlers: HandlerRegistry,
-    pub bus: JobEventBus,
-    /// Wakes this process's idle workers when a job is queued.
-    pub job_queued: Arc<Notify>,
+    /// What the use cases share; handlers parse, call one use case with it, and map the result.
+    pub core: ServiceCore,
     pub workers: Arc<WorkerReadiness>,
     /// The ONNX models loaded at start (or why not); `/readyz` reports it.
     pub models: Arc<segsplat_vision::models::ModelsStatus>,
-    /// The CLIP text encoder queries share (built on the first query).
-    pub text_encoder: Arc<segsplat_vision::language::SharedTextEncoder>,
-    /// Trained scenes on the GPU for masks, and exports.
-    pub serving: segsplat_service::usecases::serving::Serving,
     pub metrics: PrometheusHandle,
     /// Cancelled when the service stops; long-lived responses (SSE) end then.
     pub shutdown: CancellationToken,

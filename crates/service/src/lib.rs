@@ -3,6 +3,7 @@
 //! service config that composes every crate's options. No HTTP or gRPC types.
 
 pub mod config;
+pub mod core;
 pub mod job_kinds;
 pub mod jobs;
 pub mod serving;

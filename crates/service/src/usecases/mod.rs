@@ -3,6 +3,8 @@
 
 pub mod ingest;
 pub mod job_bounds;
+pub mod jobs;
 pub mod objects;
 pub mod query;
+pub mod scenes;
 pub mod serving;
