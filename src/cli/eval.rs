@@ -15,6 +15,7 @@ use segsplat_eval::{
 };
 use segsplat_scene::Level;
 use segsplat_service::serving::{MaskView, SceneCamera};
+use segsplat_service::usecases::objects::list_objects;
 use segsplat_service::usecases::query::run_query;
 use segsplat_vision::language::QueryOptions;
 use segsplat_vision::segment::BitMask;
@@ -92,11 +93,13 @@ async fn run_async(args: EvalArgs, config_file: Option<PathBuf>) -> anyhow::Resu
     };
     let scene_id = local.resolve_scene(&args.scene).await?;
     let job = local
+        .core
         .serving
         .serving_job(&scene_id, &Caller::system())
         .await?;
     let cameras: Vec<SceneCamera> = serde_json::from_slice(
         &local
+            .core
             .serving
             .trained_file(&scene_id, &Caller::system(), "cameras.json")
             .await?,
@@ -119,18 +122,26 @@ async fn run_async(args: EvalArgs, config_file: Option<PathBuf>) -> anyhow::Resu
     let mut frames: Vec<FrameScore> = Vec::new();
     let mut selected = BTreeMap::new();
     if args.oracle {
-        let objects: Vec<(Level, u32)> = local
-            .database
-            .list_objects(&scene_id, None)
-            .await?
-            .iter()
-            .map(|object| (object.level, object.object_id))
-            .collect();
+        let core = &local.core;
+        let system = Caller::system();
+        let objects: Vec<(Level, u32)> = list_objects(
+            &core.database,
+            &core.serving,
+            &system,
+            &scene_id,
+            None,
+            None,
+        )
+        .await?
+        .iter()
+        .map(|object| (object.level, object.object_id))
+        .collect();
         anyhow::ensure!(!objects.is_empty(), "scene {scene_id} has no objects");
         for frame in &ground_truth {
             let mut candidates = Vec::with_capacity(objects.len());
             for batch in objects.chunks(ORACLE_BATCH) {
                 let masks = local
+                    .core
                     .serving
                     .render_bit_masks(
                         &scene_id,
@@ -159,8 +170,8 @@ async fn run_async(args: EvalArgs, config_file: Option<PathBuf>) -> anyhow::Resu
             for query in &frame.queries {
                 if !selected.contains_key(&query.text) {
                     let outcome = run_query(
-                        &local.database,
-                        &local.text_encoder,
+                        &local.core.database,
+                        &local.core.text_encoder,
                         &scene_id,
                         &Caller::system(),
                         &query.text,
@@ -186,6 +197,7 @@ async fn run_async(args: EvalArgs, config_file: Option<PathBuf>) -> anyhow::Resu
                     continue;
                 };
                 let masks = local
+                    .core
                     .serving
                     .render_bit_masks(
                         &scene_id,
@@ -207,6 +219,7 @@ async fn run_async(args: EvalArgs, config_file: Option<PathBuf>) -> anyhow::Resu
     }
     let segmentation = summarize(frames);
     let held_out = match local
+        .core
         .serving
         .trained_file(&scene_id, &Caller::system(), "metrics.json")
         .await

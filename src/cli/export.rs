@@ -50,6 +50,7 @@ pub fn run(args: ExportArgs, config_file: Option<PathBuf>) -> anyhow::Result<()>
         let mut written = Vec::new();
         for file in DOWNLOADABLE_FILES {
             match local
+                .core
                 .serving
                 .trained_file(&scene_id, &Caller::system(), file)
                 .await
@@ -69,6 +70,7 @@ pub fn run(args: ExportArgs, config_file: Option<PathBuf>) -> anyhow::Result<()>
         }
         for &(level, object_id) in &args.objects {
             let bytes = local
+                .core
                 .serving
                 .object_ply(&scene_id, &Caller::system(), level, object_id)
                 .await?;

@@ -8,7 +8,10 @@ use std::sync::Arc;
 use anyhow::Context;
 use clap::Args;
 use segsplat_service::config::{Config, ConfigOverrides};
-use segsplat_service::store::{Caller, Database, LocalBlobStore};
+use segsplat_service::core::ServiceCore;
+use segsplat_service::jobs::{HandlerRegistry, JobEventBus};
+use segsplat_service::store::{BlobStore, Caller, Database, LocalBlobStore};
+use segsplat_service::usecases::scenes::{self, SceneFailure};
 use segsplat_service::usecases::serving::Serving;
 use segsplat_vision::language::SharedTextEncoder;
 use segsplat_vision::models::ModelsStatus;
@@ -21,10 +24,10 @@ pub struct StoreArgs {
     pub data_dir: Option<PathBuf>,
 }
 
+/// The service core a local command calls its use cases with. It queues no jobs: the job
+/// kinds are empty and no worker listens.
 pub struct LocalService {
-    pub database: Database,
-    pub serving: Serving,
-    pub text_encoder: Arc<SharedTextEncoder>,
+    pub core: ServiceCore,
 }
 
 impl LocalService {
@@ -62,7 +65,7 @@ impl LocalService {
         let database = Database::open(&database_path)
             .await
             .with_context(|| format!("cannot open {}", database_path.display()))?;
-        let blobs = Arc::new(
+        let blobs: Arc<dyn BlobStore> = Arc::new(
             LocalBlobStore::open(&config.blob_dir())
                 .with_context(|| format!("cannot open {}", config.blob_dir().display()))?,
         );
@@ -74,27 +77,31 @@ impl LocalService {
         } else {
             ModelsStatus::NotConfigured
         };
-        let serving = Serving::from_config(&config, database.clone(), blobs);
+        let serving = Serving::from_config(&config, database.clone(), blobs.clone());
         Ok(Self {
-            text_encoder: Arc::new(SharedTextEncoder::new(Arc::new(models_status))),
-            database,
-            serving,
+            core: ServiceCore {
+                config: Arc::new(config),
+                database,
+                blobs,
+                handlers: HandlerRegistry::default(),
+                bus: JobEventBus::default(),
+                job_queued: Arc::default(),
+                adapters: Arc::new([]),
+                text_encoder: Arc::new(SharedTextEncoder::new(Arc::new(models_status))),
+                serving,
+            },
         })
     }
 
     /// The scene's id from an id or a unique scene name.
     pub async fn resolve_scene(&self, id_or_name: &str) -> anyhow::Result<String> {
-        if self
-            .database
-            .get_scene(id_or_name, &Caller::system())
-            .await?
-            .is_some()
-        {
-            return Ok(id_or_name.to_string());
+        let system = Caller::system();
+        match scenes::get_scene(&self.core, &system, id_or_name).await {
+            Ok(scene) => return Ok(scene.id),
+            Err(SceneFailure::NotFound(_)) => {}
+            Err(failure) => return Err(failure.into()),
         }
-        let named: Vec<String> = self
-            .database
-            .list_scenes(&Caller::system())
+        let named: Vec<String> = scenes::list_scenes(&self.core, &system)
             .await?
             .into_iter()
             .filter(|scene| scene.name == id_or_name)

@@ -83,9 +83,9 @@ async fn run_async(args: QueryArgs, config_file: Option<PathBuf>) -> anyhow::Res
     };
     // Placed at `--time`; masks are rendered below, per frame, as PNG files.
     let answer = query_with_masks(
-        &local.database,
-        &local.text_encoder,
-        &local.serving,
+        &local.core.database,
+        &local.core.text_encoder,
+        &local.core.serving,
         &Caller::system(),
         QueryRequest {
             scene_id: scene_id.clone(),
@@ -111,6 +111,7 @@ async fn run_async(args: QueryArgs, config_file: Option<PathBuf>) -> anyhow::Res
                 max_side: args.max_side,
             };
             let masks = local
+                .core
                 .serving
                 .render_bit_masks(
                     &scene_id,
