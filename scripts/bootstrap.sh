@@ -2,12 +2,18 @@
 # Installs what a fresh Debian machine lacks to build, test and run segsplat:
 # - Mesa's software Vulkan driver (lavapipe) and the Vulkan loader, so the GPU engine runs without a GPU;
 # - the ONNX Runtime shared library (from the `onnxruntime` wheel) for the model runtime;
-# - ffmpeg, which extracts frames from Neu3D camera videos (and makes the test videos).
+# - ffmpeg, which extracts frames from Neu3D camera videos (and makes the test videos);
+# - s3rver (npm registry), the S3-compatible server the object-store tests run against
+#   (scripts/test_servers.sh starts it).
 # Idempotent: skips what is already there.
 set -euo pipefail
 
 need_apt=()
 for package in mesa-vulkan-drivers libvulkan1 curl ffmpeg; do
+  dpkg -s "$package" >/dev/null 2>&1 || need_apt+=("$package")
+done
+# Node.js for s3rver, unless the machine has its own.
+command -v npm >/dev/null 2>&1 || for package in nodejs npm; do
   dpkg -s "$package" >/dev/null 2>&1 || need_apt+=("$package")
 done
 if [ ${#need_apt[@]} -gt 0 ]; then
@@ -30,4 +36,12 @@ fi
 if cargo +nightly --version >/dev/null 2>&1 && ! cargo fuzz --version >/dev/null 2>&1; then
   cargo install --quiet --locked cargo-fuzz@0.13.2 \
     || echo "warning: could not install cargo-fuzz; the fuzz runs will be skipped" >&2
+fi
+
+# The S3-compatible test server, pinned, in a tools folder outside the repository.
+SEGSPLAT_TOOLS_DIR=${SEGSPLAT_TOOLS_DIR:-$HOME/.cache/segsplat-tools}
+if [ ! -x "$SEGSPLAT_TOOLS_DIR/s3rver/node_modules/.bin/s3rver" ]; then
+  mkdir -p "$SEGSPLAT_TOOLS_DIR/s3rver"
+  npm install --silent --no-audit --no-fund --prefix "$SEGSPLAT_TOOLS_DIR/s3rver" s3rver@3.7.1 \
+    || echo "warning: could not install s3rver; the object-store tests need it in CI" >&2
 fi

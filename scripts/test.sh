@@ -21,6 +21,8 @@ fi
 # The crates' dependency graph is the architecture: nothing reaches up a layer, and the engine
 # side never pulls in tokio, axum, tonic or sqlx (docs/architecture.md).
 bash scripts/check_layers.sh
+# The real servers the storage tests use (an S3-compatible one), on 127.0.0.1.
+source scripts/test_servers.sh
 # Benches first (one quick pass each, to prove they still run), then every test target, so the
 # run ends on the test summary.
 cargo test --locked --workspace --benches

@@ -10,7 +10,7 @@ use clap::Args;
 use segsplat_service::config::{Config, ConfigOverrides};
 use segsplat_service::core::ServiceCore;
 use segsplat_service::jobs::{HandlerRegistry, JobEventBus};
-use segsplat_service::store::{BlobStore, Caller, Database, LocalBlobStore};
+use segsplat_service::store::{Caller, Database, open_blob_store};
 use segsplat_service::usecases::scenes::{self, SceneFailure};
 use segsplat_service::usecases::serving::Serving;
 use segsplat_vision::language::SharedTextEncoder;
@@ -65,10 +65,7 @@ impl LocalService {
         let database = Database::open(&database_path)
             .await
             .with_context(|| format!("cannot open {}", database_path.display()))?;
-        let blobs: Arc<dyn BlobStore> = Arc::new(
-            LocalBlobStore::open(&config.blob_dir())
-                .with_context(|| format!("cannot open {}", config.blob_dir().display()))?,
-        );
+        let blobs = open_blob_store(&config).context("cannot open the blob store")?;
         let models_status = if models {
             let models_config = config.models.clone();
             tokio::task::spawn_blocking(move || ModelsStatus::load(&models_config))

@@ -6,6 +6,7 @@ pub mod archives;
 pub mod handlers;
 #[path = "../models_support/mod.rs"]
 pub mod models_support;
+pub mod object_store;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

@@ -75,6 +75,11 @@ impl ApiError {
         )
     }
 
+    /// A store the service depends on (database, object store) is down; retry later.
+    pub fn unavailable(message: impl Into<String>) -> Self {
+        Self::new(StatusCode::SERVICE_UNAVAILABLE, "unavailable", message)
+    }
+
     pub fn internal(message: impl Into<String>) -> Self {
         Self::new(StatusCode::INTERNAL_SERVER_ERROR, "internal", message)
     }
@@ -116,7 +121,10 @@ impl From<StoreError> for ApiError {
 
 impl From<BlobError> for ApiError {
     fn from(error: BlobError) -> Self {
-        ApiError::internal(error.to_string())
+        match error {
+            BlobError::Unavailable { .. } => ApiError::unavailable(error.to_string()),
+            other => ApiError::internal(other.to_string()),
+        }
     }
 }
 
@@ -127,9 +135,8 @@ impl From<SceneFailure> for ApiError {
             SceneFailure::NotFound(_) => ApiError::not_found(message),
             SceneFailure::Rejected { class, .. } => ApiError::from_input_class(class, message),
             SceneFailure::Busy { .. } => ApiError::conflict(message),
-            SceneFailure::Store(_) | SceneFailure::Blob(_) | SceneFailure::Internal(_) => {
-                ApiError::internal(message)
-            }
+            SceneFailure::Blob(blob) => blob.into(),
+            SceneFailure::Store(_) | SceneFailure::Internal(_) => ApiError::internal(message),
         }
     }
 }

@@ -19,7 +19,7 @@ use segsplat_service::serving::{
 use segsplat_service::store::jobs::{JobRecord, JobState};
 use segsplat_service::store::objects::ObjectRecord;
 use segsplat_service::store::scenes::SceneRecord;
-use segsplat_service::store::{Caller, StoreError};
+use segsplat_service::store::{BlobError, Caller, StoreError};
 use segsplat_service::usecases::jobs::{self, JobFailure};
 use segsplat_service::usecases::objects::{ListObjectsError, list_objects};
 use segsplat_service::usecases::query::{
@@ -243,6 +243,7 @@ fn serve_failure_status(failure: ServeFailure) -> Status {
         | ServeFailure::FileNotStored { .. }
         | ServeFailure::UnknownFile(_) => Status::not_found(message),
         ServeFailure::NotTrained(_) => Status::failed_precondition(message),
+        ServeFailure::Blobs(_) => Status::unavailable(message),
         ServeFailure::Serving(error) => match error {
             ServingError::FrameOutOfRange { .. } | ServingError::BadView(_) => {
                 Status::invalid_argument(message)
@@ -301,6 +302,7 @@ fn scene_failure_status(failure: SceneFailure) -> Status {
         SceneFailure::NotFound(_) => Status::not_found(message),
         SceneFailure::Rejected { .. } => Status::invalid_argument(message),
         SceneFailure::Busy { .. } => Status::failed_precondition(message),
+        SceneFailure::Blob(BlobError::Unavailable { .. }) => Status::unavailable(message),
         SceneFailure::Store(_) | SceneFailure::Blob(_) | SceneFailure::Internal(_) => {
             tracing::error!(%message, "gRPC scene request failed");
             Status::internal(message)

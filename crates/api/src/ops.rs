@@ -24,6 +24,8 @@ pub struct ReadinessCheck {
 #[derive(Debug, Serialize, ToSchema)]
 pub struct ReadinessChecks {
     pub database: ReadinessCheck,
+    /// The blob store (local directory or S3-compatible bucket) answers a listing.
+    pub blobs: ReadinessCheck,
     pub adapters: ReadinessCheck,
     pub models: ReadinessCheck,
 }
@@ -48,7 +50,8 @@ pub async fn healthz() -> Json<HealthResponse> {
     })
 }
 
-/// Whether the service can do its work: database reachable, GPU workers available, models.
+/// Whether the service can do its work: database and blob store reachable, GPU workers
+/// available, models.
 #[utoipa::path(get, path = "/readyz", tag = "ops",
     responses((status = 200, body = ReadinessResponse), (status = 503, body = ReadinessResponse)))]
 pub async fn readyz(State(state): State<AppState>) -> impl IntoResponse {
@@ -60,6 +63,22 @@ pub async fn readyz(State(state): State<AppState>) -> impl IntoResponse {
         Err(error) => ReadinessCheck {
             ok: false,
             detail: error.to_string(),
+        },
+    };
+    let store = state.core.blobs.clone();
+    let listed = tokio::task::spawn_blocking(move || store.list_prefix("readyz-probe")).await;
+    let blobs = match listed {
+        Ok(Ok(_)) => ReadinessCheck {
+            ok: true,
+            detail: "reachable".to_string(),
+        },
+        Ok(Err(error)) => ReadinessCheck {
+            ok: false,
+            detail: error.to_string(),
+        },
+        Err(error) => ReadinessCheck {
+            ok: false,
+            detail: format!("the check crashed: {error}"),
         },
     };
     let workers = &state.workers;
@@ -100,6 +119,7 @@ pub async fn readyz(State(state): State<AppState>) -> impl IntoResponse {
     let mut reasons = Vec::new();
     for (name, check) in [
         ("database", &database),
+        ("blobs", &blobs),
         ("adapters", &adapters),
         ("models", &models),
     ] {
@@ -113,6 +133,7 @@ pub async fn readyz(State(state): State<AppState>) -> impl IntoResponse {
         reasons,
         checks: ReadinessChecks {
             database,
+            blobs,
             adapters,
             models,
         },

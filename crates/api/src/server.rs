@@ -24,7 +24,7 @@ use segsplat_service::jobs::{
     HandlerRegistry, JobEventBus, JobHandler, LeaseReaper, ProcessIdentity, SweepPlaces,
     WorkerPool, WorkerPoolOptions, WorkerSlot, open_adapters, sweep_leftovers,
 };
-use segsplat_service::store::{BlobStore, Database, LocalBlobStore, StoreError};
+use segsplat_service::store::{BlobStore, Database, StoreError, open_blob_store};
 use segsplat_service::usecases::serving::Serving;
 use segsplat_vision::language::SharedTextEncoder;
 
@@ -107,7 +107,7 @@ impl ServiceBuilder {
             })?;
         }
         let database = Database::open(&config.database_path()).await?;
-        let blobs: Arc<dyn BlobStore> = Arc::new(LocalBlobStore::open(&config.blob_dir())?);
+        let blobs = open_blob_store(&config)?;
         let metrics = prometheus_handle().ok_or(ServiceError::Metrics)?;
         let bus = JobEventBus::default();
         let job_queued = Arc::new(Notify::new());
@@ -219,6 +219,8 @@ impl ServiceBuilder {
                 bus: bus.clone(),
                 jobs: config.jobs.clone(),
                 scratch_dir: config.scratch_dir(),
+                scene_cache_dir: config.scene_cache_dir(),
+                scene_cache_bytes: config.blobs.worker_cache_mib << 20,
                 slots,
                 job_queued: job_queued.clone(),
                 instance: instance.clone(),

@@ -52,6 +52,7 @@ pub struct Config {
     pub models: ModelsConfig,
     pub query: QueryConfig,
     pub storage: StorageConfig,
+    pub blobs: BlobsConfig,
     pub log: LogConfig,
 }
 
@@ -69,6 +70,7 @@ impl Default for Config {
             models: ModelsConfig::default(),
             query: QueryConfig::default(),
             storage: StorageConfig::default(),
+            blobs: BlobsConfig::default(),
             log: LogConfig::default(),
         }
     }
@@ -90,6 +92,47 @@ impl Default for StorageConfig {
         Self {
             temp_max_age_secs: 86_400,
             sweep_interval_secs: 600,
+        }
+    }
+}
+
+/// Where blobs (scene files, checkpoints, trained outputs) live: `{data_dir}/blobs` by default,
+/// or an S3-compatible bucket. Unset S3 settings come from the standard `AWS_*` environment
+/// variables (`AWS_ACCESS_KEY_ID`, `AWS_SECRET_ACCESS_KEY`, `AWS_REGION`, `AWS_ENDPOINT`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct BlobsConfig {
+    /// `s3://bucket` or `s3://bucket/prefix`; unset for the local directory.
+    pub url: Option<String>,
+    /// The S3 endpoint of a self-hosted server (MinIO, Ceph, s3rver), e.g.
+    /// `http://127.0.0.1:9000`; requests are then path-style.
+    pub endpoint: Option<String>,
+    pub region: Option<String>,
+    pub access_key_id: Option<String>,
+    pub secret_access_key: Option<String>,
+    /// Allow `http://` endpoints (a server on the same host or network).
+    pub allow_http: bool,
+    /// One request's limit, retries included; a store that does not answer within it is
+    /// reported unavailable (503) rather than waited for.
+    pub request_timeout_secs: f64,
+    pub max_retries: u32,
+    /// Workers keep local copies of scenes from an object store under `{data_dir}/cache/scenes`;
+    /// past this size the least recently used copies not in use are removed.
+    pub worker_cache_mib: u64,
+}
+
+impl Default for BlobsConfig {
+    fn default() -> Self {
+        Self {
+            url: None,
+            endpoint: None,
+            region: None,
+            access_key_id: None,
+            secret_access_key: None,
+            allow_http: false,
+            request_timeout_secs: 30.0,
+            max_retries: 3,
+            worker_cache_mib: 20 * 1024,
         }
     }
 }
@@ -450,6 +493,18 @@ impl Config {
         if self.query.max_mask_side == 0 {
             return invalid("query.max_mask_side", "must be > 0");
         }
+        if let Some(url) = &self.blobs.url {
+            let bucket = url.strip_prefix("s3://").map(|rest| rest.split('/').next());
+            if !matches!(bucket, Some(Some(name)) if !name.is_empty()) {
+                return invalid(
+                    "blobs.url",
+                    "must be s3://bucket or s3://bucket/prefix (unset for the local directory)",
+                );
+            }
+        }
+        if !(self.blobs.request_timeout_secs.is_finite() && self.blobs.request_timeout_secs > 0.0) {
+            return invalid("blobs.request_timeout_secs", "must be > 0");
+        }
         if !(self.jobs.lease_secs.is_finite() && self.jobs.lease_secs > 0.0) {
             return invalid("jobs.lease_secs", "must be > 0");
         }
@@ -523,6 +578,11 @@ impl Config {
 
     pub fn blob_dir(&self) -> PathBuf {
         self.data_dir.join("blobs")
+    }
+
+    /// Workers' local copies of scenes whose files are in an object store.
+    pub fn scene_cache_dir(&self) -> PathBuf {
+        self.data_dir.join("cache").join("scenes")
     }
 
     /// Uploads and unpacking happen here, on the same filesystem as the blobs.

@@ -8,6 +8,7 @@ mod handler;
 mod identity;
 mod pool;
 mod progress;
+mod scene_cache;
 mod temp_sweep;
 mod worker;
 

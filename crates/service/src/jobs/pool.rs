@@ -10,6 +10,7 @@ use tokio::task::JoinHandle;
 use tokio_util::sync::CancellationToken;
 use tracing::{info, warn};
 
+use super::scene_cache::SceneFileCache;
 use super::worker::{Worker, WorkerShared};
 use super::{HandlerRegistry, JobEventBus};
 use crate::config::JobsConfig;
@@ -33,6 +34,9 @@ pub struct WorkerPoolOptions {
     pub bus: JobEventBus,
     pub jobs: JobsConfig,
     pub scratch_dir: PathBuf,
+    /// Where workers keep local copies of scenes stored in an object store, and their budget.
+    pub scene_cache_dir: PathBuf,
+    pub scene_cache_bytes: u64,
     pub slots: Vec<WorkerSlot>,
     /// Woken when a job is queued in this process, so idle workers need not wait for a poll.
     pub job_queued: Arc<Notify>,
@@ -59,6 +63,10 @@ impl WorkerPool {
             job_queued: options.job_queued,
             shutdown: shutdown.clone(),
             scratch_dir: options.scratch_dir,
+            scene_cache: Arc::new(SceneFileCache::new(
+                options.scene_cache_dir,
+                options.scene_cache_bytes,
+            )),
             shutdown_grace: options.shutdown_grace,
         };
         metrics::gauge!("segsplat_workers_total").set(options.slots.len() as f64);

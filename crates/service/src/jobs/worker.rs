@@ -8,6 +8,7 @@ use tokio::sync::Notify;
 use tokio_util::sync::CancellationToken;
 use tracing::{Instrument, info, info_span, warn};
 
+use super::scene_cache::{CachedScene, SceneFileCache};
 use super::{HandlerRegistry, JobContext, JobEventBus, JobFailure, ProgressReporter};
 use crate::config::JobsConfig;
 use crate::store::jobs::{AttemptOutcome, HeartbeatOutcome, JobRecord, JobState};
@@ -29,6 +30,8 @@ pub(crate) struct WorkerShared {
     pub shutdown: CancellationToken,
     /// Per-attempt scratch folders live here.
     pub scratch_dir: PathBuf,
+    /// Local copies of scenes whose files are in an object store.
+    pub scene_cache: Arc<SceneFileCache>,
     /// How long a stopping worker waits for its handler before handing the job back anyway.
     pub shutdown_grace: Duration,
 }
@@ -145,8 +148,9 @@ impl Worker {
             .shared
             .scratch_dir
             .join(format!("job-{}-{}", job.id, job.attempts));
-        let scene_dir = match self.prepare_dirs(job, &work_dir).await {
-            Ok(scene_dir) => scene_dir,
+        // Held to the end of the attempt, so the scene's local copy stays.
+        let (scene_dir, _scene_copy) = match self.prepare_dirs(job, &work_dir).await {
+            Ok(prepared) => prepared,
             Err(message) => return Some(AttemptOutcome::Retry(message)),
         };
         let cancel = CancellationToken::new();
@@ -248,33 +252,27 @@ impl Worker {
         }
     }
 
-    /// Creates the scratch folder and finds (or fetches) the scene's files.
-    async fn prepare_dirs(&self, job: &JobRecord, work_dir: &Path) -> Result<PathBuf, String> {
+    /// Creates the scratch folder and finds the scene's files: in place in a local blob store,
+    /// else in this host's scene cache (fetched on first use).
+    async fn prepare_dirs(
+        &self,
+        job: &JobRecord,
+        work_dir: &Path,
+    ) -> Result<(PathBuf, Option<CachedScene>), String> {
         let blobs = self.shared.blobs.clone();
-        let scene_prefix = format!("scenes/{}/files", job.scene_id);
+        let cache = self.shared.scene_cache.clone();
+        let scene_id = job.scene_id.clone();
         let work_dir = work_dir.to_path_buf();
         tokio::task::spawn_blocking(move || {
             std::fs::create_dir_all(&work_dir)
                 .map_err(|error| format!("cannot create {}: {error}", work_dir.display()))?;
-            if let Some(local) = blobs.local_path(&scene_prefix)
+            if let Some(local) = blobs.local_path(&format!("scenes/{scene_id}/files"))
                 && local.is_dir()
             {
-                return Ok(local);
+                return Ok((local, None));
             }
-            let scene_dir = work_dir.join("scene");
-            let keys = blobs
-                .list_prefix(&scene_prefix)
-                .map_err(|error| error.to_string())?;
-            for key in keys {
-                let relative = key
-                    .strip_prefix(&scene_prefix)
-                    .unwrap_or(&key)
-                    .trim_start_matches('/');
-                blobs
-                    .get_to_path(&key, &scene_dir.join(relative))
-                    .map_err(|error| error.to_string())?;
-            }
-            Ok(scene_dir)
+            let copy = cache.checkout(blobs.as_ref(), &scene_id)?;
+            Ok((copy.dir.clone(), Some(copy)))
         })
         .await
         .map_err(|error| format!("preparing the job's folders crashed: {error}"))?

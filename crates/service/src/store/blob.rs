@@ -17,6 +17,9 @@ pub enum BlobError {
     InvalidKey { key: String, reason: &'static str },
     #[error("blob {key} does not exist")]
     NotFound { key: String },
+    /// The object store cannot be reached or refuses the request; the service answers 503.
+    #[error("the blob store is unavailable ({key}): {reason}")]
+    Unavailable { key: String, reason: String },
     #[error("blob {key}: {source}")]
     Io {
         key: String,
@@ -193,7 +196,7 @@ impl BlobStore for LocalBlobStore {
     }
 }
 
-fn validate_key(key: &str) -> Result<(), BlobError> {
+pub(crate) fn validate_key(key: &str) -> Result<(), BlobError> {
     let invalid = |reason| {
         Err(BlobError::InvalidKey {
             key: key.to_string(),

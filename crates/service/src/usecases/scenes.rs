@@ -11,7 +11,7 @@ use tempfile::NamedTempFile;
 
 use segsplat_scene::{InputErrorClass, LoadOptions, PixelLimits, UnpackLimits};
 
-use super::ingest::{IngestRequest, ingest_scene};
+use super::ingest::{IngestError, IngestRequest, ingest_scene};
 use crate::core::ServiceCore;
 use crate::store::scenes::{DeleteSceneError, SceneRecord};
 use crate::store::{BlobError, Caller, StoreError, now_ms};
@@ -83,6 +83,9 @@ async fn ingest_and_record(
         .map_err(|error| SceneFailure::Internal(format!("scene ingest crashed: {error}")))?
         .map_err(|error| {
             metrics::counter!("segsplat_scene_uploads_total", "outcome" => "rejected").increment(1);
+            if let IngestError::Blob(blob @ BlobError::Unavailable { .. }) = error {
+                return SceneFailure::Blob(blob);
+            }
             match error.class() {
                 // The details name server paths; they go to the log, not to the client.
                 InputErrorClass::Internal => {

@@ -43,6 +43,9 @@ pub enum ServeFailure {
     Serving(#[from] ServingError),
     #[error(transparent)]
     Store(#[from] StoreError),
+    /// The blob store is down; the request may be retried.
+    #[error(transparent)]
+    Blobs(BlobError),
     #[error("{0}")]
     Worker(String),
 }
@@ -260,6 +263,7 @@ impl Serving {
                     file,
                     job_id: job.id.clone(),
                 },
+                unavailable @ BlobError::Unavailable { .. } => ServeFailure::Blobs(unavailable),
                 other => ServeFailure::Worker(other.to_string()),
             })
         })

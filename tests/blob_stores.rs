@@ -1,0 +1,113 @@
+//! Both blob stores keep one contract: the local directory and an S3-compatible bucket (a real
+//! server process, started by `scripts/test_servers.sh`). Keys, whole-segment prefixes, sorted
+//! listings, NotFound, streamed multipart uploads of files larger than one part, downloads to a
+//! path, deletes; and a store that cannot be reached reports itself unavailable.
+
+mod common;
+
+use std::io::Write;
+use std::sync::Arc;
+
+use common::object_store::{s3_blobs, unreachable_s3_blobs};
+use segsplat_service::store::{BlobError, BlobStore, LocalBlobStore, ObjectBlobStore};
+
+fn check_contract(store: &dyn BlobStore) {
+    store.put_bytes("scenes/a/files/x.txt", b"one").unwrap();
+    store.put_bytes("scenes/a/files/sub/y.txt", b"two").unwrap();
+    store.put_bytes("scenes/ab/z.txt", b"three").unwrap();
+    store
+        .put_bytes("scenes/a/files/x.txt", b"replaced")
+        .unwrap();
+    assert_eq!(
+        store.get_bytes("scenes/a/files/x.txt").unwrap(),
+        b"replaced"
+    );
+    assert_eq!(
+        store.list_prefix("scenes/a").unwrap(),
+        vec!["scenes/a/files/sub/y.txt", "scenes/a/files/x.txt"]
+    );
+    assert_eq!(store.list_prefix("scenes/a/").unwrap().len(), 2);
+    assert!(store.exists("scenes/ab/z.txt").unwrap());
+    assert!(!store.exists("scenes/a/none").unwrap());
+    assert!(matches!(
+        store.get_bytes("scenes/a/none"),
+        Err(BlobError::NotFound { .. })
+    ));
+    assert!(matches!(
+        store.put_bytes("../escape", b"x"),
+        Err(BlobError::InvalidKey { .. })
+    ));
+
+    // A file of several upload parts, streamed up and down again.
+    let mut large = tempfile::NamedTempFile::new().unwrap();
+    let pattern: Vec<u8> = (0..(1u32 << 20)).map(|index| (index % 251) as u8).collect();
+    for _ in 0..19 {
+        large.write_all(&pattern).unwrap();
+    }
+    large.flush().unwrap();
+    store
+        .put_file("jobs/j/checkpoints/big.bin", large.path())
+        .unwrap();
+    let download = tempfile::tempdir().unwrap();
+    let target = download.path().join("nested/big.bin");
+    store
+        .get_to_path("jobs/j/checkpoints/big.bin", &target)
+        .unwrap();
+    assert_eq!(
+        std::fs::read(&target).unwrap(),
+        std::fs::read(large.path()).unwrap()
+    );
+
+    assert_eq!(store.delete_prefix("scenes/a/").unwrap(), 2);
+    assert!(!store.exists("scenes/a/files/x.txt").unwrap());
+    assert!(store.exists("scenes/ab/z.txt").unwrap());
+    assert_eq!(store.delete_prefix("jobs/j").unwrap(), 1);
+    assert_eq!(store.delete_prefix("scenes").unwrap(), 1);
+    assert!(store.list_prefix("").unwrap().is_empty());
+}
+
+#[test]
+fn local_directory_keeps_the_contract() {
+    let dir = tempfile::tempdir().unwrap();
+    check_contract(&LocalBlobStore::open(dir.path()).unwrap());
+}
+
+#[test]
+fn s3_bucket_keeps_the_contract() {
+    let Some(config) = s3_blobs("contract") else {
+        return;
+    };
+    let url = config.url.clone().unwrap();
+    let store = Arc::new(ObjectBlobStore::open(&config, &url).unwrap());
+    check_contract(store.as_ref());
+}
+
+#[tokio::test]
+async fn s3_store_works_from_async_code_and_drops_there() {
+    let Some(config) = s3_blobs("async") else {
+        return;
+    };
+    let url = config.url.clone().unwrap();
+    let store: Arc<dyn BlobStore> = Arc::new(ObjectBlobStore::open(&config, &url).unwrap());
+    let inner = store.clone();
+    tokio::task::spawn_blocking(move || inner.put_bytes("a/b", b"c").unwrap())
+        .await
+        .unwrap();
+    assert_eq!(store.list_prefix("a").unwrap(), vec!["a/b"]);
+    assert_eq!(store.delete_prefix("a").unwrap(), 1);
+    // The last handle goes away inside the runtime; that must not panic.
+    drop(store);
+}
+
+#[test]
+fn an_unreachable_store_is_unavailable() {
+    let config = unreachable_s3_blobs();
+    let store = ObjectBlobStore::open(&config, "s3://nowhere/prefix").unwrap();
+    let error = store.put_bytes("scenes/x/files/a", b"x").unwrap_err();
+    assert!(matches!(&error, BlobError::Unavailable { .. }), "{error:?}");
+    assert!(error.to_string().contains("unavailable"), "{error}");
+    assert!(matches!(
+        store.list_prefix("scenes"),
+        Err(BlobError::Unavailable { .. })
+    ));
+}
