@@ -23,6 +23,9 @@ use crate::config::BlobsConfig;
 
 /// Parts of a streamed upload; S3 needs at least 5 MiB for every part but the last.
 const PART_BYTES: usize = 8 << 20;
+/// Parts in flight at once: memory for a streamed upload stays about this many parts, whatever
+/// the file's size.
+const PARTS_IN_FLIGHT: usize = 3;
 const READ_CHUNK: usize = 1 << 20;
 
 pub struct ObjectBlobStore {
@@ -215,7 +218,8 @@ impl BlobStore for ObjectBlobStore {
                     })?;
             // Small files go up in one PUT; larger ones as a multipart upload that is only
             // visible once completed, and aborted on any error.
-            let mut writer = BufWriter::with_capacity(store, location, PART_BYTES);
+            let mut writer = BufWriter::with_capacity(store, location, PART_BYTES)
+                .with_max_concurrency(PARTS_IN_FLIGHT);
             let mut buffer = vec![0u8; READ_CHUNK];
             let copied: std::io::Result<()> = async {
                 loop {
