@@ -5,6 +5,7 @@ mod auth;
 pub mod error;
 mod exports;
 mod grpc;
+mod grpc_metrics;
 mod jobs;
 mod masks;
 mod metrics;

@@ -54,6 +54,39 @@ pub async fn track_requests(request: Request, next: Next) -> Response {
     response
 }
 
+/// Registers the series dashboards and alerts need before anything happened, at zero: a
+/// counter nobody incremented yet (no lease has expired) is exported as 0, not missing, so
+/// `rate()` and alert expressions work from the first scrape.
+pub fn register_zero_series() {
+    metrics::counter!("segsplat_job_leases_expired_total").increment(0);
+    metrics::gauge!("segsplat_scene_cache_bytes").increment(0.0);
+    metrics::gauge!("segsplat_scene_cache_scenes").increment(0.0);
+    for outcome in [
+        "succeeded",
+        "failed",
+        "retry",
+        "cancelled",
+        "handed_back",
+        "lease_lost",
+    ] {
+        metrics::counter!("segsplat_job_outcomes_total", "kind" => "none", "outcome" => outcome)
+            .increment(0);
+    }
+    for outcome in ["stored", "rejected"] {
+        metrics::counter!("segsplat_scene_uploads_total", "outcome" => outcome).increment(0);
+    }
+    for state in ["queued", "running", "succeeded", "failed", "cancelled"] {
+        metrics::gauge!("segsplat_jobs", "state" => state).increment(0.0);
+    }
+    for gauge in [
+        "segsplat_workers_total",
+        "segsplat_workers_busy",
+        "segsplat_workers_idle",
+    ] {
+        metrics::gauge!(gauge).increment(0.0);
+    }
+}
+
 /// Sets `segsplat_jobs{state=...}` from the database.
 pub async fn refresh_queue_gauges(database: &Database) {
     match database.job_counts_by_state().await {

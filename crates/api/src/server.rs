@@ -14,7 +14,8 @@ use tracing::{info, warn};
 
 use super::auth::{TokenCheck, grpc_interceptor};
 use super::grpc::SceneQueryService;
-use super::metrics::prometheus_handle;
+use super::grpc_metrics::GrpcMetricsLayer;
+use super::metrics::{prometheus_handle, register_zero_series};
 use super::router::router;
 use super::state::{AppState, WorkerReadiness};
 use crate::proto::scene_query_server::SceneQueryServer;
@@ -109,6 +110,7 @@ impl ServiceBuilder {
         let database = Database::open(&config.database_path()).await?;
         let blobs = open_blob_store(&config)?;
         let metrics = prometheus_handle().ok_or(ServiceError::Metrics)?;
+        register_zero_series();
         let bus = JobEventBus::default();
         let job_queued = Arc::new(Notify::new());
         let shutdown = CancellationToken::new();
@@ -335,6 +337,7 @@ async fn start_grpc(
     let task = tokio::spawn(async move {
         let served = tonic::transport::Server::builder()
             .trace_fn(|request| tracing::info_span!("grpc", path = %request.uri().path()))
+            .layer(GrpcMetricsLayer)
             .add_service(health_service)
             .add_service(reflection)
             .add_service(scene_query)

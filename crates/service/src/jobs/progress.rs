@@ -40,6 +40,8 @@ pub struct ProgressReporter {
     job_id: String,
     lease_owner: String,
     clock: Arc<Mutex<Option<StageClock>>>,
+    /// The last reported (stage, step), to count steps done for `segsplat_job_steps_total`.
+    last_step: Arc<Mutex<Option<(String, u64)>>>,
 }
 
 impl ProgressReporter {
@@ -55,6 +57,7 @@ impl ProgressReporter {
             job_id,
             lease_owner,
             clock: Arc::new(Mutex::new(None)),
+            last_step: Arc::new(Mutex::new(None)),
         }
     }
 
@@ -74,8 +77,25 @@ impl ProgressReporter {
             .await?;
         if recorded.is_some() {
             self.bus.notify(&self.job_id);
+            self.count_steps(&progress);
         }
         Ok(recorded.is_some())
+    }
+
+    /// Adds the steps done since the last report of the same stage to
+    /// `segsplat_job_steps_total{worker, stage}`, so dashboards show steps/s per worker.
+    fn count_steps(&self, progress: &Progress) {
+        let Ok(mut last) = self.last_step.lock() else {
+            return;
+        };
+        let done = match last.as_ref() {
+            Some((stage, step)) if *stage == progress.stage => progress.step.saturating_sub(*step),
+            _ => 0,
+        };
+        *last = Some((progress.stage.clone(), progress.step));
+        metrics::counter!("segsplat_job_steps_total", "worker" => self.lease_owner.clone(),
+            "stage" => progress.stage.clone())
+        .increment(done);
     }
 
     /// [`Self::report`] from blocking code (inside `spawn_blocking`).

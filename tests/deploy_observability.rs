@@ -1,0 +1,143 @@
+//! What `deploy/` tells Prometheus and Grafana matches what the service exports: every metric
+//! the dashboard and the alert rules name is on a running service's `/metrics` (after a REST
+//! upload, a gRPC call and a job), the rule and scrape files parse, and the scrape path and port
+//! are the service's.
+
+mod common;
+
+use std::collections::BTreeSet;
+use std::path::Path;
+use std::sync::Arc;
+use std::time::Duration;
+
+use common::handlers::{STEPS_KIND, StepsHandler};
+use common::{TestService, test_config};
+use yaml_rust2::{Yaml, YamlLoader};
+
+fn deploy_file(relative: &str) -> String {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("deploy")
+        .join(relative);
+    std::fs::read_to_string(&path).unwrap_or_else(|error| panic!("{}: {error}", path.display()))
+}
+
+fn yaml(relative: &str) -> Yaml {
+    let mut documents = YamlLoader::load_from_str(&deploy_file(relative))
+        .unwrap_or_else(|error| panic!("{relative} is not YAML: {error}"));
+    assert_eq!(documents.len(), 1, "{relative}");
+    documents.remove(0)
+}
+
+/// `segsplat_*` metric families an expression names (histogram series map to their family).
+fn metric_names(expression: &str, into: &mut BTreeSet<String>) {
+    let mut rest = expression;
+    while let Some(start) = rest.find("segsplat_") {
+        let tail = &rest[start..];
+        let end = tail
+            .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+            .unwrap_or(tail.len());
+        let name = &tail[..end];
+        let family = ["_bucket", "_sum", "_count"]
+            .iter()
+            .find_map(|suffix| name.strip_suffix(suffix))
+            .unwrap_or(name);
+        into.insert(family.to_string());
+        rest = &tail[end..];
+    }
+}
+
+fn dashboard_expressions() -> Vec<String> {
+    let dashboard: serde_json::Value =
+        serde_json::from_str(&deploy_file("grafana/dashboards/segsplat.json")).unwrap();
+    let panels = dashboard["panels"].as_array().unwrap();
+    assert!(panels.len() >= 10, "the operators' panels");
+    panels
+        .iter()
+        .flat_map(|panel| panel["targets"].as_array().unwrap().iter())
+        .map(|target| target["expr"].as_str().unwrap().to_string())
+        .collect()
+}
+
+fn alert_expressions() -> Vec<String> {
+    let rules = yaml("prometheus/alerts.yml");
+    let groups = rules["groups"].as_vec().unwrap();
+    let mut expressions = Vec::new();
+    for group in groups {
+        for rule in group["rules"].as_vec().unwrap() {
+            assert!(rule["alert"].as_str().is_some(), "{rule:?}");
+            expressions.push(rule["expr"].as_str().unwrap().to_string());
+        }
+    }
+    expressions
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_metric_the_dashboard_and_alerts_use_is_exported() {
+    let mut names = BTreeSet::new();
+    for expression in dashboard_expressions().iter().chain(&alert_expressions()) {
+        metric_names(expression, &mut names);
+    }
+    for needed in [
+        "segsplat_jobs",
+        "segsplat_job_outcomes_total",
+        "segsplat_job_attempt_seconds",
+        "segsplat_job_leases_expired_total",
+        "segsplat_job_steps_total",
+        "segsplat_workers_busy",
+        "segsplat_workers_idle",
+        "segsplat_scene_uploads_total",
+        "segsplat_http_request_duration_seconds",
+        "segsplat_grpc_request_duration_seconds",
+        "segsplat_scene_cache_bytes",
+    ] {
+        assert!(names.contains(needed), "the dashboard shows {needed}");
+    }
+
+    let dir = tempfile::tempdir().unwrap();
+    let handler = StepsHandler::default();
+    let client = TestService::start(test_config(dir.path()), vec![Arc::new(handler)]).await;
+    let scene_id = client.upload_test_scene().await;
+    let job_id = client
+        .create_job(&scene_id, STEPS_KIND, serde_json::json!({"steps": 3}))
+        .await;
+    client
+        .wait_for_state(&job_id, "succeeded", Duration::from_secs(30))
+        .await;
+    let mut grpc = client.grpc().await;
+    grpc.list_scenes(segsplat_api::proto::ListScenesRequest {})
+        .await
+        .unwrap();
+    let (status, body) = client.get_bytes("/metrics").await;
+    assert_eq!(status, 200);
+    let exported = String::from_utf8(body).unwrap();
+    let missing: Vec<&String> = names
+        .iter()
+        .filter(|name| {
+            !exported
+                .lines()
+                .any(|line| line.starts_with(&format!("# TYPE {name} ")))
+        })
+        .collect();
+    assert!(missing.is_empty(), "not exported: {missing:?}\n{exported}");
+    client.shutdown().await;
+}
+
+#[test]
+fn prometheus_scrapes_the_services_metrics_path_and_port() {
+    let scrape = yaml("prometheus/prometheus.yml");
+    assert_eq!(
+        scrape["rule_files"][0].as_str(),
+        Some("alerts.yml"),
+        "the alert rules are loaded"
+    );
+    let default_port = segsplat_service::config::Config::default().http_addr.port();
+    let jobs = scrape["scrape_configs"].as_vec().unwrap();
+    assert_eq!(jobs.len(), 2, "the API and the workers");
+    for job in jobs {
+        assert_eq!(job["metrics_path"].as_str(), Some("/metrics"));
+        for target in job["static_configs"][0]["targets"].as_vec().unwrap() {
+            let port = target.as_str().and_then(|target| target.rsplit(':').next());
+            assert_eq!(port, Some(default_port.to_string().as_str()), "{target:?}");
+        }
+    }
+}
