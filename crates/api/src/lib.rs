@@ -18,6 +18,7 @@ mod router;
 mod scenes;
 mod server;
 mod state;
+mod workers;
 
 pub use openapi::ApiDoc;
 pub use server::{RunningService, ServiceBuilder, ServiceError, ServiceMode};

@@ -9,7 +9,9 @@ use axum::middleware::Next;
 use axum::response::Response;
 use metrics_exporter_prometheus::{PrometheusBuilder, PrometheusHandle};
 
+use segsplat_service::core::ServiceCore;
 use segsplat_service::store::Database;
+use segsplat_service::usecases::workers::{cluster_workers, summarize};
 
 /// Latency buckets in seconds, from fast API calls to long uploads.
 const LATENCY_BUCKETS_SECS: [f64; 14] = [
@@ -78,12 +80,33 @@ pub fn register_zero_series() {
     for state in ["queued", "running", "succeeded", "failed", "cancelled"] {
         metrics::gauge!("segsplat_jobs", "state" => state).increment(0.0);
     }
+    for state in ["busy", "idle", "silent"] {
+        metrics::gauge!("segsplat_cluster_workers", "state" => state).increment(0.0);
+    }
     for gauge in [
         "segsplat_workers_total",
         "segsplat_workers_busy",
         "segsplat_workers_idle",
     ] {
         metrics::gauge!(gauge).increment(0.0);
+    }
+}
+
+/// Sets `segsplat_cluster_workers{state=busy|idle|silent}`: worker slots of every process on
+/// this database, where `segsplat_workers_*` count this process's own.
+pub async fn refresh_cluster_gauges(core: &ServiceCore) {
+    match cluster_workers(core).await {
+        Ok(statuses) => {
+            let summary = summarize(&statuses);
+            for (state, count) in [
+                ("busy", summary.busy),
+                ("idle", summary.idle),
+                ("silent", summary.silent),
+            ] {
+                metrics::gauge!("segsplat_cluster_workers", "state" => state).set(count as f64);
+            }
+        }
+        Err(error) => tracing::warn!(%error, "cannot count the cluster's workers for metrics"),
     }
 }
 

@@ -3,7 +3,7 @@
 use axum::Json;
 use utoipa::OpenApi;
 
-use super::{error, exports, jobs, masks, objects, ops, query, scenes};
+use super::{error, exports, jobs, masks, objects, ops, query, scenes, workers};
 
 #[derive(OpenApi)]
 #[openapi(
@@ -24,6 +24,7 @@ use super::{error, exports, jobs, masks, objects, ops, query, scenes};
         masks::object_mask_png,
         exports::trained_file,
         exports::object_ply,
+        workers::list_workers,
         ops::healthz,
         ops::readyz,
         ops::metrics,
@@ -36,6 +37,8 @@ use super::{error, exports, jobs, masks, objects, ops, query, scenes};
         jobs::CreateJobRequest,
         jobs::JobResponse,
         jobs::JobList,
+        workers::WorkerResponse,
+        workers::WorkerList,
         objects::ObjectResponse,
         objects::ObjectList,
         query::QueryRequest,
@@ -50,6 +53,7 @@ use super::{error, exports, jobs, masks, objects, ops, query, scenes};
         masks::MasksResponse,
         ops::HealthResponse,
         ops::ReadinessResponse,
+        ops::ClusterWorkers,
     )),
     modifiers(&BearerAuth),
     security(("bearer" = [])),

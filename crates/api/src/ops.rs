@@ -7,8 +7,9 @@ use axum::response::IntoResponse;
 use serde::Serialize;
 use utoipa::ToSchema;
 
-use super::metrics::refresh_queue_gauges;
+use super::metrics::{refresh_cluster_gauges, refresh_queue_gauges};
 use super::state::AppState;
+use segsplat_service::usecases::workers::{cluster_workers, summarize};
 
 #[derive(Debug, Serialize, ToSchema)]
 pub struct HealthResponse {
@@ -39,6 +40,33 @@ pub struct ReadinessResponse {
     /// The GPU adapters workers use (as reported by wgpu).
     #[schema(value_type = Vec<Object>)]
     pub adapters: Vec<segsplat_gpu::AdapterReport>,
+    /// Worker slots of every process on this database (`GET /v1/workers` lists them).
+    pub cluster: ClusterWorkers,
+}
+
+#[derive(Debug, Default, Serialize, ToSchema)]
+pub struct ClusterWorkers {
+    pub busy: usize,
+    pub idle: usize,
+    /// Registered, not stopped, silent for longer than a lease.
+    pub silent: usize,
+}
+
+async fn cluster_summary(state: &AppState) -> ClusterWorkers {
+    match cluster_workers(&state.core).await {
+        Ok(statuses) => {
+            let summary = summarize(&statuses);
+            ClusterWorkers {
+                busy: summary.busy,
+                idle: summary.idle,
+                silent: summary.silent,
+            }
+        }
+        Err(error) => {
+            tracing::warn!(%error, "cannot list the cluster's workers");
+            ClusterWorkers::default()
+        }
+    }
 }
 
 /// The process is alive.
@@ -138,6 +166,7 @@ pub async fn readyz(State(state): State<AppState>) -> impl IntoResponse {
             models,
         },
         adapters: workers.adapters.clone(),
+        cluster: cluster_summary(&state).await,
     };
     let status = if ready {
         StatusCode::OK
@@ -152,6 +181,7 @@ pub async fn readyz(State(state): State<AppState>) -> impl IntoResponse {
     responses((status = 200, description = "Prometheus text format", body = String)))]
 pub async fn metrics(State(state): State<AppState>) -> impl IntoResponse {
     refresh_queue_gauges(&state.core.database).await;
+    refresh_cluster_gauges(&state.core).await;
     state.metrics.run_upkeep();
     (
         [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],

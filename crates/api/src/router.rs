@@ -8,7 +8,7 @@ use tower_http::trace::TraceLayer;
 use super::auth::{TokenCheck, require_token};
 use super::metrics::track_requests;
 use super::state::AppState;
-use super::{exports, jobs, masks, objects, openapi, ops, query, scenes};
+use super::{exports, jobs, masks, objects, openapi, ops, query, scenes, workers};
 
 pub fn router(state: AppState) -> Router {
     let tokens = TokenCheck::from_config(&state.core.config.auth);
@@ -40,6 +40,7 @@ pub fn router(state: AppState) -> Router {
         .route("/v1/jobs/{id}", get(jobs::get_job))
         .route("/v1/jobs/{id}/cancel", post(jobs::cancel_job))
         .route("/v1/jobs/{id}/events", get(jobs::job_events))
+        .route("/v1/workers", get(workers::list_workers))
         .route("/v1/openapi.json", get(openapi::openapi_json))
         .route("/healthz", get(ops::healthz))
         .route("/readyz", get(ops::readyz))

@@ -12,6 +12,7 @@ use super::scene_cache::{CachedScene, SceneFileCache};
 use super::{HandlerRegistry, JobContext, JobEventBus, JobFailure, ProgressReporter};
 use crate::config::JobsConfig;
 use crate::store::jobs::{AttemptOutcome, HeartbeatOutcome, JobRecord, JobState};
+use crate::store::workers::WorkerState;
 use crate::store::{BlobStore, Database};
 use segsplat_gpu::GpuContext;
 use segsplat_vision::models::ModelsStatus;
@@ -50,7 +51,24 @@ impl Worker {
         let lease_ms = (self.shared.jobs.lease_secs * 1000.0).ceil() as i64;
         info!(worker = %self.name, ?kinds, "worker started");
         metrics::gauge!("segsplat_workers_idle").increment(1.0);
+        let device = self
+            .gpu
+            .as_ref()
+            .map_or("cpu".to_string(), |gpu| gpu.report.name.clone());
+        let instance = self
+            .name
+            .rsplit_once('/')
+            .map_or(&*self.name, |(instance, _)| instance);
+        if let Err(error) = self
+            .shared
+            .database
+            .register_worker(&self.name, instance, &device, &kinds)
+            .await
+        {
+            warn!(worker = %self.name, %error, "registering the worker failed; it runs anyway");
+        }
         while !self.shared.shutdown.is_cancelled() {
+            self.record_state(WorkerState::Idle, None).await;
             let claimed = self
                 .shared
                 .database
@@ -59,6 +77,7 @@ impl Worker {
             match claimed {
                 Ok(Some(job)) => {
                     self.shared.bus.notify(&job.id);
+                    self.record_state(WorkerState::Busy, Some(&job.id)).await;
                     metrics::gauge!("segsplat_workers_idle").decrement(1.0);
                     metrics::gauge!("segsplat_workers_busy").increment(1.0);
                     let span = info_span!("job", job_id = %job.id, kind = %job.kind,
@@ -84,7 +103,21 @@ impl Worker {
             }
         }
         metrics::gauge!("segsplat_workers_idle").decrement(1.0);
+        self.record_state(WorkerState::Stopped, None).await;
         info!(worker = %self.name, "worker stopped");
+    }
+
+    /// This slot's row in `workers`: what the cluster view shows. A failure is logged only; the
+    /// row's heartbeat then ages and readers see the worker as silent.
+    async fn record_state(&self, state: WorkerState, job_id: Option<&str>) {
+        if let Err(error) = self
+            .shared
+            .database
+            .worker_heartbeat(&self.name, state, job_id)
+            .await
+        {
+            warn!(worker = %self.name, %error, "recording the worker's heartbeat failed");
+        }
     }
 
     async fn run_job(&self, job: JobRecord) {
@@ -193,6 +226,7 @@ impl Worker {
             tokio::select! {
                 joined = &mut handler_task => break Some(joined),
                 _ = heartbeat.tick() => {
+                    self.record_state(WorkerState::Busy, Some(&job.id)).await;
                     match self.shared.database.heartbeat(&job.id, &self.name, lease_ms).await {
                         Ok(HeartbeatOutcome::Renewed { cancel_requested }) => {
                             if cancel_requested && !cancel.is_cancelled() {

@@ -30,6 +30,11 @@ const MIGRATIONS: &[(i64, &str, &str)] = &[
         "tenants",
         include_str!("../../migrations/0003_tenants.sql"),
     ),
+    (
+        4,
+        "workers",
+        include_str!("../../migrations/0004_workers.sql"),
+    ),
 ];
 
 /// How long a writer waits for another writer's lock before failing.

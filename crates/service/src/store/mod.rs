@@ -13,6 +13,7 @@ pub mod objects;
 pub mod process_tag;
 pub mod scenes;
 pub mod tenancy;
+pub mod workers;
 
 pub use blob::{BlobError, BlobStore, LocalBlobStore};
 pub use database::Database;

@@ -8,3 +8,4 @@ pub mod objects;
 pub mod query;
 pub mod scenes;
 pub mod serving;
+pub mod workers;
