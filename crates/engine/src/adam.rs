@@ -8,6 +8,8 @@
 //! 3DGS's optional sparse Adam (which skips Gaussians outside the view: those get exactly zero
 //! gradients in every element).
 
+mod groups;
+
 use wgpu::util::DeviceExt;
 
 use segsplat_gpu::kernel::{wgsl_u32_constants, workgroups_2d};
@@ -15,6 +17,7 @@ use segsplat_gpu::validation::validated;
 use segsplat_gpu::{GpuContext, GpuError, Kernel};
 
 const ADAM_STEP: &str = include_str!("adam_step.wgsl");
+const ADAM_UPDATE: &str = include_str!("adam_update.wgsl");
 /// Invocations per workgroup, one element each (prepended to `adam_step.wgsl`).
 const ADAM_WORKGROUP: u32 = 256;
 
@@ -77,10 +80,22 @@ pub struct AdamBuffers<'a> {
     pub second_moment: &'a wgpu::Buffer,
 }
 
-/// The Adam update kernel (see the module doc).
+pub use groups::ADAM_GROUPS;
+
+/// One parameter group's step: its buffers, how many elements, its learning rate.
+#[derive(Debug, Clone, Copy)]
+pub struct AdamGroup<'a> {
+    pub buffers: AdamBuffers<'a>,
+    pub element_count: u32,
+    pub learning_rate: f32,
+}
+
+/// The Adam update kernels (see the module doc): one group per dispatch, and where the adapter
+/// binds enough storage buffers, every group in one dispatch (`adam/groups.rs`).
 #[derive(Debug)]
 pub struct Adam {
     kernel: Kernel,
+    groups_kernel: groups::AdamGroupsKernel,
     pub settings: AdamSettings,
 }
 
@@ -88,9 +103,55 @@ impl Adam {
     pub fn new(ctx: &GpuContext, settings: AdamSettings) -> Result<Self, AdamError> {
         let kernel = validated(ctx, "adam_step", || {
             let constants = wgsl_u32_constants(&[("ADAM_WORKGROUP", ADAM_WORKGROUP)]);
-            Kernel::new(ctx, "adam_step", &[&constants, ADAM_STEP], "adam_step", &[])
+            Kernel::new(
+                ctx,
+                "adam_step",
+                &[&constants, ADAM_UPDATE, ADAM_STEP],
+                "adam_step",
+                &[],
+            )
         })?;
-        Ok(Self { kernel, settings })
+        let groups_kernel = groups::AdamGroupsKernel::new(ctx)?;
+        Ok(Self {
+            kernel,
+            groups_kernel,
+            settings,
+        })
+    }
+
+    /// Records Adam step number `step` of every group in `groups`, each with its own learning
+    /// rate: the same updates as [`Self::encode_step`] per group, in one dispatch where the
+    /// adapter allows it (2 to [`ADAM_GROUPS`] groups), else one dispatch per group. Invocation
+    /// i steps element i of every group, so give one call groups of similar sizes.
+    pub fn encode_steps(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        groups: &[AdamGroup<'_>],
+        step: u32,
+    ) -> Result<(), AdamError> {
+        if step == 0 {
+            return Err(AdamError::StepZero);
+        }
+        for group in groups {
+            check_buffers(&group.buffers, group.element_count)?;
+        }
+        if self.groups_kernel.covers(groups.len()) {
+            self.groups_kernel
+                .encode(ctx, encoder, &self.settings, groups, step);
+            return Ok(());
+        }
+        for group in groups {
+            self.encode_step(
+                ctx,
+                encoder,
+                &group.buffers,
+                group.element_count,
+                group.learning_rate,
+                step,
+            )?;
+        }
+        Ok(())
     }
 
     /// Records Adam step number `step` (from 1, for the bias corrections) over the first
@@ -110,21 +171,7 @@ impl Adam {
         if step == 0 {
             return Err(AdamError::StepZero);
         }
-        let needed_bytes = u64::from(element_count) * 4;
-        for (what, buffer) in [
-            ("params", buffers.params),
-            ("grads", buffers.grads),
-            ("first_moment", buffers.first_moment),
-            ("second_moment", buffers.second_moment),
-        ] {
-            if buffer.size() < needed_bytes {
-                return Err(AdamError::BufferTooSmall {
-                    what,
-                    element_count,
-                    actual_bytes: buffer.size(),
-                });
-            }
-        }
+        check_buffers(buffers, element_count)?;
         if element_count == 0 {
             return Ok(());
         }
@@ -165,4 +212,24 @@ impl Adam {
         self.kernel.dispatch(encoder, &bind_group, grid);
         Ok(())
     }
+}
+
+/// Each buffer of `buffers` holds at least `element_count` f32.
+fn check_buffers(buffers: &AdamBuffers<'_>, element_count: u32) -> Result<(), AdamError> {
+    let needed_bytes = u64::from(element_count) * 4;
+    for (what, buffer) in [
+        ("params", buffers.params),
+        ("grads", buffers.grads),
+        ("first_moment", buffers.first_moment),
+        ("second_moment", buffers.second_moment),
+    ] {
+        if buffer.size() < needed_bytes {
+            return Err(AdamError::BufferTooSmall {
+                what,
+                element_count,
+                actual_bytes: buffer.size(),
+            });
+        }
+    }
+    Ok(())
 }

@@ -3,7 +3,7 @@
 //   p -= step_size * m / (sqrt(v) / sqrt(1 - beta2^t) + epsilon),  step_size = lr / (1 - beta1^t)
 // Bias corrections are computed on the host in f64.
 
-// ADAM_WORKGROUP is prepended by the host (adam.rs).
+// ADAM_WORKGROUP and adam_update.wgsl are prepended by the host (adam.rs).
 
 struct AdamParams {
     step_size: f32,
@@ -42,10 +42,12 @@ fn adam_step(
     if params.skip_zero_gradients != 0u && gradient == 0.0 {
         return;
     }
-    let m = params.beta1 * first_moment[index] + params.one_minus_beta1 * gradient;
-    let v = params.beta2 * second_moment[index] + params.one_minus_beta2 * gradient * gradient;
-    first_moment[index] = m;
-    second_moment[index] = v;
-    let denominator = sqrt(v) * params.inv_sqrt_bias_correction2 + params.epsilon;
-    parameters[index] -= params.step_size * m / denominator;
+    let updated = adam_update(
+        params.step_size, params.inv_sqrt_bias_correction2, params.beta1, params.beta2,
+        params.one_minus_beta1, params.one_minus_beta2, params.epsilon, parameters[index], gradient,
+        first_moment[index], second_moment[index],
+    );
+    first_moment[index] = updated.first_moment;
+    second_moment[index] = updated.second_moment;
+    parameters[index] = updated.parameter;
 }
