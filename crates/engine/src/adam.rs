@@ -55,20 +55,48 @@ impl Default for AdamSettings {
     }
 }
 
-/// Uniform block of `adam_step.wgsl`.
+/// `AdamConstants` of `adam_update.wgsl`: what every group of a step shares.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct AdamParams {
-    step_size: f32,
+struct AdamConstants {
     inv_sqrt_bias_correction2: f32,
     beta1: f32,
     beta2: f32,
     one_minus_beta1: f32,
     one_minus_beta2: f32,
     epsilon: f32,
-    element_count: u32,
     skip_zero_gradients: u32,
-    _pad: [u32; 3],
+    _pad: u32,
+}
+
+impl AdamConstants {
+    /// The constants of step `step` (from 1) and its first bias correction, 1 - beta1^step,
+    /// which each group's step size divides by (in f64).
+    fn at_step(settings: &AdamSettings, step: u32) -> (Self, f64) {
+        let bias_correction1 = 1.0 - settings.beta1.powf(f64::from(step));
+        let bias_correction2 = 1.0 - settings.beta2.powf(f64::from(step));
+        let constants = Self {
+            inv_sqrt_bias_correction2: (1.0 / bias_correction2.sqrt()) as f32,
+            beta1: settings.beta1 as f32,
+            beta2: settings.beta2 as f32,
+            one_minus_beta1: (1.0 - settings.beta1) as f32,
+            one_minus_beta2: (1.0 - settings.beta2) as f32,
+            epsilon: settings.epsilon as f32,
+            skip_zero_gradients: u32::from(settings.skip_zero_gradients),
+            _pad: 0,
+        };
+        (constants, bias_correction1)
+    }
+}
+
+/// Uniform block of `adam_step.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct AdamParams {
+    constants: AdamConstants,
+    step_size: f32,
+    element_count: u32,
+    _pad: [u32; 2],
 }
 
 /// The buffers of one parameter group, each holding at least `element_count` f32.
@@ -175,20 +203,12 @@ impl Adam {
         if element_count == 0 {
             return Ok(());
         }
-        let settings = self.settings;
-        let bias_correction1 = 1.0 - settings.beta1.powf(f64::from(step));
-        let bias_correction2 = 1.0 - settings.beta2.powf(f64::from(step));
+        let (constants, bias_correction1) = AdamConstants::at_step(&self.settings, step);
         let params = AdamParams {
+            constants,
             step_size: (f64::from(learning_rate) / bias_correction1) as f32,
-            inv_sqrt_bias_correction2: (1.0 / bias_correction2.sqrt()) as f32,
-            beta1: settings.beta1 as f32,
-            beta2: settings.beta2 as f32,
-            one_minus_beta1: (1.0 - settings.beta1) as f32,
-            one_minus_beta2: (1.0 - settings.beta2) as f32,
-            epsilon: settings.epsilon as f32,
             element_count,
-            skip_zero_gradients: u32::from(settings.skip_zero_gradients),
-            _pad: [0; 3],
+            _pad: [0; 2],
         };
         let params = ctx
             .device

@@ -16,7 +16,7 @@ use segsplat_gpu::kernel::{wgsl_u32_constants, workgroups_2d};
 use segsplat_gpu::validation::validated;
 use segsplat_gpu::{GpuContext, GpuError, Kernel};
 
-use super::{ADAM_UPDATE, ADAM_WORKGROUP, AdamGroup, AdamSettings};
+use super::{ADAM_UPDATE, ADAM_WORKGROUP, AdamConstants, AdamGroup, AdamSettings};
 
 const ADAM_GROUPS_KERNEL: &str = include_str!("../adam_groups.wgsl");
 /// Most groups one dispatch covers.
@@ -28,14 +28,7 @@ const BUFFERS_PER_GROUP: usize = 4;
 #[repr(C)]
 #[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct AdamGroupsParams {
-    inv_sqrt_bias_correction2: f32,
-    beta1: f32,
-    beta2: f32,
-    one_minus_beta1: f32,
-    one_minus_beta2: f32,
-    epsilon: f32,
-    skip_zero_gradients: u32,
-    _pad: u32,
+    constants: AdamConstants,
     step_size: [f32; ADAM_GROUPS],
     element_count: [u32; ADAM_GROUPS],
 }
@@ -68,8 +61,8 @@ fn group_source(groups: usize) -> String {
             blocks,
             "    if index < group_element_count({g}u) {{\n\
              \x20       let gradient = grads_{g}[index];\n\
-             \x20       if !keeps_element(gradient) {{\n\
-             \x20           let e = group_element(params_{g}[index], gradient, first_moment_{g}[index], second_moment_{g}[index], group_step_size({g}u));\n\
+             \x20       if !adam_keeps(params.constants, gradient) {{\n\
+             \x20           let e = adam_update(params.constants, group_step_size({g}u), params_{g}[index], gradient, first_moment_{g}[index], second_moment_{g}[index]);\n\
              \x20           first_moment_{g}[index] = e.first_moment;\n\
              \x20           second_moment_{g}[index] = e.second_moment;\n\
              \x20           params_{g}[index] = e.parameter;\n\
@@ -125,17 +118,9 @@ impl AdamGroupsKernel {
         else {
             return;
         };
-        let bias_correction1 = 1.0 - settings.beta1.powf(f64::from(step));
-        let bias_correction2 = 1.0 - settings.beta2.powf(f64::from(step));
+        let (constants, bias_correction1) = AdamConstants::at_step(settings, step);
         let mut params = AdamGroupsParams {
-            inv_sqrt_bias_correction2: (1.0 / bias_correction2.sqrt()) as f32,
-            beta1: settings.beta1 as f32,
-            beta2: settings.beta2 as f32,
-            one_minus_beta1: (1.0 - settings.beta1) as f32,
-            one_minus_beta2: (1.0 - settings.beta2) as f32,
-            epsilon: settings.epsilon as f32,
-            skip_zero_gradients: u32::from(settings.skip_zero_gradients),
-            _pad: 0,
+            constants,
             step_size: [0.0; ADAM_GROUPS],
             element_count: [0; ADAM_GROUPS],
         };
