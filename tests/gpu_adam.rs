@@ -7,7 +7,7 @@ mod gpu_support;
 
 use gpu_support::{gpu_context, new_encoder, seeded_rng, storage_buffer, submit};
 use rand::Rng;
-use segsplat_engine::adam::{Adam, AdamBuffers, AdamSettings};
+use segsplat_engine::adam::{Adam, AdamBuffers, AdamGroup, AdamSettings};
 use segsplat_gpu::GpuContext;
 
 #[derive(Clone)]
@@ -233,4 +233,81 @@ fn adam_rejects_step_zero_and_short_buffers() {
         adam.encode_step(ctx, &mut encoder, &state.buffers(), 17, 1e-3, 1)
             .is_err()
     );
+}
+
+/// Three groups of different sizes, some gradients exactly zero, stepped three times by
+/// `encode_steps` (one dispatch where the adapter allows) and by `encode_step` per group.
+fn steps_together_and_apart(settings: AdamSettings) -> (Vec<Vec<f32>>, Vec<Vec<f32>>) {
+    let Some(ctx) = gpu_context() else {
+        return (Vec::new(), Vec::new());
+    };
+    let adam = Adam::new(ctx, settings).unwrap();
+    let mut rng = seeded_rng(17);
+    let sizes = [100usize, 37, 300];
+    let rates = [1e-3f32, 5e-2, 2e-4];
+    let initial: Vec<Vec<f32>> = sizes
+        .iter()
+        .map(|&n| (0..n).map(|_| rng.random_range(-1.0f32..1.0)).collect())
+        .collect();
+    let together: Vec<GpuAdamState> = initial.iter().map(|p| GpuAdamState::new(ctx, p)).collect();
+    let apart: Vec<GpuAdamState> = initial.iter().map(|p| GpuAdamState::new(ctx, p)).collect();
+    for step in 1..=3 {
+        for (g, &n) in sizes.iter().enumerate() {
+            let grads: Vec<f32> = (0..n)
+                .map(|i| {
+                    if i % 7 == 0 {
+                        0.0
+                    } else {
+                        rng.random_range(-1.0f32..1.0)
+                    }
+                })
+                .collect();
+            for state in [&together[g], &apart[g]] {
+                ctx.queue
+                    .write_buffer(&state.grads, 0, bytemuck::cast_slice(&grads));
+            }
+        }
+        let mut encoder = new_encoder(ctx);
+        let groups: Vec<AdamGroup<'_>> = together
+            .iter()
+            .zip(sizes.iter().zip(&rates))
+            .map(|(state, (&n, &lr))| AdamGroup {
+                buffers: state.buffers(),
+                element_count: n as u32,
+                learning_rate: lr,
+            })
+            .collect();
+        adam.encode_steps(ctx, &mut encoder, &groups, step).unwrap();
+        for (state, (&n, &lr)) in apart.iter().zip(sizes.iter().zip(&rates)) {
+            adam.encode_step(ctx, &mut encoder, &state.buffers(), n as u32, lr, step)
+                .unwrap();
+        }
+        submit(ctx, encoder);
+    }
+    let read = |states: &[GpuAdamState]| -> Vec<Vec<f32>> {
+        states
+            .iter()
+            .flat_map(|s| [&s.params, &s.first_moment, &s.second_moment])
+            .map(|b| ctx.read_vec(b).unwrap())
+            .collect()
+    };
+    (read(&together), read(&apart))
+}
+
+#[test]
+fn adam_groups_in_one_dispatch_match_one_dispatch_per_group() {
+    for skip_zero_gradients in [false, true] {
+        let (together, apart) = steps_together_and_apart(AdamSettings {
+            skip_zero_gradients,
+            ..AdamSettings::default()
+        });
+        for (a, b) in together.iter().zip(&apart) {
+            for (x, y) in a.iter().zip(b) {
+                assert!(
+                    (x - y).abs() <= 1e-6 * y.abs().max(1e-3),
+                    "skip {skip_zero_gradients}: {x} against {y}"
+                );
+            }
+        }
+    }
 }

@@ -8,6 +8,8 @@
 //! 3DGS's optional sparse Adam (which skips Gaussians outside the view: those get exactly zero
 //! gradients in every element).
 
+mod groups;
+
 use wgpu::util::DeviceExt;
 
 use segsplat_gpu::kernel::{wgsl_u32_constants, workgroups_2d};
@@ -15,6 +17,7 @@ use segsplat_gpu::validation::validated;
 use segsplat_gpu::{GpuContext, GpuError, Kernel};
 
 const ADAM_STEP: &str = include_str!("adam_step.wgsl");
+const ADAM_UPDATE: &str = include_str!("adam_update.wgsl");
 /// Invocations per workgroup, one element each (prepended to `adam_step.wgsl`).
 const ADAM_WORKGROUP: u32 = 256;
 
@@ -52,20 +55,48 @@ impl Default for AdamSettings {
     }
 }
 
-/// Uniform block of `adam_step.wgsl`.
+/// `AdamConstants` of `adam_update.wgsl`: what every group of a step shares.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct AdamParams {
-    step_size: f32,
+struct AdamConstants {
     inv_sqrt_bias_correction2: f32,
     beta1: f32,
     beta2: f32,
     one_minus_beta1: f32,
     one_minus_beta2: f32,
     epsilon: f32,
-    element_count: u32,
     skip_zero_gradients: u32,
-    _pad: [u32; 3],
+    _pad: u32,
+}
+
+impl AdamConstants {
+    /// The constants of step `step` (from 1) and its first bias correction, 1 - beta1^step,
+    /// which each group's step size divides by (in f64).
+    fn at_step(settings: &AdamSettings, step: u32) -> (Self, f64) {
+        let bias_correction1 = 1.0 - settings.beta1.powf(f64::from(step));
+        let bias_correction2 = 1.0 - settings.beta2.powf(f64::from(step));
+        let constants = Self {
+            inv_sqrt_bias_correction2: (1.0 / bias_correction2.sqrt()) as f32,
+            beta1: settings.beta1 as f32,
+            beta2: settings.beta2 as f32,
+            one_minus_beta1: (1.0 - settings.beta1) as f32,
+            one_minus_beta2: (1.0 - settings.beta2) as f32,
+            epsilon: settings.epsilon as f32,
+            skip_zero_gradients: u32::from(settings.skip_zero_gradients),
+            _pad: 0,
+        };
+        (constants, bias_correction1)
+    }
+}
+
+/// Uniform block of `adam_step.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct AdamParams {
+    constants: AdamConstants,
+    step_size: f32,
+    element_count: u32,
+    _pad: [u32; 2],
 }
 
 /// The buffers of one parameter group, each holding at least `element_count` f32.
@@ -77,10 +108,22 @@ pub struct AdamBuffers<'a> {
     pub second_moment: &'a wgpu::Buffer,
 }
 
-/// The Adam update kernel (see the module doc).
+pub use groups::ADAM_GROUPS;
+
+/// One parameter group's step: its buffers, how many elements, its learning rate.
+#[derive(Debug, Clone, Copy)]
+pub struct AdamGroup<'a> {
+    pub buffers: AdamBuffers<'a>,
+    pub element_count: u32,
+    pub learning_rate: f32,
+}
+
+/// The Adam update kernels (see the module doc): one group per dispatch, and where the adapter
+/// binds enough storage buffers, every group in one dispatch (`adam/groups.rs`).
 #[derive(Debug)]
 pub struct Adam {
     kernel: Kernel,
+    groups_kernel: groups::AdamGroupsKernel,
     pub settings: AdamSettings,
 }
 
@@ -88,9 +131,55 @@ impl Adam {
     pub fn new(ctx: &GpuContext, settings: AdamSettings) -> Result<Self, AdamError> {
         let kernel = validated(ctx, "adam_step", || {
             let constants = wgsl_u32_constants(&[("ADAM_WORKGROUP", ADAM_WORKGROUP)]);
-            Kernel::new(ctx, "adam_step", &[&constants, ADAM_STEP], "adam_step", &[])
+            Kernel::new(
+                ctx,
+                "adam_step",
+                &[&constants, ADAM_UPDATE, ADAM_STEP],
+                "adam_step",
+                &[],
+            )
         })?;
-        Ok(Self { kernel, settings })
+        let groups_kernel = groups::AdamGroupsKernel::new(ctx)?;
+        Ok(Self {
+            kernel,
+            groups_kernel,
+            settings,
+        })
+    }
+
+    /// Records Adam step number `step` of every group in `groups`, each with its own learning
+    /// rate: the same updates as [`Self::encode_step`] per group, in one dispatch where the
+    /// adapter allows it (2 to [`ADAM_GROUPS`] groups), else one dispatch per group. Invocation
+    /// i steps element i of every group, so give one call groups of similar sizes.
+    pub fn encode_steps(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        groups: &[AdamGroup<'_>],
+        step: u32,
+    ) -> Result<(), AdamError> {
+        if step == 0 {
+            return Err(AdamError::StepZero);
+        }
+        for group in groups {
+            check_buffers(&group.buffers, group.element_count)?;
+        }
+        if self.groups_kernel.covers(groups.len()) {
+            self.groups_kernel
+                .encode(ctx, encoder, &self.settings, groups, step);
+            return Ok(());
+        }
+        for group in groups {
+            self.encode_step(
+                ctx,
+                encoder,
+                &group.buffers,
+                group.element_count,
+                group.learning_rate,
+                step,
+            )?;
+        }
+        Ok(())
     }
 
     /// Records Adam step number `step` (from 1, for the bias corrections) over the first
@@ -110,38 +199,16 @@ impl Adam {
         if step == 0 {
             return Err(AdamError::StepZero);
         }
-        let needed_bytes = u64::from(element_count) * 4;
-        for (what, buffer) in [
-            ("params", buffers.params),
-            ("grads", buffers.grads),
-            ("first_moment", buffers.first_moment),
-            ("second_moment", buffers.second_moment),
-        ] {
-            if buffer.size() < needed_bytes {
-                return Err(AdamError::BufferTooSmall {
-                    what,
-                    element_count,
-                    actual_bytes: buffer.size(),
-                });
-            }
-        }
+        check_buffers(buffers, element_count)?;
         if element_count == 0 {
             return Ok(());
         }
-        let settings = self.settings;
-        let bias_correction1 = 1.0 - settings.beta1.powf(f64::from(step));
-        let bias_correction2 = 1.0 - settings.beta2.powf(f64::from(step));
+        let (constants, bias_correction1) = AdamConstants::at_step(&self.settings, step);
         let params = AdamParams {
+            constants,
             step_size: (f64::from(learning_rate) / bias_correction1) as f32,
-            inv_sqrt_bias_correction2: (1.0 / bias_correction2.sqrt()) as f32,
-            beta1: settings.beta1 as f32,
-            beta2: settings.beta2 as f32,
-            one_minus_beta1: (1.0 - settings.beta1) as f32,
-            one_minus_beta2: (1.0 - settings.beta2) as f32,
-            epsilon: settings.epsilon as f32,
             element_count,
-            skip_zero_gradients: u32::from(settings.skip_zero_gradients),
-            _pad: [0; 3],
+            _pad: [0; 2],
         };
         let params = ctx
             .device
@@ -165,4 +232,24 @@ impl Adam {
         self.kernel.dispatch(encoder, &bind_group, grid);
         Ok(())
     }
+}
+
+/// Each buffer of `buffers` holds at least `element_count` f32.
+fn check_buffers(buffers: &AdamBuffers<'_>, element_count: u32) -> Result<(), AdamError> {
+    let needed_bytes = u64::from(element_count) * 4;
+    for (what, buffer) in [
+        ("params", buffers.params),
+        ("grads", buffers.grads),
+        ("first_moment", buffers.first_moment),
+        ("second_moment", buffers.second_moment),
+    ] {
+        if buffer.size() < needed_bytes {
+            return Err(AdamError::BufferTooSmall {
+                what,
+                element_count,
+                actual_bytes: buffer.size(),
+            });
+        }
+    }
+    Ok(())
 }

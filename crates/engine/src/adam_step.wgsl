@@ -1,25 +1,13 @@
-// One Adam step over a flat f32 parameter array (PyTorch's formulation, as 3DGS uses it):
-//   m = beta1 m + (1 - beta1) g;  v = beta2 v + (1 - beta2) g^2
-//   p -= step_size * m / (sqrt(v) / sqrt(1 - beta2^t) + epsilon),  step_size = lr / (1 - beta1^t)
-// Bias corrections are computed on the host in f64.
+// One Adam step over a flat f32 parameter array (the update: adam_update.wgsl).
 
-// ADAM_WORKGROUP is prepended by the host (adam.rs).
+// ADAM_WORKGROUP and adam_update.wgsl are prepended by the host (adam.rs).
 
 struct AdamParams {
+    constants: AdamConstants,
     step_size: f32,
-    inv_sqrt_bias_correction2: f32,
-    beta1: f32,
-    beta2: f32,
-    // 1 - beta, computed in f64 on the host: 1.0 - 0.999 in f32 is off by 1.3e-5 relative.
-    one_minus_beta1: f32,
-    one_minus_beta2: f32,
-    epsilon: f32,
     element_count: u32,
-    // 1: elements whose gradient is exactly 0 keep their parameter and moments.
-    skip_zero_gradients: u32,
     _pad0: u32,
     _pad1: u32,
-    _pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: AdamParams;
@@ -39,13 +27,14 @@ fn adam_step(
         return;
     }
     let gradient = gradients[index];
-    if params.skip_zero_gradients != 0u && gradient == 0.0 {
+    if adam_keeps(params.constants, gradient) {
         return;
     }
-    let m = params.beta1 * first_moment[index] + params.one_minus_beta1 * gradient;
-    let v = params.beta2 * second_moment[index] + params.one_minus_beta2 * gradient * gradient;
-    first_moment[index] = m;
-    second_moment[index] = v;
-    let denominator = sqrt(v) * params.inv_sqrt_bias_correction2 + params.epsilon;
-    parameters[index] -= params.step_size * m / denominator;
+    let updated = adam_update(
+        params.constants, params.step_size, parameters[index], gradient, first_moment[index],
+        second_moment[index],
+    );
+    first_moment[index] = updated.first_moment;
+    second_moment[index] = updated.second_moment;
+    parameters[index] = updated.parameter;
 }

@@ -21,7 +21,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::adam::{Adam, AdamBuffers, AdamError, AdamSettings};
+use crate::adam::{Adam, AdamBuffers, AdamError, AdamGroup, AdamSettings};
 use crate::background_shell::{append_points, background_shell_points};
 use crate::checkpoint::{Checkpoint, CheckpointError};
 use crate::densify::{self, DensifyPlan, DensifyStats, PruneGuard};
@@ -145,6 +145,10 @@ pub struct Trainer {
     separate_object_renders: bool,
     object_buffers: object_step::ObjectBuffers,
 }
+
+/// Adam groups of 1 to 4 floats per Gaussian (means, scales, rotations, opacities, SH DC), which
+/// the trainer steps in one dispatch, before the SH rest groups.
+const SMALL_ADAM_GROUPS: usize = 5;
 
 /// The initial model for a scene: its sparse points, or random points in the cameras' bounds.
 pub fn initial_model(scene: &Scene, config: &TrainConfig) -> Result<GaussianModel, TrainError> {
@@ -508,23 +512,28 @@ impl Trainer {
         // sh_rest[g] (the last three groups) holds coefficients 1 + 5g ..= 5 + 5g, which start
         // in band g + 1: the first `sh_degree` of them have been reached.
         let reached = groups.len() - 3 + sh_degree.min(3) as usize;
-        for (params, grads, first_moment, second_moment, width, rate) in
-            groups.into_iter().take(reached)
-        {
-            self.adam.encode_step(
-                &self.ctx,
-                encoder,
-                &AdamBuffers {
-                    params,
-                    grads,
-                    first_moment,
-                    second_moment,
+        let steps: Vec<AdamGroup<'_>> = groups
+            .into_iter()
+            .take(reached)
+            .map(
+                |(params, grads, first_moment, second_moment, width, rate)| AdamGroup {
+                    buffers: AdamBuffers {
+                        params,
+                        grads,
+                        first_moment,
+                        second_moment,
+                    },
+                    element_count: count * width,
+                    learning_rate: rate,
                 },
-                count * width,
-                rate,
-                step,
-            )?;
-        }
+            )
+            .collect();
+        // Where the adapter allows, one dispatch for the groups of 1 to 4 floats per Gaussian and
+        // one for the SH rest groups (15 each): a dispatch steps element i of each of its groups
+        // together, so its groups should be of similar sizes (adam/groups.rs).
+        let (small, rest) = steps.split_at(steps.len().min(SMALL_ADAM_GROUPS));
+        self.adam.encode_steps(&self.ctx, encoder, small, step)?;
+        self.adam.encode_steps(&self.ctx, encoder, rest, step)?;
         Ok(())
     }
 

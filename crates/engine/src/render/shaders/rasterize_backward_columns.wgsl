@@ -1,15 +1,17 @@
 // rasterize_backward.wgsl for software adapters: the same gradients, with each invocation walking a
-// column of 4 pixels of the 16x16 tile (a workgroup of 16x4 columns), and each subgroup walking the
+// column of 8 pixels of the 16x16 tile (a workgroup of 16x2 columns), and each subgroup walking the
 // tile's splats on its own, back to front from the last one its pixels composited, a chunk of one
 // splat per lane at a time, only those that reach its block of pixels (rasterize_lane_chunk.wgsl).
-// Needs subgroups. A CPU adapter's float atomics are compare-and-swap loops, so the 4 pixels'
+// Needs subgroups. A CPU adapter's float atomics are compare-and-swap loops, so the 8 pixels'
 // gradients are summed in registers and then over the subgroup (rasterize_grad_emit_shuffle.wgsl)
-// before any atomic. Columns of 2 or 8 pixels were slower (lavapipe, 512 px, 200k random Gaussians:
-// 413 and 467 ms against 300 ms, before the block test). The 4 pixels are separate variables rather
-// than an array, which lavapipe runs faster (198 against 210-216 ms). Bindings:
-// rasterize_backward_common.wgsl; the fragment's gradients: rasterize_grad_fragment.wgsl.
+// before any atomic. Columns of 8 give the forward's 8x8 blocks and half the atomics and shuffles
+// of columns of 4 (lavapipe, figurine at 256 px, 200 steps, best of 3 alternated runs: 9.4 against
+// 13.2 ms a step); before the block test, 8 were slower than 4 (512 px, 200k random Gaussians: 467
+// against 300 ms). The pixels are separate variables rather than an array, which lavapipe runs
+// faster (198 against 210-216 ms). Bindings: rasterize_backward_common.wgsl; the fragment's
+// gradients: rasterize_grad_fragment.wgsl.
 
-const PIXELS: u32 = 4u;
+const PIXELS: u32 = 8u;
 
 // What one pixel's walk carries (a CPU adapter spills what does not fit its vector registers,
 // so only this): the column's pixels share x, so their centres differ in y only.
@@ -69,8 +71,8 @@ fn step_back(
     return stepped;
 }
 
-// One-dimensional, as naga requires with subgroup_invocation_id: 16x4 columns.
-@compute @workgroup_size(64)
+// One-dimensional, as naga requires with subgroup_invocation_id: 16x2 columns.
+@compute @workgroup_size(32)
 fn rasterize_backward(
     @builtin(workgroup_id) group: vec3<u32>,
     @builtin(local_invocation_index) local_index: u32,
@@ -85,10 +87,15 @@ fn rasterize_backward(
     var walk1 = pixel_walk(group.z, first_pixel + vec2<u32>(0u, 1u));
     var walk2 = pixel_walk(group.z, first_pixel + vec2<u32>(0u, 2u));
     var walk3 = pixel_walk(group.z, first_pixel + vec2<u32>(0u, 3u));
-    let most = max(max(walk0.contributed, walk1.contributed), max(walk2.contributed, walk3.contributed));
+    var walk4 = pixel_walk(group.z, first_pixel + vec2<u32>(0u, 4u));
+    var walk5 = pixel_walk(group.z, first_pixel + vec2<u32>(0u, 5u));
+    var walk6 = pixel_walk(group.z, first_pixel + vec2<u32>(0u, 6u));
+    var walk7 = pixel_walk(group.z, first_pixel + vec2<u32>(0u, 7u));
+    let most = max(max(max(walk0.contributed, walk1.contributed), max(walk2.contributed, walk3.contributed)),
+        max(max(walk4.contributed, walk5.contributed), max(walk6.contributed, walk7.contributed)));
     let block = subgroup_block(
         vec2<f32>(centre_x, walk0.centre_y),
-        vec2<f32>(centre_x, walk3.centre_y),
+        vec2<f32>(centre_x, walk7.centre_y),
     );
     let start = tile_ranges[2u * tile];
     // The subgroup's walk: list positions [0, count), back to front.
@@ -109,6 +116,10 @@ fn rasterize_backward(
                 walk1 = step_back(walk1, splat, centre_x, position, &sum, &contributes);
                 walk2 = step_back(walk2, splat, centre_x, position, &sum, &contributes);
                 walk3 = step_back(walk3, splat, centre_x, position, &sum, &contributes);
+                walk4 = step_back(walk4, splat, centre_x, position, &sum, &contributes);
+                walk5 = step_back(walk5, splat, centre_x, position, &sum, &contributes);
+                walk6 = step_back(walk6, splat, centre_x, position, &sum, &contributes);
+                walk7 = step_back(walk7, splat, centre_x, position, &sum, &contributes);
             }
             emit_lane_sums(splat.gaussian, sum, contributes, lane, lanes);
         }

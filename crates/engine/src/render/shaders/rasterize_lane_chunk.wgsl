@@ -9,7 +9,7 @@
 //
 // Each lane also tests its splat's footprint (tile_footprint.wgsl) against the block of pixels
 // the subgroup covers, and the walk visits only the chunk's splats that reach the block: a splat
-// listed in a 16x16 tile misses most of the tile's 8x4 blocks. The footprint holds every
+// listed in a 16x16 tile misses most of the tile's 8x8 blocks. The footprint holds every
 // fragment that passes the alpha threshold, so the skipped ones contribute nothing.
 //
 // lavapipe, 512 px, 200k random Gaussians, ms per pass (docs/benchmarks.md): column backward

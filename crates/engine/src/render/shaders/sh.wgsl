@@ -17,11 +17,6 @@ const SH_C3_4: f32 = -0.4570457994644658;
 const SH_C3_5: f32 = 1.445305721320277;
 const SH_C3_6: f32 = -0.5900435899266435;
 
-fn sh_coefficient_count(degree: u32) -> u32 {
-    let d = min(degree, 3u);
-    return (d + 1u) * (d + 1u);
-}
-
 // Coefficient k (RGB) of Gaussian i.
 fn sh_coefficient(i: u32, k: u32) -> vec3<f32> {
     if k == 0u {
@@ -98,12 +93,40 @@ fn sh_basis_gradient(k: u32, d: vec3<f32>) -> vec3<f32> {
     }
 }
 
-// Unclamped colour (SH + 0.5) of Gaussian i seen along unit direction d.
+// Coefficient k's share of the colour along unit direction d.
+fn sh_term(i: u32, k: u32, d: vec3<f32>) -> vec3<f32> {
+    return sh_basis(k, d) * sh_coefficient(i, k);
+}
+
+// Unclamped colour (SH + 0.5) of Gaussian i seen along unit direction d. Written out band by band
+// with literal coefficient indices rather than as a loop over the coefficients: the compiler then
+// folds sh_basis's switch and sh_coefficient's choice of buffer away, where a software adapter
+// ran every case and every buffer's load under a mask for each coefficient (lavapipe, figurine
+// at 256 px, 200 steps, best of 3 alternated runs: project_forward 2.84 -> 2.38 ms a step,
+// sh_backward 1.27 -> 0.55). The sum runs in the same order as the loop did.
 fn sh_colour(i: u32, degree: u32, d: vec3<f32>) -> vec3<f32> {
     var colour = vec3<f32>(0.5);
-    let count = sh_coefficient_count(degree);
-    for (var k = 0u; k < count; k++) {
-        colour += sh_basis(k, d) * sh_coefficient(i, k);
+    colour += sh_term(i, 0u, d);
+    if degree >= 1u {
+        colour += sh_term(i, 1u, d);
+        colour += sh_term(i, 2u, d);
+        colour += sh_term(i, 3u, d);
+    }
+    if degree >= 2u {
+        colour += sh_term(i, 4u, d);
+        colour += sh_term(i, 5u, d);
+        colour += sh_term(i, 6u, d);
+        colour += sh_term(i, 7u, d);
+        colour += sh_term(i, 8u, d);
+    }
+    if degree >= 3u {
+        colour += sh_term(i, 9u, d);
+        colour += sh_term(i, 10u, d);
+        colour += sh_term(i, 11u, d);
+        colour += sh_term(i, 12u, d);
+        colour += sh_term(i, 13u, d);
+        colour += sh_term(i, 14u, d);
+        colour += sh_term(i, 15u, d);
     }
     return colour;
 }

@@ -42,6 +42,12 @@ fn add_sh_grad(i: u32, k: u32, v: vec3<f32>) {
     }
 }
 
+// Coefficient k's backward: adds its gradient and answers its share of d loss / d direction.
+fn sh_term_backward(i: u32, k: u32, direction: vec3<f32>, v_colour: vec3<f32>) -> vec3<f32> {
+    add_sh_grad(i, k, sh_basis(k, direction) * v_colour);
+    return sh_basis_gradient(k, direction) * dot(sh_coefficient(i, k), v_colour);
+}
+
 @compute @workgroup_size(256)
 fn sh_backward(
     @builtin(global_invocation_id) gid: vec3<u32>,
@@ -62,11 +68,29 @@ fn sh_backward(
         vec3<f32>(0.0),
         raw_colour < vec3<f32>(0.0),
     );
-    var v_direction = vec3<f32>(0.0);
-    let count = sh_coefficient_count(uniforms.sh_degree);
-    for (var k = 0u; k < count; k++) {
-        add_sh_grad(i, k, sh_basis(k, direction) * v_colour);
-        v_direction += sh_basis_gradient(k, direction) * dot(sh_coefficient(i, k), v_colour);
+    // Band by band with literal indices, as sh_colour (sh.wgsl) and for the same reason.
+    let degree = uniforms.sh_degree;
+    var v_direction = sh_term_backward(i, 0u, direction, v_colour);
+    if degree >= 1u {
+        v_direction += sh_term_backward(i, 1u, direction, v_colour);
+        v_direction += sh_term_backward(i, 2u, direction, v_colour);
+        v_direction += sh_term_backward(i, 3u, direction, v_colour);
+    }
+    if degree >= 2u {
+        v_direction += sh_term_backward(i, 4u, direction, v_colour);
+        v_direction += sh_term_backward(i, 5u, direction, v_colour);
+        v_direction += sh_term_backward(i, 6u, direction, v_colour);
+        v_direction += sh_term_backward(i, 7u, direction, v_colour);
+        v_direction += sh_term_backward(i, 8u, direction, v_colour);
+    }
+    if degree >= 3u {
+        v_direction += sh_term_backward(i, 9u, direction, v_colour);
+        v_direction += sh_term_backward(i, 10u, direction, v_colour);
+        v_direction += sh_term_backward(i, 11u, direction, v_colour);
+        v_direction += sh_term_backward(i, 12u, direction, v_colour);
+        v_direction += sh_term_backward(i, 13u, direction, v_colour);
+        v_direction += sh_term_backward(i, 14u, direction, v_colour);
+        v_direction += sh_term_backward(i, 15u, direction, v_colour);
     }
     let v_mean = (v_direction - direction * dot(direction, v_direction)) / distance;
     grad_means[3u * i] += v_mean.x;
