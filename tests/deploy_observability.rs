@@ -1,7 +1,7 @@
 //! What `deploy/` tells Prometheus and Grafana matches what the service exports: every metric
 //! the dashboard and the alert rules name is on a running service's `/metrics` (after a REST
-//! upload, a gRPC call and a job), the rule and scrape files parse, and the scrape path and port
-//! are the service's.
+//! upload, a gRPC call and a job), the rule and scrape files parse, and the scrape path and the
+//! API's and workers' ports are the service's.
 
 mod common;
 
@@ -130,14 +130,19 @@ fn prometheus_scrapes_the_services_metrics_path_and_port() {
         Some("alerts.yml"),
         "the alert rules are loaded"
     );
-    let default_port = segsplat_service::config::Config::default().http_addr.port();
+    let defaults = segsplat_service::config::Config::default();
     let jobs = scrape["scrape_configs"].as_vec().unwrap();
     assert_eq!(jobs.len(), 2, "the API and the workers");
     for job in jobs {
         assert_eq!(job["metrics_path"].as_str(), Some("/metrics"));
+        let port = match job["job_name"].as_str() {
+            Some("segsplat-api") => defaults.http_addr.port(),
+            Some("segsplat-worker") => defaults.workers.ops_addr.port(),
+            other => panic!("unknown scrape job {other:?}"),
+        };
         for target in job["static_configs"][0]["targets"].as_vec().unwrap() {
-            let port = target.as_str().and_then(|target| target.rsplit(':').next());
-            assert_eq!(port, Some(default_port.to_string().as_str()), "{target:?}");
+            let target_port = target.as_str().and_then(|target| target.rsplit(':').next());
+            assert_eq!(target_port, Some(port.to_string().as_str()), "{target:?}");
         }
     }
 }

@@ -2,7 +2,7 @@
 //! database register each slot, heartbeat idle or busy (with the job), and mark themselves
 //! stopped; a worker that goes silent without stopping (killed) counts as silent once a lease
 //! passes. `GET /v1/workers`, `/readyz`'s cluster summary and the `segsplat_cluster_workers`
-//! gauges all show it.
+//! gauges all show it; a worker process answers probes and metrics on `workers.ops_addr`.
 
 mod common;
 
@@ -60,6 +60,13 @@ async fn api_processes_see_every_workers_state() {
     let api = TestService::start(config, vec![Arc::new(StepsHandler::default())]).await;
     let box_a = start_worker(dir.path(), "box-a").await;
     let box_b = start_worker(dir.path(), "box-b").await;
+
+    // A worker process serves the probes and its metrics on its own port, nothing else.
+    let ops = format!("http://{}", box_a.http_addr().unwrap());
+    for (path, status) in [("/healthz", 200), ("/metrics", 200), ("/v1/scenes", 404)] {
+        let response = api.client.get(format!("{ops}{path}")).send().await.unwrap();
+        assert_eq!(response.status().as_u16(), status, "{path}");
+    }
 
     let list = wait_for_workers(&api, |list| list["idle"] == 2).await;
     for id in ["box-a/0", "box-b/0"] {

@@ -31,6 +31,7 @@ pub fn test_config(data_dir: &Path) -> Config {
     config.jobs.poll_interval_ms = 50;
     config.jobs.max_attempts = 3;
     config.workers.cpu_slots = 1;
+    config.workers.ops_addr = "127.0.0.1:0".parse().unwrap();
     config.limits.max_upload_bytes = 4 << 20;
     config
 }

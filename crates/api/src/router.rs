@@ -51,3 +51,19 @@ pub fn router(state: AppState) -> Router {
         .layer(TraceLayer::new_for_http())
         .with_state(state)
 }
+
+/// A worker process's listener: only the probes and `/metrics` (open, as on the API), so
+/// orchestrators can check it and Prometheus can scrape its training and queue metrics.
+pub fn ops_router(state: AppState) -> Router {
+    Router::new()
+        .route("/healthz", get(ops::healthz))
+        .route("/readyz", get(ops::readyz))
+        .route("/metrics", get(ops::metrics))
+        .fallback(|| async {
+            super::error::ApiError::not_found(
+                "a worker process serves only /healthz, /readyz and /metrics",
+            )
+        })
+        .layer(axum::middleware::from_fn(track_requests))
+        .with_state(state)
+}

@@ -16,7 +16,7 @@ use super::auth::{TokenCheck, grpc_interceptor};
 use super::grpc::SceneQueryService;
 use super::grpc_metrics::GrpcMetricsLayer;
 use super::metrics::{prometheus_handle, register_zero_series};
-use super::router::router;
+use super::router::{ops_router, router};
 use super::state::{AppState, WorkerReadiness};
 use crate::proto::scene_query_server::SceneQueryServer;
 use segsplat_service::config::Config;
@@ -250,11 +250,15 @@ impl ServiceBuilder {
         };
         let (http, grpc) = match self.mode {
             ServiceMode::All => {
-                let http = start_http(&config, state.clone()).await?;
+                let http = start_http(config.http_addr, router(state.clone()), &shutdown).await?;
                 let grpc = start_grpc(&config, core, shutdown.clone()).await?;
                 (Some(http), Some(grpc))
             }
-            ServiceMode::WorkersOnly => (None, None),
+            ServiceMode::WorkersOnly => {
+                let ops_addr = config.workers.ops_addr;
+                let http = start_http(ops_addr, ops_router(state.clone()), &shutdown).await?;
+                (Some(http), None)
+            }
         };
         info!(instance = %instance, http = ?http.as_ref().map(|s| s.0),
             grpc = ?grpc.as_ref().map(|s| s.0), "segsplat started");
@@ -271,23 +275,18 @@ impl ServiceBuilder {
 }
 
 async fn start_http(
-    config: &Config,
-    state: AppState,
+    bind: SocketAddr,
+    app: axum::Router,
+    shutdown: &CancellationToken,
 ) -> Result<(SocketAddr, JoinHandle<()>), ServiceError> {
-    let listener = TcpListener::bind(config.http_addr)
-        .await
-        .map_err(|source| ServiceError::Bind {
-            addr: config.http_addr,
-            what: "HTTP",
-            source,
-        })?;
-    let addr = listener.local_addr().map_err(|source| ServiceError::Bind {
-        addr: config.http_addr,
+    let bind_error = |source| ServiceError::Bind {
+        addr: bind,
         what: "HTTP",
         source,
-    })?;
-    let shutdown = state.shutdown.clone();
-    let app = router(state);
+    };
+    let listener = TcpListener::bind(bind).await.map_err(bind_error)?;
+    let addr = listener.local_addr().map_err(bind_error)?;
+    let shutdown = shutdown.clone();
     let task = tokio::spawn(async move {
         let served = axum::serve(listener, app)
             .with_graceful_shutdown(async move { shutdown.cancelled().await })

@@ -287,6 +287,10 @@ pub struct WorkersConfig {
     /// Unset: `{host}-pid{pid}-{random}`, and a stopped process's jobs on the same host are
     /// re-queued as soon as it is seen to be gone.
     pub instance_id: Option<String>,
+    /// Where a `segsplat worker` process serves `/healthz`, `/readyz` and `/metrics` (an API
+    /// process serves them on `http_addr`). Its own port, so a worker beside `serve` on one
+    /// host does not collide with it.
+    pub ops_addr: SocketAddr,
 }
 
 impl Default for WorkersConfig {
@@ -297,6 +301,7 @@ impl Default for WorkersConfig {
             adapters: AdapterFilter::default(),
             cpu_slots: 0,
             instance_id: None,
+            ops_addr: SocketAddr::from(([127, 0, 0, 1], 8081)),
         }
     }
 }
