@@ -600,6 +600,15 @@ async fn a_start_reclaims_leftovers_of_stopped_processes_and_nothing_live() {
         },
         write(checkpoints.join(format!(".step.segsplat-tmp-{dead}-0123abcd"))),
         {
+            // A worker's scene fetch cut off by its death.
+            let fetch = dir
+                .path()
+                .join(format!("cache/scenes/.abc.segsplat-tmp-{dead}-0123abcd"));
+            std::fs::create_dir_all(fetch.join("images")).unwrap();
+            write(fetch.join("images/0.png"));
+            fetch
+        },
+        {
             // Another host's, untouched for two days.
             let old = write(tmp.join("upload-elsewhere-pid7-Qw12Er"));
             let two_days_ago = std::time::SystemTime::now() - Duration::from_secs(2 * 86_400);
@@ -617,6 +626,11 @@ async fn a_start_reclaims_leftovers_of_stopped_processes_and_nothing_live() {
         write(tmp.join("unpack-elsewhere-pid7-Fr12Sh")),
         write(checkpoints.join(".step.segsplat-tmp-elsewhere-pid7-0123abcd")),
         write(checkpoints.join("step")),
+        {
+            let copy = dir.path().join("cache/scenes/abc");
+            std::fs::create_dir_all(&copy).unwrap();
+            write(copy.join(".complete"))
+        },
     ];
 
     let handler = StepsHandler::new();

@@ -143,6 +143,7 @@ impl ServiceBuilder {
         let places = SweepPlaces {
             scratch_dir: config.scratch_dir(),
             blob_dir: config.blob_dir(),
+            scene_cache_dir: config.scene_cache_dir(),
             max_age: Duration::from_secs(config.storage.temp_max_age_secs),
         };
         sweep_leftovers(&places, &database).await;

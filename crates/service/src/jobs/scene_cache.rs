@@ -4,7 +4,7 @@
 //!
 //! A copy is complete or absent: files are fetched into a temporary folder, which is renamed into
 //! place only once whole, so a worker killed mid-fetch leaves a folder the next fetch ignores and
-//! the sweep removes.
+//! the leftover sweep (`jobs::temp_sweep`) removes once that process is gone.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -12,6 +12,7 @@ use std::sync::{Arc, Mutex};
 
 use crate::store::BlobStore;
 use crate::store::blob::TEMP_MARKER;
+use crate::store::process_tag::process_tag;
 
 /// Written last into a complete copy; its modification time is the copy's last use.
 const COMPLETE: &str = ".complete";
@@ -72,8 +73,10 @@ impl SceneFileCache {
 
     fn fetch(&self, blobs: &dyn BlobStore, scene_id: &str, dir: &Path) -> Result<(), String> {
         let prefix = format!("scenes/{scene_id}/files");
+        // Named after this process, so a sweep knows when its fetcher is gone.
         let temp = self.root.join(format!(
-            ".{scene_id}{TEMP_MARKER}{}",
+            ".{scene_id}{TEMP_MARKER}{}-{}",
+            process_tag(),
             uuid::Uuid::new_v4().simple()
         ));
         let result = (|| {

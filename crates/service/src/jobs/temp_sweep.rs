@@ -1,6 +1,7 @@
 //! Reclaiming what killed processes leave behind: partial uploads (`tmp/upload-*`), unpack
-//! folders (`tmp/unpack-*`), per-attempt job folders (`tmp/job-<id>-<attempt>`) and partial blob
-//! writes (`*.segsplat-tmp-*` anywhere under `blobs/`).
+//! folders (`tmp/unpack-*`), per-attempt job folders (`tmp/job-<id>-<attempt>`), partial blob
+//! writes (`*.segsplat-tmp-*` anywhere under `blobs/`) and partial scene fetches of the workers'
+//! scene cache (`cache/scenes/.*.segsplat-tmp-*`).
 //!
 //! Never what a live writer still uses. Uploads, unpack folders and blob temp files carry their
 //! writer's process tag (`{host}-pid{pid}`): they go at once when that process on this host has
@@ -21,6 +22,8 @@ use crate::store::{Caller, Database};
 pub struct SweepPlaces {
     pub scratch_dir: PathBuf,
     pub blob_dir: PathBuf,
+    /// Workers' scene copies (`jobs::scene_cache`).
+    pub scene_cache_dir: PathBuf,
     pub max_age: Duration,
 }
 
@@ -91,6 +94,16 @@ fn scan(places: &SweepPlaces) -> (Vec<PathBuf>, Vec<(PathBuf, String, u32)>) {
         }
     }
     collect_blob_temps(&places.blob_dir, places.max_age, &mut stale);
+    if let Ok(entries) = std::fs::read_dir(&places.scene_cache_dir) {
+        for entry in entries.flatten() {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if let Some((_, tagged)) = name.split_once(TEMP_MARKER)
+                && is_stale(&entry.path(), tagged, places.max_age)
+            {
+                stale.push(entry.path());
+            }
+        }
+    }
     (stale, job_dirs)
 }
 
