@@ -11,6 +11,7 @@ use metrics_exporter_prometheus::{PrometheusBuilder, PrometheusHandle};
 
 use segsplat_service::core::ServiceCore;
 use segsplat_service::store::Database;
+use segsplat_service::store::jobs::JobState;
 use segsplat_service::usecases::workers::{cluster_workers, summarize};
 
 /// Latency buckets in seconds, from fast API calls to long uploads.
@@ -77,8 +78,8 @@ pub fn register_zero_series() {
     for outcome in ["stored", "rejected"] {
         metrics::counter!("segsplat_scene_uploads_total", "outcome" => outcome).increment(0);
     }
-    for state in ["queued", "running", "succeeded", "failed", "cancelled"] {
-        metrics::gauge!("segsplat_jobs", "state" => state).increment(0.0);
+    for state in JobState::ALL {
+        metrics::gauge!("segsplat_jobs", "state" => state.as_str()).increment(0.0);
     }
     for state in ["busy", "idle", "silent"] {
         metrics::gauge!("segsplat_cluster_workers", "state" => state).increment(0.0);

@@ -67,8 +67,15 @@ impl Worker {
         {
             warn!(worker = %self.name, %error, "registering the worker failed; it runs anyway");
         }
+        // Idle heartbeats are written once per `heartbeat_secs`, not on every poll or wake-up:
+        // readers call a worker silent only after a whole lease.
+        let heartbeat_every = Duration::from_secs_f64(self.shared.jobs.heartbeat_secs);
+        let mut idle_recorded: Option<Instant> = None;
         while !self.shared.shutdown.is_cancelled() {
-            self.record_state(WorkerState::Idle, None).await;
+            if idle_recorded.is_none_or(|at| at.elapsed() >= heartbeat_every) {
+                self.record_state(WorkerState::Idle, None).await;
+                idle_recorded = Some(Instant::now());
+            }
             let claimed = self
                 .shared
                 .database
@@ -78,6 +85,7 @@ impl Worker {
                 Ok(Some(job)) => {
                     self.shared.bus.notify(&job.id);
                     self.record_state(WorkerState::Busy, Some(&job.id)).await;
+                    idle_recorded = None;
                     metrics::gauge!("segsplat_workers_idle").decrement(1.0);
                     metrics::gauge!("segsplat_workers_busy").increment(1.0);
                     let span = info_span!("job", job_id = %job.id, kind = %job.kind,
