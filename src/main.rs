@@ -29,8 +29,12 @@ struct Cli {
 enum Command {
     /// Run the REST and gRPC APIs and the GPU workers in one process.
     Serve(ServeArgs),
-    /// Run GPU workers only, against the data dir shared with a `serve` process.
+    /// Run GPU workers only, sharing the database and blob store with `serve` processes (the
+    /// same data dir, or `database.url` and `blobs.url` on other hosts).
     Worker(WorkerArgs),
+    /// Apply the database migrations (the SQLite file, or PostgreSQL at `database.url`) and
+    /// exit: what a Kubernetes Job runs before a rollout.
+    Migrate(MigrateArgs),
     /// List the GPU adapters wgpu can see, as JSON.
     Adapters,
     /// Write a small synthetic COLMAP dataset (three spheres, 32 views, masks) for demos; with
@@ -63,6 +67,21 @@ struct ServeArgs {
     /// gRPC listen address.
     #[arg(long = "grpc")]
     grpc_addr: Option<SocketAddr>,
+    /// PostgreSQL URL (`database.url`); the SQLite file in the data dir when unset.
+    #[arg(long)]
+    database_url: Option<String>,
+    /// Serve the APIs without job workers (they run as `segsplat worker` elsewhere).
+    #[arg(long)]
+    api_only: bool,
+}
+
+#[derive(Args)]
+struct MigrateArgs {
+    #[arg(long)]
+    data_dir: Option<PathBuf>,
+    /// PostgreSQL URL (`database.url`); the SQLite file in the data dir when unset.
+    #[arg(long)]
+    database_url: Option<String>,
 }
 
 #[derive(Args)]
@@ -85,6 +104,9 @@ struct SyntheticSceneArgs {
 struct WorkerArgs {
     #[arg(long)]
     data_dir: Option<PathBuf>,
+    /// PostgreSQL URL (`database.url`); the SQLite file in the data dir when unset.
+    #[arg(long)]
+    database_url: Option<String>,
 }
 
 fn main() -> ExitCode {
@@ -95,15 +117,26 @@ fn main() -> ExitCode {
                 data_dir: args.data_dir,
                 http_addr: args.http_addr,
                 grpc_addr: args.grpc_addr,
+                database_url: args.database_url,
+                api_only: args.api_only,
             };
             run_service(cli.config, overrides, ServiceMode::All)
         }
         Command::Worker(args) => {
             let overrides = ConfigOverrides {
                 data_dir: args.data_dir,
+                database_url: args.database_url,
                 ..Default::default()
             };
             run_service(cli.config, overrides, ServiceMode::WorkersOnly)
+        }
+        Command::Migrate(args) => {
+            let overrides = ConfigOverrides {
+                data_dir: args.data_dir,
+                database_url: args.database_url,
+                ..Default::default()
+            };
+            init_cli_logging().and_then(|()| migrate(cli.config, overrides))
         }
         Command::Adapters => print_adapters(),
         Command::SyntheticScene(args) => write_synthetic_scene(&args),
@@ -157,6 +190,23 @@ fn run_service(
             .await
             .context("cannot start segsplat")?;
         service.run_until_signal().await;
+        Ok(())
+    })
+}
+
+fn migrate(config_file: Option<PathBuf>, overrides: ConfigOverrides) -> anyhow::Result<()> {
+    let config = Config::load(config_file.as_deref(), std::env::vars(), &overrides)
+        .context("invalid configuration")?;
+    let runtime = tokio::runtime::Runtime::new().context("cannot start the async runtime")?;
+    runtime.block_on(async move {
+        let database = segsplat_service::store::Database::connect(&config)
+            .await
+            .context("cannot migrate the database")?;
+        println!(
+            "segsplat: {} schema is up to date",
+            database.backend().name()
+        );
+        database.close().await;
         Ok(())
     })
 }

@@ -55,16 +55,24 @@ impl LocalService {
         };
         let config = Config::load(config_file, std::env::vars(), &overrides)
             .context("invalid configuration")?;
-        let database_path = config.database_path();
-        if !database_path.exists() {
-            anyhow::bail!(
-                "no segsplat database at {} (pass --data-dir, the folder `segsplat serve` uses)",
-                database_path.display()
-            );
-        }
-        let database = Database::open(&database_path)
-            .await
-            .with_context(|| format!("cannot open {}", database_path.display()))?;
+        let database = match &config.database.url {
+            Some(_) => Database::connect(&config)
+                .await
+                .context("cannot open the PostgreSQL database of database.url")?,
+            None => {
+                let database_path = config.database_path();
+                if !database_path.exists() {
+                    anyhow::bail!(
+                        "no segsplat database at {} (pass --data-dir, the folder `segsplat serve` \
+                         uses, or set database.url)",
+                        database_path.display()
+                    );
+                }
+                Database::open(&database_path)
+                    .await
+                    .with_context(|| format!("cannot open {}", database_path.display()))?
+            }
+        };
         let blobs = open_blob_store(&config).context("cannot open the blob store")?;
         let models_status = if models {
             let models_config = config.models.clone();

@@ -119,7 +119,11 @@ impl IntoResponse for ApiError {
 
 impl From<StoreError> for ApiError {
     fn from(error: StoreError) -> Self {
-        ApiError::internal(error.to_string())
+        if error.is_unavailable() {
+            ApiError::unavailable(error.to_string())
+        } else {
+            ApiError::internal(error.to_string())
+        }
     }
 }
 
@@ -140,7 +144,8 @@ impl From<SceneFailure> for ApiError {
             SceneFailure::Rejected { class, .. } => ApiError::from_input_class(class, message),
             SceneFailure::Busy { .. } => ApiError::conflict(message),
             SceneFailure::Blob(blob) => blob.into(),
-            SceneFailure::Store(_) | SceneFailure::Internal(_) => ApiError::internal(message),
+            SceneFailure::Store(store) => store.into(),
+            SceneFailure::Internal(_) => ApiError::internal(message),
         }
     }
 }
@@ -153,7 +158,7 @@ impl From<JobFailure> for ApiError {
             JobFailure::Invalid(_) => ApiError::unprocessable(message),
             JobFailure::UnknownState(_) => ApiError::bad_request(message),
             JobFailure::AlreadyFinished { .. } => ApiError::conflict(message),
-            JobFailure::Store(_) => ApiError::internal(message),
+            JobFailure::Store(store) => store.into(),
         }
     }
 }

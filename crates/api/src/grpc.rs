@@ -259,7 +259,8 @@ fn serve_failure_status(failure: ServeFailure) -> Status {
                 Status::internal(message)
             }
         },
-        ServeFailure::Store(_) | ServeFailure::Worker(_) => {
+        ServeFailure::Store(store) => internal(store),
+        ServeFailure::Worker(_) => {
             tracing::error!(%message, "gRPC mask request failed");
             Status::internal(message)
         }
@@ -277,7 +278,8 @@ fn query_failure_status(failure: QueryFailure) -> Status {
         QueryFailure::NoTextEncoder(_) | QueryFailure::EmbeddingWidth(_) => {
             Status::unavailable(message)
         }
-        QueryFailure::Store(_) | QueryFailure::Encoding(_) => {
+        QueryFailure::Store(store) => internal(store),
+        QueryFailure::Encoding(_) => {
             tracing::error!(%message, "gRPC query failed");
             Status::internal(message)
         }
@@ -303,7 +305,8 @@ fn scene_failure_status(failure: SceneFailure) -> Status {
         SceneFailure::Rejected { .. } => Status::invalid_argument(message),
         SceneFailure::Busy { .. } => Status::failed_precondition(message),
         SceneFailure::Blob(BlobError::Unavailable { .. }) => Status::unavailable(message),
-        SceneFailure::Store(_) | SceneFailure::Blob(_) | SceneFailure::Internal(_) => {
+        SceneFailure::Store(store) => internal(store),
+        SceneFailure::Blob(_) | SceneFailure::Internal(_) => {
             tracing::error!(%message, "gRPC scene request failed");
             Status::internal(message)
         }
@@ -316,14 +319,17 @@ fn job_failure_status(failure: JobFailure) -> Status {
         JobFailure::NotFound(_) | JobFailure::SceneNotFound(_) => Status::not_found(message),
         JobFailure::Invalid(_) | JobFailure::UnknownState(_) => Status::invalid_argument(message),
         JobFailure::AlreadyFinished { .. } => Status::failed_precondition(message),
-        JobFailure::Store(_) => {
-            tracing::error!(%message, "gRPC job request failed");
-            Status::internal(message)
-        }
+        JobFailure::Store(store) => internal(store),
     }
 }
 
+/// A store failure: UNAVAILABLE while the database cannot be reached (the client may retry),
+/// INTERNAL otherwise.
 fn internal(error: StoreError) -> Status {
+    if error.is_unavailable() {
+        tracing::warn!(%error, "gRPC request: database unavailable");
+        return Status::unavailable(error.to_string());
+    }
     tracing::error!(%error, "gRPC request failed");
     Status::internal(error.to_string())
 }

@@ -47,7 +47,8 @@ impl From<ServeFailure> for ApiError {
                 | ServingError::Gpu(_)
                 | ServingError::Encoding(_) => ApiError::internal(message),
             },
-            ServeFailure::Store(_) | ServeFailure::Worker(_) => ApiError::internal(message),
+            ServeFailure::Store(store) => store.into(),
+            ServeFailure::Worker(_) => ApiError::internal(message),
         }
     }
 }

@@ -38,7 +38,8 @@ impl From<QueryFailure> for ApiError {
             QueryFailure::NoTextEncoder(_) | QueryFailure::EmbeddingWidth(_) => {
                 ApiError::new(StatusCode::SERVICE_UNAVAILABLE, "unavailable", message)
             }
-            QueryFailure::Store(_) | QueryFailure::Encoding(_) => ApiError::internal(message),
+            QueryFailure::Store(store) => store.into(),
+            QueryFailure::Encoding(_) => ApiError::internal(message),
         }
     }
 }

@@ -107,7 +107,7 @@ impl ServiceBuilder {
                 source,
             })?;
         }
-        let database = Database::open(&config.database_path()).await?;
+        let database = Database::connect(&config).await?;
         let blobs = open_blob_store(&config)?;
         let metrics = prometheus_handle().ok_or(ServiceError::Metrics)?;
         register_zero_series();

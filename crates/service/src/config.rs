@@ -52,6 +52,7 @@ pub struct Config {
     pub models: ModelsConfig,
     pub query: QueryConfig,
     pub storage: StorageConfig,
+    pub database: DatabaseConfig,
     pub blobs: BlobsConfig,
     pub log: LogConfig,
 }
@@ -70,6 +71,7 @@ impl Default for Config {
             models: ModelsConfig::default(),
             query: QueryConfig::default(),
             storage: StorageConfig::default(),
+            database: DatabaseConfig::default(),
             blobs: BlobsConfig::default(),
             log: LogConfig::default(),
         }
@@ -92,6 +94,34 @@ impl Default for StorageConfig {
         Self {
             temp_max_age_secs: 86_400,
             sweep_interval_secs: 600,
+        }
+    }
+}
+
+/// Which SQL database holds the service's state: `{data_dir}/segsplat.db` (SQLite) by default,
+/// or a PostgreSQL server shared by API and worker processes on many hosts.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DatabaseConfig {
+    /// `postgres://user:password@host:5432/dbname` (any libpq-style URL sqlx accepts); unset
+    /// for the embedded SQLite file.
+    pub url: Option<String>,
+    /// Connections this process keeps open at most (PostgreSQL only).
+    pub max_connections: u32,
+    /// How long a request waits for a connection before it is answered 503 `unavailable`.
+    pub acquire_timeout_secs: u64,
+    /// How long a starting process keeps retrying an unreachable server before it gives up,
+    /// so API and workers may start before the database in compose or Kubernetes.
+    pub connect_retry_secs: u64,
+}
+
+impl Default for DatabaseConfig {
+    fn default() -> Self {
+        Self {
+            url: None,
+            max_connections: 16,
+            acquire_timeout_secs: 5,
+            connect_retry_secs: 60,
         }
     }
 }
@@ -357,6 +387,9 @@ pub struct ConfigOverrides {
     pub data_dir: Option<PathBuf>,
     pub http_addr: Option<SocketAddr>,
     pub grpc_addr: Option<SocketAddr>,
+    pub database_url: Option<String>,
+    /// `serve --api-only`: no workers in this process (`workers.enabled = false`).
+    pub api_only: bool,
 }
 
 impl Config {
@@ -413,6 +446,12 @@ impl Config {
         }
         if let Some(addr) = overrides.grpc_addr {
             config.grpc_addr = addr;
+        }
+        if let Some(url) = &overrides.database_url {
+            config.database.url = Some(url.clone());
+        }
+        if overrides.api_only {
+            config.workers.enabled = false;
         }
         config.validate()?;
         Ok(config)
@@ -521,6 +560,20 @@ impl Config {
                 "jobs.heartbeat_secs",
                 "must be less than jobs.lease_secs, or leases expire between heartbeats",
             );
+        }
+        if let Some(url) = &self.database.url
+            && !(url.starts_with("postgres://") || url.starts_with("postgresql://"))
+        {
+            return invalid(
+                "database.url",
+                "must start with postgres:// or postgresql:// (unset for the SQLite file)",
+            );
+        }
+        if self.database.max_connections == 0 {
+            return invalid("database.max_connections", "must be >= 1");
+        }
+        if self.database.acquire_timeout_secs == 0 {
+            return invalid("database.acquire_timeout_secs", "must be >= 1");
         }
         if self.jobs.max_attempts == 0 {
             return invalid("jobs.max_attempts", "must be >= 1");

@@ -1,11 +1,10 @@
 //! `job_events`: the append-only history of each job (state changes, progress), replayed to
 //! Server-Sent-Events subscribers.
 
-use serde::Serialize;
-use sqlx::Row;
-
 use super::jobs::insert_event;
+use super::sql::query;
 use super::{Database, StoreError, now_ms};
+use serde::Serialize;
 
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct JobEventRecord {
@@ -27,8 +26,8 @@ impl Database {
         owner: &str,
         payload: &serde_json::Value,
     ) -> Result<Option<i64>, StoreError> {
-        let mut transaction = self.pool().begin().await?;
-        let updated = sqlx::query(
+        let mut transaction = self.begin().await?;
+        let updated = query(
             "UPDATE jobs SET progress_json = ?, updated_at_ms = ? \
              WHERE id = ? AND lease_owner = ? AND state = 'running'",
         )
@@ -36,9 +35,9 @@ impl Database {
         .bind(now_ms())
         .bind(job_id)
         .bind(owner)
-        .execute(&mut *transaction)
+        .execute(&mut transaction)
         .await?;
-        if updated.rows_affected() == 0 {
+        if updated == 0 {
             return Ok(None);
         }
         let id = insert_event(&mut transaction, job_id, "progress", payload).await?;
@@ -55,14 +54,13 @@ impl Database {
         kind: &str,
         payload: &serde_json::Value,
     ) -> Result<Option<i64>, StoreError> {
-        let mut transaction = self.pool().begin().await?;
-        let holds: Option<i64> = sqlx::query_scalar(
-            "SELECT 1 FROM jobs WHERE id = ? AND lease_owner = ? AND state = 'running'",
-        )
-        .bind(job_id)
-        .bind(owner)
-        .fetch_optional(&mut *transaction)
-        .await?;
+        let mut transaction = self.begin().await?;
+        let holds =
+            query("SELECT 1 FROM jobs WHERE id = ? AND lease_owner = ? AND state = 'running'")
+                .bind(job_id)
+                .bind(owner)
+                .fetch_optional(&mut transaction)
+                .await?;
         if holds.is_none() {
             return Ok(None);
         }
@@ -78,14 +76,14 @@ impl Database {
         after_id: i64,
         limit: i64,
     ) -> Result<Vec<JobEventRecord>, StoreError> {
-        let rows = sqlx::query(
+        let rows = query(
             "SELECT id, job_id, at_ms, kind, payload_json FROM job_events \
              WHERE job_id = ? AND id > ? ORDER BY id LIMIT ?",
         )
         .bind(job_id)
         .bind(after_id)
         .bind(limit)
-        .fetch_all(self.pool())
+        .fetch_all(self.sql())
         .await?;
         rows.iter()
             .map(|row| {

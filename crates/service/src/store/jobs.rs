@@ -10,11 +10,10 @@
 //! On Postgres the claim's inner select becomes `... LIMIT 1 FOR UPDATE SKIP LOCKED`.
 
 use serde::{Deserialize, Serialize};
-use sqlx::sqlite::SqliteRow;
-use sqlx::{Row, Sqlite, Transaction};
 
+use super::sql::{DbRow, Tx, query};
 use super::tenancy::{Caller, visible};
-use super::{Database, StoreError, now_ms};
+use super::{Backend, Database, StoreError, now_ms};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -150,7 +149,7 @@ fn corrupt(job_id: &str, what: &str, message: impl ToString) -> StoreError {
     }
 }
 
-pub(super) fn job_from_row(row: &SqliteRow) -> Result<JobRecord, StoreError> {
+pub(super) fn job_from_row(row: &DbRow) -> Result<JobRecord, StoreError> {
     let id: String = row.try_get("id")?;
     let state_text: String = row.try_get("state")?;
     let state = JobState::parse(&state_text)
@@ -193,12 +192,12 @@ pub(super) fn job_from_row(row: &SqliteRow) -> Result<JobRecord, StoreError> {
 
 /// Appends an event inside `transaction`; returns its id.
 pub(super) async fn insert_event(
-    transaction: &mut Transaction<'_, Sqlite>,
+    transaction: &mut Tx,
     job_id: &str,
     kind: &str,
     payload: &serde_json::Value,
 ) -> Result<i64, StoreError> {
-    let id: i64 = sqlx::query_scalar(
+    let id: i64 = query(
         "INSERT INTO job_events (job_id, at_ms, kind, payload_json) VALUES (?, ?, ?, ?) \
          RETURNING id",
     )
@@ -206,13 +205,14 @@ pub(super) async fn insert_event(
     .bind(now_ms())
     .bind(kind)
     .bind(payload.to_string())
-    .fetch_one(&mut **transaction)
-    .await?;
+    .fetch_one(&mut *transaction)
+    .await?
+    .try_get(0)?;
     Ok(id)
 }
 
 pub(super) async fn insert_state_event(
-    transaction: &mut Transaction<'_, Sqlite>,
+    transaction: &mut Tx,
     job: &JobRecord,
 ) -> Result<i64, StoreError> {
     let payload = serde_json::json!({
@@ -237,14 +237,14 @@ impl Database {
     ) -> Result<Option<JobRecord>, StoreError> {
         let id = uuid::Uuid::now_v7().to_string();
         let now = now_ms();
-        let mut transaction = self.pool().begin().await?;
-        let row = sqlx::query(sqlx::AssertSqlSafe(format!(
+        let mut transaction = self.begin().await?;
+        let row = query(format!(
             "INSERT INTO jobs (id, scene_id, kind, state, config_json, attempts, max_attempts, \
              max_lease_expiries, cancel_requested, created_at_ms, updated_at_ms, tenant) \
              SELECT ?, ?, ?, 'queued', ?, 0, ?, ?, FALSE, ?, ?, tenant FROM scenes \
              WHERE id = ? AND {} RETURNING {COLUMNS}",
             visible("tenant")
-        )))
+        ))
         .bind(&id)
         .bind(scene_id)
         .bind(kind)
@@ -256,7 +256,7 @@ impl Database {
         .bind(scene_id)
         .bind(caller.admin)
         .bind(&caller.tenant)
-        .fetch_optional(&mut *transaction)
+        .fetch_optional(&mut transaction)
         .await?;
         let Some(row) = row else {
             return Ok(None);
@@ -273,14 +273,14 @@ impl Database {
         id: &str,
         caller: &Caller,
     ) -> Result<Option<JobRecord>, StoreError> {
-        let row = sqlx::query(sqlx::AssertSqlSafe(format!(
+        let row = query(format!(
             "SELECT {COLUMNS} FROM jobs WHERE id = ? AND {}",
             visible("tenant")
-        )))
+        ))
         .bind(id)
         .bind(caller.admin)
         .bind(&caller.tenant)
-        .fetch_optional(self.pool())
+        .fetch_optional(self.sql())
         .await?;
         row.as_ref().map(job_from_row).transpose()
     }
@@ -291,16 +291,16 @@ impl Database {
         state: Option<JobState>,
         caller: &Caller,
     ) -> Result<Vec<JobRecord>, StoreError> {
-        let rows = sqlx::query(sqlx::AssertSqlSafe(format!(
+        let rows = query(format!(
             "SELECT {COLUMNS} FROM jobs WHERE (? IS NULL OR state = ?) AND {} \
              ORDER BY created_at_ms, id",
             visible("tenant")
-        )))
+        ))
         .bind(state.map(JobState::as_str))
         .bind(state.map(JobState::as_str))
         .bind(caller.admin)
         .bind(&caller.tenant)
-        .fetch_all(self.pool())
+        .fetch_all(self.sql())
         .await?;
         rows.iter().map(job_from_row).collect()
     }
@@ -312,23 +312,25 @@ impl Database {
         scene_id: &str,
         kind: &str,
     ) -> Result<Option<JobRecord>, StoreError> {
-        let row = sqlx::query(sqlx::AssertSqlSafe(format!(
+        let row = query(format!(
             "SELECT {COLUMNS} FROM jobs WHERE scene_id = ? AND kind = ? AND state = 'succeeded' \
              ORDER BY updated_at_ms DESC, id DESC LIMIT 1"
-        )))
+        ))
         .bind(scene_id)
         .bind(kind)
-        .fetch_optional(self.pool())
+        .fetch_optional(self.sql())
         .await?;
         row.as_ref().map(job_from_row).transpose()
     }
 
     /// Jobs per state, for the queue-depth gauges.
     pub async fn job_counts_by_state(&self) -> Result<Vec<(JobState, i64)>, StoreError> {
-        let rows: Vec<(String, i64)> =
-            sqlx::query_as("SELECT state, COUNT(*) FROM jobs GROUP BY state")
-                .fetch_all(self.pool())
-                .await?;
+        let rows = query("SELECT state, COUNT(*) FROM jobs GROUP BY state")
+            .fetch_all(self.sql())
+            .await?
+            .iter()
+            .map(|row| Ok((row.try_get::<String, _>(0)?, row.try_get::<i64, _>(1)?)))
+            .collect::<Result<Vec<_>, sqlx::Error>>()?;
         Ok(JobState::ALL
             .into_iter()
             .map(|state| {
@@ -354,25 +356,31 @@ impl Database {
         }
         let now = now_ms();
         let placeholders = vec!["?"; kinds.len()].join(", ");
+        // On Postgres, concurrent claimers skip a row another claimer has locked and take the
+        // next one; SQLite serialises writers, so the plain select is already exclusive.
+        let skip_locked = match self.backend() {
+            Backend::Postgres => " FOR UPDATE SKIP LOCKED",
+            Backend::Sqlite => "",
+        };
         let statement = format!(
             "UPDATE jobs SET state = 'running', lease_owner = ?, lease_expires_at_ms = ?, \
              attempts = attempts + 1, checkpointed_this_attempt = FALSE, updated_at_ms = ?, \
              started_at_ms = COALESCE(started_at_ms, ?), error = NULL \
              WHERE id = (SELECT id FROM jobs WHERE state = 'queued' AND kind IN ({placeholders}) \
-                         ORDER BY created_at_ms, id LIMIT 1) \
+                         ORDER BY created_at_ms, id LIMIT 1{skip_locked}) \
                AND state = 'queued' \
              RETURNING {COLUMNS}"
         );
-        let mut transaction = self.pool().begin().await?;
-        let mut query = sqlx::query(sqlx::AssertSqlSafe(statement))
+        let mut transaction = self.begin().await?;
+        let mut claim = query(statement)
             .bind(owner)
             .bind(now + lease_ms)
             .bind(now)
             .bind(now);
         for kind in kinds {
-            query = query.bind(*kind);
+            claim = claim.bind(*kind);
         }
-        let Some(row) = query.fetch_optional(&mut *transaction).await? else {
+        let Some(row) = claim.fetch_optional(&mut transaction).await? else {
             return Ok(None);
         };
         let job = job_from_row(&row)?;
@@ -389,7 +397,7 @@ impl Database {
         lease_ms: i64,
     ) -> Result<HeartbeatOutcome, StoreError> {
         let now = now_ms();
-        let cancel_requested: Option<bool> = sqlx::query_scalar(
+        let cancel_requested: Option<bool> = query(
             "UPDATE jobs SET lease_expires_at_ms = ?, updated_at_ms = ? \
              WHERE id = ? AND lease_owner = ? AND state = 'running' RETURNING cancel_requested",
         )
@@ -397,8 +405,10 @@ impl Database {
         .bind(now)
         .bind(job_id)
         .bind(owner)
-        .fetch_optional(self.pool())
-        .await?;
+        .fetch_optional(self.sql())
+        .await?
+        .map(|row| row.try_get(0))
+        .transpose()?;
         Ok(match cancel_requested {
             Some(cancel_requested) => HeartbeatOutcome::Renewed { cancel_requested },
             None => HeartbeatOutcome::LeaseLost,
@@ -433,14 +443,14 @@ impl Database {
              lease_expires_at_ms = NULL, error = ?, updated_at_ms = ?, finished_at_ms = ? \
              WHERE id = ? AND lease_owner = ? AND state = 'running' RETURNING {COLUMNS}"
         );
-        let mut transaction = self.pool().begin().await?;
-        let row = sqlx::query(sqlx::AssertSqlSafe(statement))
+        let mut transaction = self.begin().await?;
+        let row = query(statement)
             .bind(error)
             .bind(now)
             .bind(finished)
             .bind(job_id)
             .bind(owner)
-            .fetch_optional(&mut *transaction)
+            .fetch_optional(&mut transaction)
             .await?;
         let Some(row) = row else {
             return Ok(None);
@@ -459,16 +469,16 @@ impl Database {
 
     async fn mark_finished(
         &self,
-        transaction: &mut Transaction<'_, Sqlite>,
+        transaction: &mut Tx,
         job_id: &str,
         now: i64,
     ) -> Result<Option<JobRecord>, StoreError> {
-        let row = sqlx::query(sqlx::AssertSqlSafe(format!(
+        let row = query(format!(
             "UPDATE jobs SET finished_at_ms = ? WHERE id = ? RETURNING {COLUMNS}"
-        )))
+        ))
         .bind(now)
         .bind(job_id)
-        .fetch_optional(&mut **transaction)
+        .fetch_optional(&mut *transaction)
         .await?;
         row.as_ref().map(job_from_row).transpose()
     }
@@ -477,15 +487,15 @@ impl Database {
     /// attempt's lease later expires, the job made progress and the expiry is not counted as an
     /// attempt. Returns false when `owner` no longer holds the lease.
     pub async fn record_checkpoint(&self, job_id: &str, owner: &str) -> Result<bool, StoreError> {
-        let updated = sqlx::query(
+        let updated = query(
             "UPDATE jobs SET checkpointed_this_attempt = TRUE \
              WHERE id = ? AND lease_owner = ? AND state = 'running'",
         )
         .bind(job_id)
         .bind(owner)
-        .execute(self.pool())
+        .execute(self.sql())
         .await?;
-        Ok(updated.rows_affected() > 0)
+        Ok(updated > 0)
     }
 
     /// Cancels a queued job at once, or flags a running one for its worker. Another tenant's
@@ -500,15 +510,15 @@ impl Database {
             return Ok(CancelOutcome::NotFound);
         }
         let now = now_ms();
-        let mut transaction = self.pool().begin().await?;
-        let row = sqlx::query(sqlx::AssertSqlSafe(format!(
+        let mut transaction = self.begin().await?;
+        let row = query(format!(
             "UPDATE jobs SET state = 'cancelled', cancel_requested = TRUE, updated_at_ms = ?, \
              finished_at_ms = ? WHERE id = ? AND state = 'queued' RETURNING {COLUMNS}"
-        )))
+        ))
         .bind(now)
         .bind(now)
         .bind(job_id)
-        .fetch_optional(&mut *transaction)
+        .fetch_optional(&mut transaction)
         .await?;
         if let Some(row) = row {
             let job = job_from_row(&row)?;
@@ -516,13 +526,13 @@ impl Database {
             transaction.commit().await?;
             return Ok(CancelOutcome::Cancelled(job));
         }
-        let row = sqlx::query(sqlx::AssertSqlSafe(format!(
+        let row = query(format!(
             "UPDATE jobs SET cancel_requested = TRUE, updated_at_ms = ? \
              WHERE id = ? AND state = 'running' RETURNING {COLUMNS}"
-        )))
+        ))
         .bind(now)
         .bind(job_id)
-        .fetch_optional(&mut *transaction)
+        .fetch_optional(&mut transaction)
         .await?;
         if let Some(row) = row {
             let job = job_from_row(&row)?;

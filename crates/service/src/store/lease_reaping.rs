@@ -7,6 +7,7 @@
 //! the job, failed), any other against `max_attempts`. A pending cancel cancels it.
 
 use super::jobs::{COLUMNS, ExpiredLease, insert_state_event, job_from_row};
+use super::sql::query;
 use super::{Database, StoreError, now_ms};
 
 impl Database {
@@ -38,12 +39,18 @@ impl Database {
         reason: impl Fn(&str, Option<i64>) -> Option<String>,
     ) -> Result<Vec<ExpiredLease>, StoreError> {
         let now = now_ms();
-        let mut transaction = self.pool().begin().await?;
-        let running: Vec<(String, Option<String>, Option<i64>)> = sqlx::query_as(
-            "SELECT id, lease_owner, lease_expires_at_ms FROM jobs WHERE state = 'running'",
-        )
-        .fetch_all(&mut *transaction)
-        .await?;
+        let mut transaction = self.begin().await?;
+        let running =
+            query("SELECT id, lease_owner, lease_expires_at_ms FROM jobs WHERE state = 'running'")
+                .fetch_all(&mut transaction)
+                .await?
+                .iter()
+                .map(
+                    |row| -> Result<(String, Option<String>, Option<i64>), sqlx::Error> {
+                        Ok((row.try_get(0)?, row.try_get(1)?, row.try_get(2)?))
+                    },
+                )
+                .collect::<Result<Vec<_>, _>>()?;
         let mut results = Vec::new();
         for (job_id, previous_owner, expires_at_ms) in running {
             let owner_text = previous_owner.as_deref().unwrap_or("unknown");
@@ -53,7 +60,7 @@ impl Database {
             // Conditional on the lease being the one just looked at, so a job renewed or
             // re-claimed meanwhile is left alone. SQLite evaluates every right-hand side on the
             // row as it was, so the CASEs below all see the old counters.
-            let row = sqlx::query(sqlx::AssertSqlSafe(format!(
+            let row = query(format!(
                 "UPDATE jobs SET \
                    state = CASE WHEN cancel_requested THEN 'cancelled' \
                                 WHEN checkpointed_this_attempt \
@@ -85,10 +92,10 @@ impl Database {
                                     CASE WHEN checkpointed_this_attempt THEN 1 ELSE 0 END, \
                    checkpointed_this_attempt = FALSE, \
                    lease_owner = NULL, lease_expires_at_ms = NULL, updated_at_ms = ? \
-                 WHERE id = ? AND state = 'running' AND lease_owner IS ? \
-                   AND lease_expires_at_ms IS ? \
+                 WHERE id = ? AND state = 'running' AND lease_owner IS NOT DISTINCT FROM ? \
+                   AND lease_expires_at_ms IS NOT DISTINCT FROM ? \
                  RETURNING {COLUMNS}"
-            )))
+            ))
             .bind(&why)
             .bind(&why)
             .bind(&why)
@@ -97,7 +104,7 @@ impl Database {
             .bind(&job_id)
             .bind(&previous_owner)
             .bind(expires_at_ms)
-            .fetch_optional(&mut *transaction)
+            .fetch_optional(&mut transaction)
             .await?;
             if let Some(row) = row {
                 let job = job_from_row(&row)?;

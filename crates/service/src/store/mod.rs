@@ -12,11 +12,12 @@ pub mod object_blob;
 pub mod objects;
 pub mod process_tag;
 pub mod scenes;
+mod sql;
 pub mod tenancy;
 pub mod workers;
 
 pub use blob::{BlobError, BlobStore, LocalBlobStore};
-pub use database::Database;
+pub use database::{Backend, Database};
 pub use error::StoreError;
 pub use object_blob::ObjectBlobStore;
 pub use tenancy::{Caller, DEFAULT_TENANT};

@@ -1,8 +1,8 @@
 //! `objects` and `object_embeddings`: what a finished pipeline job found in a scene.
 
 use serde::Serialize;
-use sqlx::Row;
 
+use super::sql::query;
 use super::{Database, StoreError};
 use segsplat_scene::Level;
 
@@ -66,18 +66,18 @@ impl Database {
         objects: &[ObjectRecord],
         embeddings: &[ObjectEmbedding],
     ) -> Result<(), StoreError> {
-        let mut transaction = self.pool().begin().await?;
+        let mut transaction = self.begin().await?;
         for statement in [
             "DELETE FROM object_embeddings WHERE scene_id = ?",
             "DELETE FROM objects WHERE scene_id = ?",
         ] {
-            sqlx::query(statement)
+            query(statement)
                 .bind(scene_id)
-                .execute(&mut *transaction)
+                .execute(&mut transaction)
                 .await?;
         }
         for object in objects {
-            sqlx::query(
+            query(
                 "INSERT INTO objects (scene_id, level, object_id, gaussian_count, centroid_x, \
                  centroid_y, centroid_z, bounds_min_x, bounds_min_y, bounds_min_z, bounds_max_x, \
                  bounds_max_y, bounds_max_z, mean_color_r, mean_color_g, mean_color_b) \
@@ -99,11 +99,11 @@ impl Database {
             .bind(object.mean_color[0])
             .bind(object.mean_color[1])
             .bind(object.mean_color[2])
-            .execute(&mut *transaction)
+            .execute(&mut transaction)
             .await?;
         }
         for embedding in embeddings {
-            sqlx::query(
+            query(
                 "INSERT INTO object_embeddings (scene_id, level, object_id, model_id, dim, vector) \
                  VALUES (?, ?, ?, ?, ?, ?)",
             )
@@ -113,7 +113,7 @@ impl Database {
             .bind(&embedding.model_id)
             .bind(embedding.vector.len() as i64)
             .bind(vector_to_bytes(&embedding.vector))
-            .execute(&mut *transaction)
+            .execute(&mut transaction)
             .await?;
         }
         transaction.commit().await?;
@@ -126,14 +126,14 @@ impl Database {
         scene_id: &str,
         level: Option<Level>,
     ) -> Result<Vec<ObjectRecord>, StoreError> {
-        let rows = sqlx::query(
+        let rows = query(
             "SELECT * FROM objects WHERE scene_id = ? AND (? IS NULL OR level = ?) \
              ORDER BY level, object_id",
         )
         .bind(scene_id)
         .bind(level.map(Level::name))
         .bind(level.map(Level::name))
-        .fetch_all(self.pool())
+        .fetch_all(self.sql())
         .await?;
         rows.iter()
             .map(|row| {
@@ -165,13 +165,13 @@ impl Database {
         scene_id: &str,
         model_id: &str,
     ) -> Result<Vec<ObjectEmbedding>, StoreError> {
-        let rows = sqlx::query(
+        let rows = query(
             "SELECT level, object_id, model_id, dim, vector FROM object_embeddings \
              WHERE scene_id = ? AND model_id = ? ORDER BY level, object_id",
         )
         .bind(scene_id)
         .bind(model_id)
-        .fetch_all(self.pool())
+        .fetch_all(self.sql())
         .await?;
         rows.iter()
             .map(|row| {

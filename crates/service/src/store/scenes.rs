@@ -1,9 +1,8 @@
 //! `scenes` rows: one per successfully uploaded dataset.
 
 use serde::Serialize;
-use sqlx::Row;
-use sqlx::sqlite::SqliteRow;
 
+use super::sql::{DbRow, query};
 use super::tenancy::{Caller, visible};
 use super::{Database, StoreError};
 use segsplat_scene::SceneSummary;
@@ -39,7 +38,7 @@ impl From<sqlx::Error> for DeleteSceneError {
 
 const COLUMNS: &str = "id, name, summary_json, blob_prefix, created_at_ms, tenant";
 
-fn scene_from_row(row: &SqliteRow) -> Result<SceneRecord, StoreError> {
+fn scene_from_row(row: &DbRow) -> Result<SceneRecord, StoreError> {
     let summary_json: String = row.try_get("summary_json")?;
     let id: String = row.try_get("id")?;
     let summary = serde_json::from_str(&summary_json).map_err(|error| StoreError::Corrupt {
@@ -67,7 +66,7 @@ impl Database {
             .ok()
             .and_then(|value| value.as_str().map(str::to_string))
             .unwrap_or_default();
-        sqlx::query(
+        query(
             "INSERT INTO scenes (id, name, format, frame_count, sparse_point_count, summary_json, \
              blob_prefix, created_at_ms, tenant) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
         )
@@ -80,7 +79,7 @@ impl Database {
         .bind(&scene.blob_prefix)
         .bind(scene.created_at_ms)
         .bind(&scene.tenant)
-        .execute(self.pool())
+        .execute(self.sql())
         .await?;
         Ok(())
     }
@@ -91,27 +90,27 @@ impl Database {
         id: &str,
         caller: &Caller,
     ) -> Result<Option<SceneRecord>, StoreError> {
-        let row = sqlx::query(sqlx::AssertSqlSafe(format!(
+        let row = query(format!(
             "SELECT {COLUMNS} FROM scenes WHERE id = ? AND {}",
             visible("tenant")
-        )))
+        ))
         .bind(id)
         .bind(caller.admin)
         .bind(&caller.tenant)
-        .fetch_optional(self.pool())
+        .fetch_optional(self.sql())
         .await?;
         row.as_ref().map(scene_from_row).transpose()
     }
 
     /// The scenes `caller` sees, oldest first.
     pub async fn list_scenes(&self, caller: &Caller) -> Result<Vec<SceneRecord>, StoreError> {
-        let rows = sqlx::query(sqlx::AssertSqlSafe(format!(
+        let rows = query(format!(
             "SELECT {COLUMNS} FROM scenes WHERE {} ORDER BY created_at_ms, id",
             visible("tenant")
-        )))
+        ))
         .bind(caller.admin)
         .bind(&caller.tenant)
-        .fetch_all(self.pool())
+        .fetch_all(self.sql())
         .await?;
         rows.iter().map(scene_from_row).collect()
     }
@@ -124,36 +123,40 @@ impl Database {
         id: &str,
         caller: &Caller,
     ) -> Result<(SceneRecord, Vec<String>), DeleteSceneError> {
-        let mut transaction = self.pool().begin().await?;
-        let row = sqlx::query(sqlx::AssertSqlSafe(format!(
+        let mut transaction = self.begin().await?;
+        let row = query(format!(
             "SELECT {COLUMNS} FROM scenes WHERE id = ? AND {}",
             visible("tenant")
-        )))
+        ))
         .bind(id)
         .bind(caller.admin)
         .bind(&caller.tenant)
-        .fetch_optional(&mut *transaction)
+        .fetch_optional(&mut transaction)
         .await?;
         let Some(row) = row else {
             return Err(DeleteSceneError::NotFound(id.to_string()));
         };
         let record = scene_from_row(&row)?;
-        let active_jobs: i64 = sqlx::query_scalar(
+        let active_jobs: i64 = query(
             "SELECT COUNT(*) FROM jobs WHERE scene_id = ? AND state IN ('queued', 'running')",
         )
         .bind(id)
-        .fetch_one(&mut *transaction)
-        .await?;
+        .fetch_one(&mut transaction)
+        .await?
+        .try_get(0)?;
         if active_jobs > 0 {
             return Err(DeleteSceneError::Busy {
                 scene_id: id.to_string(),
                 active_jobs,
             });
         }
-        let job_ids: Vec<String> = sqlx::query_scalar("SELECT id FROM jobs WHERE scene_id = ?")
+        let job_ids = query("SELECT id FROM jobs WHERE scene_id = ?")
             .bind(id)
-            .fetch_all(&mut *transaction)
-            .await?;
+            .fetch_all(&mut transaction)
+            .await?
+            .iter()
+            .map(|row| row.try_get(0))
+            .collect::<Result<Vec<String>, _>>()?;
         for statement in [
             "DELETE FROM job_events WHERE job_id IN (SELECT id FROM jobs WHERE scene_id = ?)",
             "DELETE FROM jobs WHERE scene_id = ?",
@@ -161,10 +164,7 @@ impl Database {
             "DELETE FROM objects WHERE scene_id = ?",
             "DELETE FROM scenes WHERE id = ?",
         ] {
-            sqlx::query(statement)
-                .bind(id)
-                .execute(&mut *transaction)
-                .await?;
+            query(statement).bind(id).execute(&mut transaction).await?;
         }
         transaction.commit().await?;
         Ok((record, job_ids))

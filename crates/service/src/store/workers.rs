@@ -4,8 +4,8 @@
 //! heartbeat, and readers tell it is gone by the heartbeat's age.
 
 use serde::Serialize;
-use sqlx::Row;
 
+use super::sql::query;
 use super::{Database, StoreError, now_ms};
 
 /// Rows of stopped or silent workers are kept this long, then pruned when a worker registers.
@@ -64,7 +64,7 @@ impl Database {
             what: "worker kinds".to_string(),
             message: error.to_string(),
         })?;
-        sqlx::query(
+        query(
             "INSERT INTO workers (id, instance, device, kinds_json, state, job_id, started_at_ms, \
              heartbeat_at_ms) VALUES (?, ?, ?, ?, 'idle', NULL, ?, ?) \
              ON CONFLICT (id) DO UPDATE SET instance = excluded.instance, \
@@ -78,11 +78,11 @@ impl Database {
         .bind(kinds_json)
         .bind(now)
         .bind(now)
-        .execute(self.pool())
+        .execute(self.sql())
         .await?;
-        sqlx::query("DELETE FROM workers WHERE heartbeat_at_ms < ?")
+        query("DELETE FROM workers WHERE heartbeat_at_ms < ?")
             .bind(now - KEEP_GONE_MS)
-            .execute(self.pool())
+            .execute(self.sql())
             .await?;
         Ok(())
     }
@@ -94,23 +94,23 @@ impl Database {
         state: WorkerState,
         job_id: Option<&str>,
     ) -> Result<(), StoreError> {
-        sqlx::query("UPDATE workers SET state = ?, job_id = ?, heartbeat_at_ms = ? WHERE id = ?")
+        query("UPDATE workers SET state = ?, job_id = ?, heartbeat_at_ms = ? WHERE id = ?")
             .bind(state.as_str())
             .bind(job_id)
             .bind(now_ms())
             .bind(id)
-            .execute(self.pool())
+            .execute(self.sql())
             .await?;
         Ok(())
     }
 
     /// Every registered worker, newest heartbeat first.
     pub async fn list_workers(&self) -> Result<Vec<WorkerRecord>, StoreError> {
-        let rows = sqlx::query(
+        let rows = query(
             "SELECT id, instance, device, kinds_json, state, job_id, started_at_ms, \
              heartbeat_at_ms FROM workers ORDER BY heartbeat_at_ms DESC, id",
         )
-        .fetch_all(self.pool())
+        .fetch_all(self.sql())
         .await?;
         rows.iter()
             .map(|row| {
