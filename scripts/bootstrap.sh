@@ -3,13 +3,14 @@
 # - Mesa's software Vulkan driver (lavapipe) and the Vulkan loader, so the GPU engine runs without a GPU;
 # - the ONNX Runtime shared library (from the `onnxruntime` wheel) for the model runtime;
 # - ffmpeg, which extracts frames from Neu3D camera videos (and makes the test videos);
-# - s3rver (npm registry), the S3-compatible server the object-store tests run against
-#   (scripts/test_servers.sh starts it).
+# - s3rver (npm registry), the S3-compatible server the object-store tests run against, and
+#   PostgreSQL (Debian's package), the database the Postgres store tests run against
+#   (scripts/test_servers.sh starts both).
 # Idempotent: skips what is already there.
 set -euo pipefail
 
 need_apt=()
-for package in mesa-vulkan-drivers libvulkan1 curl ffmpeg; do
+for package in mesa-vulkan-drivers libvulkan1 curl ffmpeg postgresql; do
   dpkg -s "$package" >/dev/null 2>&1 || need_apt+=("$package")
 done
 # Node.js for s3rver, unless the machine has its own.

@@ -27,6 +27,14 @@ source scripts/test_servers.sh
 # run ends on the test summary.
 cargo test --locked --workspace --benches
 cargo test --locked --workspace --lib --bins --tests
+# The job and store tests again with every service on PostgreSQL instead of SQLite (each test
+# gets a fresh database on the server test_servers.sh started), so both backends pass the same
+# tests.
+if [ -n "${SEGSPLAT_TEST_POSTGRES_URL:-}" ]; then
+    SEGSPLAT_TEST_BACKEND=postgres cargo test --locked --test service_jobs --test service_core \
+        --test service_tenants --test service_workers --test service_upload \
+        --test service_object_store
+fi
 # Every fuzz target for a short bounded time on its committed corpus (docs/fuzzing.md). Needs
 # nightly Rust and cargo-fuzz; without them fuzz.sh says so and skips, and the stable replay of
 # the corpus in tests/fuzz_corpus.rs (above) is what guards the parsers.

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Sourced by scripts/test.sh: starts the real servers the storage tests run against, on
 # 127.0.0.1, and exports where they are. Today: an S3-compatible server (s3rver, installed from
-# the npm registry by scripts/bootstrap.sh) with one bucket. Tests whose server is absent skip
-# with the reason, except in CI (CI=true), where this script fails instead.
+# the npm registry by scripts/bootstrap.sh) with one bucket, and PostgreSQL (Debian's package) in
+# a throwaway cluster. Tests whose server is absent skip with the reason, except in CI (CI=true),
+# where this script fails instead.
 # Stopped when the sourcing shell exits.
 
 SEGSPLAT_TOOLS_DIR=${SEGSPLAT_TOOLS_DIR:-$HOME/.cache/segsplat-tools}
@@ -38,7 +39,47 @@ start_s3rver() {
     return 1
 }
 
+# A throwaway PostgreSQL cluster with trust authentication on 127.0.0.1 only. PostgreSQL refuses
+# to run as root, so as root the cluster belongs to the `postgres` user the package created.
+start_postgres() {
+    local bin
+    bin=$(ls -d /usr/lib/postgresql/*/bin 2>/dev/null | sort -V | tail -n 1)
+    if [ -z "$bin" ] || [ ! -x "$bin/initdb" ]; then
+        if [ "${CI:-}" = "true" ]; then
+            echo "error: CI needs PostgreSQL (Debian's postgresql package; scripts/bootstrap.sh installs it)" >&2
+            return 1
+        fi
+        echo "note: no PostgreSQL server binaries; the Postgres store tests will skip"
+        return 0
+    fi
+    local as_user=() port data
+    data=$(mktemp -d)
+    if [ "$(id -u)" -eq 0 ]; then
+        chown postgres "$data"
+        as_user=(runuser -u postgres --)
+    fi
+    port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
+    if ! "${as_user[@]}" "$bin/initdb" -D "$data/cluster" -A trust -U segsplat >"$data.log" 2>&1 \
+        || ! "${as_user[@]}" "$bin/pg_ctl" -D "$data/cluster" -l "$data/server.log" -w \
+            -o "-c listen_addresses=127.0.0.1 -p $port -k $data -c max_connections=300 -c fsync=off" \
+            start >>"$data.log" 2>&1; then
+        echo "error: PostgreSQL did not start; its log:" >&2
+        cat "$data.log" "$data/server.log" >&2 2>/dev/null
+        return 1
+    fi
+    SEGSPLAT_TEST_PG_DATA=$data
+    SEGSPLAT_TEST_PG_BIN=$bin
+    SEGSPLAT_TEST_PG_AS=("${as_user[@]}")
+    export SEGSPLAT_TEST_POSTGRES_URL="postgres://segsplat@127.0.0.1:$port/postgres"
+    echo "PostgreSQL on $SEGSPLAT_TEST_POSTGRES_URL (data $data)"
+}
+
 stop_test_servers() {
+    if [ -n "${SEGSPLAT_TEST_PG_DATA:-}" ]; then
+        "${SEGSPLAT_TEST_PG_AS[@]}" "$SEGSPLAT_TEST_PG_BIN/pg_ctl" -D "$SEGSPLAT_TEST_PG_DATA/cluster" \
+            -m immediate stop >/dev/null 2>&1 || true
+        rm -rf "$SEGSPLAT_TEST_PG_DATA" "$SEGSPLAT_TEST_PG_DATA.log"
+    fi
     if [ -n "${SEGSPLAT_TEST_S3_PID:-}" ]; then
         kill "$SEGSPLAT_TEST_S3_PID" 2>/dev/null || true
         rm -rf "$SEGSPLAT_TEST_S3_DATA" "$SEGSPLAT_TEST_S3_DATA.log"
@@ -47,3 +88,4 @@ stop_test_servers() {
 
 trap stop_test_servers EXIT
 start_s3rver
+start_postgres

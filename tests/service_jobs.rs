@@ -377,9 +377,7 @@ async fn shutdown_hands_running_jobs_back_and_the_next_run_resumes_from_the_chec
     }
     first.shutdown().await;
 
-    let database = Database::open(&dir.path().join("segsplat.db"))
-        .await
-        .unwrap();
+    let database = Database::connect(&test_config(dir.path())).await.unwrap();
     let job = database
         .get_job(&job_id, &Caller::system())
         .await
@@ -509,9 +507,7 @@ async fn a_restart_takes_back_its_own_and_dead_local_processes_jobs_at_once() {
     api.shutdown().await;
     // Processes that held the leases and are gone; the leases would last an hour. Claims take
     // the oldest queued job, so the owners go in creation order.
-    let database = Database::open(&dir.path().join("segsplat.db"))
-        .await
-        .unwrap();
+    let database = Database::connect(&test_config(dir.path())).await.unwrap();
     // A pid above the kernel's limit: a process on this host that is certainly gone.
     let dead_local = format!(
         "{}-pid4294967-0badf00d/0",

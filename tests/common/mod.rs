@@ -7,6 +7,7 @@ pub mod handlers;
 #[path = "../models_support/mod.rs"]
 pub mod models_support;
 pub mod object_store;
+pub mod postgres;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -18,7 +19,9 @@ use segsplat_service::jobs::JobHandler;
 
 pub use models_support::tiny_models_dir;
 
-/// A test config: ephemeral ports, fast leases and polling, one CPU worker slot, no GPU.
+/// A test config: ephemeral ports, fast leases and polling, one CPU worker slot, no GPU. The
+/// database is the SQLite file in `data_dir`, or a fresh PostgreSQL database when
+/// `SEGSPLAT_TEST_BACKEND=postgres` ([`postgres`]).
 pub fn test_config(data_dir: &Path) -> Config {
     let mut config = Config {
         data_dir: data_dir.to_path_buf(),
@@ -33,6 +36,9 @@ pub fn test_config(data_dir: &Path) -> Config {
     config.workers.cpu_slots = 1;
     config.workers.ops_addr = "127.0.0.1:0".parse().unwrap();
     config.limits.max_upload_bytes = 4 << 20;
+    if postgres::backend_is_postgres() {
+        config.database.url = Some(postgres::database_for_data_dir(data_dir));
+    }
     config
 }
 

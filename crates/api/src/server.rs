@@ -23,7 +23,8 @@ use segsplat_service::config::Config;
 use segsplat_service::core::ServiceCore;
 use segsplat_service::jobs::{
     HandlerRegistry, JobEventBus, JobHandler, LeaseReaper, ProcessIdentity, SweepPlaces,
-    WorkerPool, WorkerPoolOptions, WorkerSlot, open_adapters, sweep_leftovers,
+    WorkerPool, WorkerPoolOptions, WorkerSlot, forward_remote_wakeups, open_adapters,
+    sweep_leftovers,
 };
 use segsplat_service::store::{BlobStore, Database, StoreError, open_blob_store};
 use segsplat_service::usecases::serving::Serving;
@@ -198,6 +199,10 @@ impl ServiceBuilder {
             job_queued.clone(),
             (lease / 4).clamp(Duration::from_millis(50), Duration::from_secs(5)),
         );
+        // Ends with `shutdown`; on SQLite there is nothing to listen to.
+        let _wakeups =
+            forward_remote_wakeups(&database, bus.clone(), job_queued.clone(), shutdown.clone())
+                .await;
         // Loaded before the workers start: jobs embed objects with CLIP.
         let models_config = config.models.clone();
         let models = Arc::new(

@@ -4,6 +4,9 @@
 
 use tokio::sync::broadcast;
 
+/// Not a job id (ids are UUIDs): the wake-up meant for every subscriber.
+const EVERY_JOB: &str = "*";
+
 #[derive(Debug, Clone)]
 pub struct JobEventBus {
     sender: broadcast::Sender<String>,
@@ -20,6 +23,17 @@ impl JobEventBus {
     /// Tells subscribers that `job_id` has new events.
     pub fn notify(&self, job_id: &str) {
         let _ = self.sender.send(job_id.to_string());
+    }
+
+    /// Tells every subscriber to look again (wake-ups from other processes may have been
+    /// missed).
+    pub fn notify_all(&self) {
+        let _ = self.sender.send(EVERY_JOB.to_string());
+    }
+
+    /// Whether a received wake-up concerns `job_id`.
+    pub fn concerns(woken: &str, job_id: &str) -> bool {
+        woken == job_id || woken == EVERY_JOB
     }
 
     pub fn subscribe(&self) -> broadcast::Receiver<String> {

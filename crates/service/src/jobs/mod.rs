@@ -8,6 +8,7 @@ mod handler;
 mod identity;
 mod pool;
 mod progress;
+mod remote_wakeups;
 mod scene_cache;
 mod temp_sweep;
 mod worker;
@@ -18,6 +19,7 @@ pub use handler::{HandlerRegistry, JobFailure, JobHandler};
 pub use identity::{ProcessIdentity, host_name};
 pub use pool::{LeaseReaper, WorkerPool, WorkerPoolOptions, WorkerSlot, open_adapters};
 pub use progress::{Progress, ProgressReporter};
+pub use remote_wakeups::forward_remote_wakeups;
 pub use temp_sweep::{SweepPlaces, sweep_leftovers};
 
 #[derive(Debug, thiserror::Error)]

@@ -13,7 +13,10 @@ use super::{HandlerRegistry, JobContext, JobEventBus, JobFailure, ProgressReport
 use crate::config::JobsConfig;
 use crate::store::jobs::{AttemptOutcome, HeartbeatOutcome, JobRecord, JobState};
 use crate::store::workers::WorkerState;
-use crate::store::{BlobStore, Database};
+use crate::store::{BlobStore, Database, StoreError};
+
+/// How long a finished attempt keeps trying to record its outcome while the database is down.
+const OUTCOME_RETRY: Duration = Duration::from_secs(120);
 use segsplat_gpu::GpuContext;
 use segsplat_vision::models::ModelsStatus;
 
@@ -145,12 +148,7 @@ impl Worker {
             AttemptOutcome::Cancelled => "cancelled",
             AttemptOutcome::HandBack => "handed_back",
         };
-        match self
-            .shared
-            .database
-            .finish_attempt(&job.id, &self.name, &outcome)
-            .await
-        {
+        match self.record_outcome(&job.id, &outcome).await {
             Ok(Some(finished)) => {
                 info!(
                     outcome = outcome_label,
@@ -175,6 +173,32 @@ impl Worker {
         metrics::histogram!("segsplat_job_attempt_seconds", "kind" => job.kind.clone())
             .record(started.elapsed().as_secs_f64());
         self.shared.bus.notify(&job.id);
+    }
+
+    /// Records how the attempt ended, retrying while the database is unreachable: the outcome
+    /// (a finished training, say) is kept rather than left to a lease expiry and a re-run. The
+    /// write stays conditional on this worker's lease, so a late retry cannot overwrite another
+    /// worker's claim.
+    async fn record_outcome(
+        &self,
+        job_id: &str,
+        outcome: &AttemptOutcome,
+    ) -> Result<Option<JobRecord>, StoreError> {
+        let started = Instant::now();
+        loop {
+            match self
+                .shared
+                .database
+                .finish_attempt(job_id, &self.name, outcome)
+                .await
+            {
+                Err(error) if error.is_unavailable() && started.elapsed() < OUTCOME_RETRY => {
+                    warn!(%error, "the database is unreachable; retrying to record the outcome");
+                    tokio::time::sleep(Duration::from_secs(1)).await;
+                }
+                result => return result,
+            }
+        }
     }
 
     /// Runs the handler; `None` when the lease was lost (nothing may be recorded then).

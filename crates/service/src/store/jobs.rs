@@ -13,6 +13,7 @@ use serde::{Deserialize, Serialize};
 
 use super::sql::{DbRow, Tx, query};
 use super::tenancy::{Caller, visible};
+use super::wakeups::announce_event;
 use super::{Backend, Database, StoreError, now_ms};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -197,6 +198,38 @@ pub(super) async fn insert_event(
     kind: &str,
     payload: &serde_json::Value,
 ) -> Result<i64, StoreError> {
+    append_event(transaction, job_id, kind, payload, false).await
+}
+
+/// Appends the job's new state as an event; a job left queued also wakes idle workers of other
+/// processes ([`super::wakeups`]).
+pub(super) async fn insert_state_event(
+    transaction: &mut Tx,
+    job: &JobRecord,
+) -> Result<i64, StoreError> {
+    let payload = serde_json::json!({
+        "state": job.state,
+        "attempts": job.attempts,
+        "max_attempts": job.max_attempts,
+        "error": job.error,
+    });
+    append_event(
+        transaction,
+        &job.id,
+        "state",
+        &payload,
+        job.state == JobState::Queued,
+    )
+    .await
+}
+
+async fn append_event(
+    transaction: &mut Tx,
+    job_id: &str,
+    kind: &str,
+    payload: &serde_json::Value,
+    job_is_queued: bool,
+) -> Result<i64, StoreError> {
     let id: i64 = query(
         "INSERT INTO job_events (job_id, at_ms, kind, payload_json) VALUES (?, ?, ?, ?) \
          RETURNING id",
@@ -208,20 +241,8 @@ pub(super) async fn insert_event(
     .fetch_one(&mut *transaction)
     .await?
     .try_get(0)?;
+    announce_event(transaction, job_id, job_is_queued).await?;
     Ok(id)
-}
-
-pub(super) async fn insert_state_event(
-    transaction: &mut Tx,
-    job: &JobRecord,
-) -> Result<i64, StoreError> {
-    let payload = serde_json::json!({
-        "state": job.state,
-        "attempts": job.attempts,
-        "max_attempts": job.max_attempts,
-        "error": job.error,
-    });
-    insert_event(transaction, &job.id, "state", &payload).await
 }
 
 impl Database {

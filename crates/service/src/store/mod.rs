@@ -14,6 +14,7 @@ pub mod process_tag;
 pub mod scenes;
 mod sql;
 pub mod tenancy;
+pub mod wakeups;
 pub mod workers;
 
 pub use blob::{BlobError, BlobStore, LocalBlobStore};

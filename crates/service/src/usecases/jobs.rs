@@ -10,6 +10,7 @@ use tokio_util::sync::CancellationToken;
 
 use super::job_bounds::{check_adapter_fit, check_job_bounds};
 use crate::core::ServiceCore;
+use crate::jobs::JobEventBus;
 use crate::store::events::JobEventRecord;
 use crate::store::jobs::{AttemptBounds, CancelOutcome, JobRecord, JobState};
 use crate::store::{Caller, StoreError};
@@ -201,7 +202,7 @@ fn event_stream(
             let wait = async {
                 loop {
                     match wakeups.recv().await {
-                        Ok(woken) if woken == job_id => return,
+                        Ok(woken) if JobEventBus::concerns(&woken, &job_id) => return,
                         Ok(_) => {}
                         Err(RecvError::Lagged(_)) => return,
                         Err(RecvError::Closed) => std::future::pending::<()>().await,
