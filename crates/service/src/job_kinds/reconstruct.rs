@@ -92,6 +92,12 @@ fn run_blocking(ctx: &JobContext) -> Result<(), JobFailure> {
         Some(bytes) => {
             let checkpoint = Checkpoint::<TrainerMeta>::from_bytes(&bytes).map_err(retryable)?;
             tracing::info!(step = checkpoint.meta.step, "resuming from checkpoint");
+            if let Err(error) = ctx
+                .progress
+                .resumed_blocking("train", u64::from(checkpoint.meta.step))
+            {
+                tracing::warn!(%error, "cannot record the resume");
+            }
             Trainer::resume(&gpu, &scene, &checkpoint).map_err(train_failure)?
         }
         None => Trainer::new(&gpu, &scene, config.train.clone(), None).map_err(train_failure)?,

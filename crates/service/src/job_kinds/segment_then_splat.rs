@@ -221,6 +221,12 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
         Some(bytes) => {
             let checkpoint = Checkpoint::<TrainerMeta>::from_bytes(&bytes).map_err(retryable)?;
             tracing::info!(step = checkpoint.meta.step, "resuming from checkpoint");
+            if let Err(error) = ctx
+                .progress
+                .resumed_blocking("train", u64::from(checkpoint.meta.step))
+            {
+                tracing::warn!(%error, "cannot record the resume");
+            }
             resume_segmented(&gpu, &scene, &checkpoint, &masks, &options)?
         }
         None => {

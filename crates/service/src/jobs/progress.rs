@@ -107,9 +107,20 @@ impl ProgressReporter {
     /// cannot happen. Returns false when this worker no longer holds the job's lease.
     pub async fn warn(&self, stage: &str, message: &str) -> Result<bool, StoreError> {
         let payload = serde_json::json!({ "stage": stage, "message": message });
+        self.record("warning", &payload).await
+    }
+
+    /// Records a `resumed` event (`{"stage", "from_step"}`): this attempt continues from a
+    /// checkpoint an earlier attempt saved (after a crash, a lost lease or a shutdown).
+    pub fn resumed_blocking(&self, stage: &str, from_step: u64) -> Result<bool, StoreError> {
+        let payload = serde_json::json!({ "stage": stage, "from_step": from_step });
+        tokio::runtime::Handle::current().block_on(self.record("resumed", &payload))
+    }
+
+    async fn record(&self, kind: &str, payload: &serde_json::Value) -> Result<bool, StoreError> {
         let recorded = self
             .database
-            .record_job_event(&self.job_id, &self.lease_owner, "warning", &payload)
+            .record_job_event(&self.job_id, &self.lease_owner, kind, payload)
             .await?;
         if recorded.is_some() {
             self.bus.notify(&self.job_id);
