@@ -110,6 +110,14 @@ async fn a_gpu_job_trains_from_the_bucket_and_its_result_is_served_from_it() {
         .unwrap();
     assert_eq!(ply, stored);
     assert!(files_under(&dir.path().join("blobs")).is_empty());
+    // The download was staged in the scratch folder to stream it, and is gone.
+    assert!(
+        files_under(&dir.path().join("tmp"))
+            .iter()
+            .all(|path| !path.to_string_lossy().starts_with("download-")),
+        "{:?}",
+        files_under(&dir.path().join("tmp"))
+    );
     client.shutdown().await;
 }
 

@@ -20,18 +20,18 @@ fn content_type(file: &str) -> &'static str {
     }
 }
 
+fn attachment_headers(name: &str, content_type: &str) -> [(header::HeaderName, String); 2] {
+    [
+        (header::CONTENT_TYPE, content_type.to_string()),
+        (
+            header::CONTENT_DISPOSITION,
+            format!("attachment; filename=\"{name}\""),
+        ),
+    ]
+}
+
 fn attachment(name: &str, content_type: &'static str, bytes: Vec<u8>) -> Response {
-    (
-        [
-            (header::CONTENT_TYPE, content_type.to_string()),
-            (
-                header::CONTENT_DISPOSITION,
-                format!("attachment; filename=\"{name}\""),
-            ),
-        ],
-        bytes,
-    )
-        .into_response()
+    (attachment_headers(name, content_type), bytes).into_response()
 }
 
 #[utoipa::path(get, path = "/v1/scenes/{id}/trained/{file}", tag = "objects",
@@ -46,8 +46,19 @@ pub async fn trained_file(
     Extension(caller): Extension<Caller>,
     UrlPath((id, file)): UrlPath<(String, String)>,
 ) -> ApiResult<Response> {
-    let bytes = state.core.serving.trained_file(&id, &caller, &file).await?;
-    Ok(attachment(&file, content_type(&file), bytes))
+    let opened = state
+        .core
+        .serving
+        .open_trained_file(&id, &caller, &file)
+        .await?;
+    // Streamed from the open file in chunks: a large PLY is never held whole in memory.
+    let stream = tokio_util::io::ReaderStream::new(tokio::fs::File::from_std(opened.file));
+    Ok((
+        attachment_headers(&file, content_type(&file)),
+        [(header::CONTENT_LENGTH, opened.len.to_string())],
+        axum::body::Body::from_stream(stream),
+    )
+        .into_response())
 }
 
 #[utoipa::path(get, path = "/v1/scenes/{id}/objects/{level}/{object_id}/ply", tag = "objects",

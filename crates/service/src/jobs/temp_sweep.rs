@@ -87,6 +87,7 @@ fn scan(places: &SweepPlaces) -> (Vec<PathBuf>, Vec<(PathBuf, String, u32)>) {
             } else if let Some(tagged) = name
                 .strip_prefix("upload-")
                 .or_else(|| name.strip_prefix("unpack-"))
+                .or_else(|| name.strip_prefix("download-"))
                 && is_stale(&path, tagged, places.max_age)
             {
                 stale.push(path);

@@ -65,6 +65,15 @@ pub struct Serving {
     blobs: Arc<dyn BlobStore>,
     cache: Arc<SceneCache>,
     max_mask_side: u32,
+    /// Where downloads from an object store are staged before they stream to the client.
+    scratch_dir: std::path::PathBuf,
+}
+
+/// A trained file opened for streaming to a client: it is never held whole in memory.
+#[derive(Debug)]
+pub struct OpenedFile {
+    pub file: std::fs::File,
+    pub len: u64,
 }
 
 impl Serving {
@@ -73,12 +82,14 @@ impl Serving {
         blobs: Arc<dyn BlobStore>,
         cache: Arc<SceneCache>,
         max_mask_side: u32,
+        scratch_dir: std::path::PathBuf,
     ) -> Self {
         Self {
             database,
             blobs,
             cache,
             max_mask_side,
+            scratch_dir,
         }
     }
 
@@ -94,7 +105,13 @@ impl Serving {
             config.query.cache_budget_mib.saturating_mul(1024 * 1024),
             move || segsplat_gpu::GpuContext::new(&adapters).map_err(|error| error.to_string()),
         ));
-        Self::new(database, blobs, cache, config.query.max_mask_side)
+        Self::new(
+            database,
+            blobs,
+            cache,
+            config.query.max_mask_side,
+            config.scratch_dir(),
+        )
     }
 
     pub fn cache(&self) -> &SceneCache {
@@ -266,6 +283,72 @@ impl Serving {
                 unavailable @ BlobError::Unavailable { .. } => ServeFailure::Blobs(unavailable),
                 other => ServeFailure::Worker(other.to_string()),
             })
+        })
+        .await
+    }
+
+    /// A trained file of the scene's serving job, opened for streaming. From the local blob
+    /// directory the stored file itself is opened; from an object store it is first fetched
+    /// (streamed) into the scratch folder and unlinked once open, so nothing is left behind
+    /// whatever becomes of the download.
+    pub async fn open_trained_file(
+        &self,
+        scene_id: &str,
+        caller: &Caller,
+        file: &str,
+    ) -> Result<OpenedFile, ServeFailure> {
+        if !DOWNLOADABLE_FILES.contains(&file) {
+            return Err(ServeFailure::UnknownFile(file.to_string()));
+        }
+        let job = self.serving_job(scene_id, caller).await?;
+        let blobs = Arc::clone(&self.blobs);
+        let scratch_dir = self.scratch_dir.clone();
+        let file = file.to_string();
+        blocking(move || {
+            let key = format!("{}/{file}", output_prefix(&job.id));
+            let not_stored = |file: String| ServeFailure::FileNotStored {
+                file,
+                job_id: job.id.clone(),
+            };
+            let opened = match blobs.local_path(&key) {
+                Some(path) => std::fs::File::open(&path).map_err(|error| {
+                    if error.kind() == std::io::ErrorKind::NotFound {
+                        not_stored(file.clone())
+                    } else {
+                        ServeFailure::Worker(format!("cannot open {key}: {error}"))
+                    }
+                })?,
+                None => {
+                    std::fs::create_dir_all(&scratch_dir).map_err(|error| {
+                        ServeFailure::Worker(format!("cannot create the scratch folder: {error}"))
+                    })?;
+                    let staged = scratch_dir.join(format!(
+                        "download-{}-{}",
+                        crate::store::process_tag::process_tag(),
+                        uuid::Uuid::new_v4().simple()
+                    ));
+                    let fetched = blobs.get_to_path(&key, &staged);
+                    let opened = fetched.and_then(|()| {
+                        std::fs::File::open(&staged).map_err(|source| BlobError::Io {
+                            key: key.clone(),
+                            source,
+                        })
+                    });
+                    let _ = std::fs::remove_file(&staged);
+                    opened.map_err(|error| match error {
+                        BlobError::NotFound { .. } => not_stored(file.clone()),
+                        unavailable @ BlobError::Unavailable { .. } => {
+                            ServeFailure::Blobs(unavailable)
+                        }
+                        other => ServeFailure::Worker(other.to_string()),
+                    })?
+                }
+            };
+            let len = opened
+                .metadata()
+                .map_err(|error| ServeFailure::Worker(format!("cannot stat {key}: {error}")))?
+                .len();
+            Ok(OpenedFile { file: opened, len })
         })
         .await
     }
