@@ -8,24 +8,12 @@
 //! `SEGSPLAT_TEST_S3_ENDPOINT` / `SEGSPLAT_TEST_S3_BUCKET`. Without them it says so and exits.
 //! Run: `SEGSPLAT_BENCH_UPLOAD_MIB=1024 cargo bench --bench blob_upload` (docs/benchmarks.md).
 
+mod support;
+
 use std::io::{Read, Write};
 use std::time::Instant;
 
-use segsplat_service::config::BlobsConfig;
 use segsplat_service::store::{BlobStore, ObjectBlobStore};
-
-fn peak_resident_mib() -> f64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|status| {
-            status
-                .lines()
-                .find(|line| line.starts_with("VmHWM:"))
-                .and_then(|line| line.split_whitespace().nth(1))
-                .and_then(|kib| kib.parse::<f64>().ok())
-        })
-        .map_or(0.0, |kib| kib / 1024.0)
-}
 
 fn same_contents(left: &std::path::Path, right: &std::path::Path) -> std::io::Result<bool> {
     let (mut left, mut right) = (std::fs::File::open(left)?, std::fs::File::open(right)?);
@@ -43,27 +31,14 @@ fn same_contents(left: &std::path::Path, right: &std::path::Path) -> std::io::Re
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let (Ok(endpoint), Ok(bucket)) = (
-        std::env::var("SEGSPLAT_TEST_S3_ENDPOINT"),
-        std::env::var("SEGSPLAT_TEST_S3_BUCKET"),
-    ) else {
-        println!("blob_upload: no S3-compatible server (run scripts/test_servers.sh); skipped");
+    let Some(config) = support::s3_test_bucket("blob_upload") else {
         return Ok(());
     };
     let mib: usize = std::env::var("SEGSPLAT_BENCH_UPLOAD_MIB")
         .ok()
         .and_then(|value| value.parse().ok())
         .unwrap_or(64);
-    let url = format!("s3://{bucket}/bench-{}", uuid::Uuid::new_v4().simple());
-    let config = BlobsConfig {
-        endpoint: Some(endpoint),
-        region: Some("us-east-1".into()),
-        access_key_id: Some("S3RVER".into()),
-        secret_access_key: Some("S3RVER".into()),
-        allow_http: true,
-        request_timeout_secs: 300.0,
-        ..BlobsConfig::default()
-    };
+    let url = config.url.clone().unwrap_or_default();
     let store = ObjectBlobStore::open(&config, &url)?;
 
     let dir = tempfile::tempdir()?;
@@ -80,17 +55,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     file.flush()?;
     drop(file);
     drop(block);
-    let before = peak_resident_mib();
+    let before = support::peak_resident_mib();
 
     let started = Instant::now();
     store.put_file("bench/archive.bin", &source)?;
     let upload_secs = started.elapsed().as_secs_f64();
-    let after_upload = peak_resident_mib();
+    let after_upload = support::peak_resident_mib();
     let fetched = dir.path().join("fetched.bin");
     let started = Instant::now();
     store.get_to_path("bench/archive.bin", &fetched)?;
     let download_secs = started.elapsed().as_secs_f64();
-    let after_download = peak_resident_mib();
+    let after_download = support::peak_resident_mib();
     let identical = same_contents(&source, &fetched)?;
     store.delete_prefix("bench")?;
     println!(
