@@ -110,6 +110,7 @@ struct WorkerArgs {
 }
 
 fn main() -> ExitCode {
+    quiet_display_probing();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Serve(args) => {
@@ -192,6 +193,20 @@ fn run_service(
         service.run_until_signal().await;
         Ok(())
     })
+}
+
+/// Mesa's Vulkan device-select layer connects to the Wayland display to learn which GPU drives
+/// it; on a headless host that makes libwayland print `XDG_RUNTIME_DIR is invalid or not set`
+/// twice on every start. segsplat picks its adapters itself (`workers.adapters`) and draws
+/// nothing, so the layer is turned off (`NODEVICE_SELECT=1`) unless the environment says
+/// otherwise.
+#[allow(unsafe_code)]
+fn quiet_display_probing() {
+    if std::env::var_os("NODEVICE_SELECT").is_none() {
+        // SAFETY: the first statement of `main`, before any thread exists, so nothing reads
+        // the environment concurrently.
+        unsafe { std::env::set_var("NODEVICE_SELECT", "1") };
+    }
 }
 
 fn migrate(config_file: Option<PathBuf>, overrides: ConfigOverrides) -> anyhow::Result<()> {

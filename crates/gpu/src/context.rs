@@ -133,8 +133,14 @@ fn backend_name(backend: wgpu::Backend) -> &'static str {
     }
 }
 
+/// Vulkan, Metal and DX12 only (unless `WGPU_BACKEND` names others): the kernels need storage
+/// buffers with atomics and subgroups that no OpenGL adapter offers, and probing the GL backend
+/// on a headless Linux host makes libwayland print `XDG_RUNTIME_DIR is invalid or not set` on
+/// every start, burying real errors.
 fn new_instance() -> wgpu::Instance {
-    wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env())
+    let mut descriptor = wgpu::InstanceDescriptor::new_without_display_handle();
+    descriptor.backends = wgpu::Backends::PRIMARY;
+    wgpu::Instance::new(descriptor.with_env())
 }
 
 /// All adapters wgpu can see, hardware first.
