@@ -229,17 +229,7 @@ async fn segment_then_splat_embeds_objects_and_answers_text_queries() {
     let Some(client) = TestService::start_with_tiny_models(data.path()).await else {
         return;
     };
-    // 96 x 72 rather than 48 x 36: the stand-in CLIP quantises a crop's mean colour to the
-    // nearest prototype, and on tiny crops the shaded sphere plus the resize's dark edge ring
-    // reads as "brown" (measured: "red" scored 0.08 against the red sphere at 48 x 36).
-    let spec = SyntheticSpec {
-        frame_count: 9,
-        width: 96,
-        height: 72,
-        with_masks: Some(Level::ALL.to_vec()),
-        ..SyntheticSpec::default()
-    };
-    let archive = archives::zip_of(&archives::colmap_files(spec, ColmapEncoding::Text));
+    let archive = archives::queryable_scene_zip();
     let (status, scene) = client.upload(archive, "application/zip").await;
     assert_eq!(status, 201, "{scene}");
     let scene_id = scene["id"].as_str().unwrap();

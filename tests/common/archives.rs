@@ -17,6 +17,21 @@ pub fn small_spec() -> SyntheticSpec {
     }
 }
 
+/// A scene the stand-in CLIP can name: 9 views of 96 x 72 with masks at every level, as a
+/// COLMAP zip. 96 x 72 rather than 48 x 36: the stand-in CLIP quantises a crop's mean colour to
+/// the nearest prototype, and on tiny crops the shaded sphere plus the resize's dark edge ring
+/// reads as "brown" (measured: "red" scored 0.08 against the red sphere at 48 x 36).
+pub fn queryable_scene_zip() -> Vec<u8> {
+    let spec = SyntheticSpec {
+        frame_count: 9,
+        width: 96,
+        height: 72,
+        with_masks: Some(segsplat_scene::Level::ALL.to_vec()),
+        ..SyntheticSpec::default()
+    };
+    zip_of(&colmap_files(spec, ColmapEncoding::Text))
+}
+
 /// Every file under `dir` as (relative `/` path, bytes), sorted.
 pub fn read_tree(dir: &Path) -> Vec<(String, Vec<u8>)> {
     super::files_under(dir)

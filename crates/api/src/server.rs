@@ -294,6 +294,13 @@ async fn start_http(
     let addr = listener.local_addr().map_err(bind_error)?;
     let shutdown = shutdown.clone();
     let task = tokio::spawn(async move {
+        // Small replies go out at once instead of waiting on Nagle's algorithm for the
+        // client's delayed ACK (a 20-40 ms floor on every small response).
+        let listener = axum::serve::ListenerExt::tap_io(listener, |tcp| {
+            if let Err(error) = tcp.set_nodelay(true) {
+                warn!(%error, "cannot set TCP_NODELAY on an HTTP connection");
+            }
+        });
         let served = axum::serve(listener, app)
             .with_graceful_shutdown(async move { shutdown.cancelled().await })
             .await;
@@ -347,7 +354,18 @@ async fn start_grpc(
             .add_service(reflection)
             .add_service(scene_query)
             .serve_with_incoming_shutdown(
-                tokio_stream::wrappers::TcpListenerStream::new(listener),
+                // As for HTTP: no Nagle delay on small replies.
+                tokio_stream::StreamExt::map(
+                    tokio_stream::wrappers::TcpListenerStream::new(listener),
+                    |accepted| {
+                        if let Ok(tcp) = &accepted
+                            && let Err(error) = tcp.set_nodelay(true)
+                        {
+                            warn!(%error, "cannot set TCP_NODELAY on a gRPC connection");
+                        }
+                        accepted
+                    },
+                ),
                 async move { shutdown.cancelled().await },
             )
             .await;
