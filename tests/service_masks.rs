@@ -353,13 +353,34 @@ async fn masks_and_exports_of_a_trained_scene() {
             scene_id: scene_id.clone(),
             object_id: 99,
             level: proto::Level::Small as i32,
-            view: Some(frame_view),
+            view: Some(frame_view.clone()),
             mask_encoding: proto::MaskEncoding::CocoRle as i32,
             visible_only: true,
         })
         .await
         .unwrap_err();
     assert_eq!(missing.code(), tonic::Code::NotFound, "{missing}");
+    // RenderMask's answer is a mask: "no mask" is refused, not answered in some other encoding.
+    let no_encoding = grpc
+        .render_mask(proto::RenderMaskRequest {
+            scene_id: scene_id.clone(),
+            object_id: 1,
+            level: proto::Level::Small as i32,
+            view: Some(frame_view.clone()),
+            mask_encoding: proto::MaskEncoding::None as i32,
+            visible_only: false,
+        })
+        .await
+        .unwrap_err();
+    assert_eq!(
+        no_encoding.code(),
+        tonic::Code::InvalidArgument,
+        "{no_encoding}"
+    );
+    assert!(
+        no_encoding.message().contains("mask_encoding"),
+        "{no_encoding}"
+    );
     let cache = client.service.serving_stats();
     assert_eq!(cache.loads, 1, "one load, then cache hits: {cache:?}");
     assert!(cache.hits >= 10, "{cache:?}");

@@ -201,6 +201,35 @@ async fn bearer_tokens_guard_rest_and_grpc_when_configured() {
         .unwrap()
         .into_inner();
     assert!(answers.message().await.unwrap().is_some());
+
+    // The older v1alpha protocol too, which many clients still speak.
+    use tonic_reflection::pb::v1alpha::ServerReflectionRequest as AlphaRequest;
+    use tonic_reflection::pb::v1alpha::server_reflection_client::ServerReflectionClient as Alpha;
+    use tonic_reflection::pb::v1alpha::server_reflection_request::MessageRequest as AlphaMessage;
+    use tonic_reflection::pb::v1alpha::server_reflection_response::MessageResponse;
+    let mut request = tonic::Request::new(tokio_stream::iter(vec![AlphaRequest {
+        host: String::new(),
+        message_request: Some(AlphaMessage::ListServices(String::new())),
+    }]));
+    request
+        .metadata_mut()
+        .insert("authorization", "Bearer s3cret".parse().unwrap());
+    let mut answers = Alpha::new(channel.clone())
+        .server_reflection_info(request)
+        .await
+        .unwrap()
+        .into_inner();
+    let answer = answers.message().await.unwrap().unwrap();
+    let Some(MessageResponse::ListServicesResponse(listed)) = answer.message_response else {
+        panic!("v1alpha list_services answered {answer:?}");
+    };
+    assert!(
+        listed
+            .service
+            .iter()
+            .any(|service| service.name == "segsplat.v1.SceneQuery"),
+        "{listed:?}"
+    );
     service.shutdown().await;
 }
 

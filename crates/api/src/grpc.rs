@@ -542,7 +542,13 @@ impl SceneQuery for SceneQueryService {
             .as_ref()
             .ok_or_else(|| Status::invalid_argument("view: required"))
             .and_then(view_from_proto)?;
-        let format = mask_format_from_proto(request.mask_encoding)?.unwrap_or_default();
+        // The reply is the mask, so "no mask" (NONE, also proto3's default) cannot be honoured.
+        let format = mask_format_from_proto(request.mask_encoding)?.ok_or_else(|| {
+            Status::invalid_argument(
+                "mask_encoding: RenderMask answers with a mask; ask for MASK_ENCODING_PNG or \
+                 MASK_ENCODING_COCO_RLE (MASK_ENCODING_NONE is for Query and StreamQuery)",
+            )
+        })?;
         let time = time_from_proto(request.view.as_ref().and_then(|v| v.time))?;
         let masks = self
             .core

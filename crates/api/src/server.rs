@@ -333,15 +333,23 @@ async fn start_grpc(
     health_reporter
         .set_serving::<SceneQueryServer<SceneQueryService>>()
         .await;
-    let reflection = tonic_reflection::server::Builder::configure()
-        .register_encoded_file_descriptor_set(crate::proto::FILE_DESCRIPTOR_SET)
-        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
-        .build_v1()
-        .map_err(|error| ServiceError::Reflection(error.to_string()))?;
-    // Reflection describes the whole API; with tokens set it needs one like every other call
-    // (health checks stay open for load balancers).
+    let describing = || {
+        tonic_reflection::server::Builder::configure()
+            .register_encoded_file_descriptor_set(crate::proto::FILE_DESCRIPTOR_SET)
+            .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+    };
+    let reflection_error =
+        |error: tonic_reflection::server::Error| ServiceError::Reflection(error.to_string());
+    // Both reflection versions: `grpc.reflection.v1`, and `v1alpha`, which grpcio's reflection
+    // client, grpcurl's older releases and many tools still speak. Reflection describes the
+    // whole API; with tokens set it needs one like every other call (health checks stay open
+    // for load balancers).
     let reflection = tonic::service::interceptor::InterceptedService::new(
-        reflection,
+        describing().build_v1().map_err(reflection_error)?,
+        grpc_interceptor(tokens.clone()),
+    );
+    let reflection_v1alpha = tonic::service::interceptor::InterceptedService::new(
+        describing().build_v1alpha().map_err(reflection_error)?,
         grpc_interceptor(tokens.clone()),
     );
     let scene_query =
@@ -352,6 +360,7 @@ async fn start_grpc(
             .layer(GrpcMetricsLayer)
             .add_service(health_service)
             .add_service(reflection)
+            .add_service(reflection_v1alpha)
             .add_service(scene_query)
             .serve_with_incoming_shutdown(
                 // As for HTTP: no Nagle delay on small replies.
