@@ -22,6 +22,7 @@ use segsplat_service::store::scenes::SceneRecord;
 use segsplat_service::store::{BlobError, Caller, StoreError};
 use segsplat_service::usecases::jobs::{self, JobFailure};
 use segsplat_service::usecases::objects::{ListObjectsError, list_objects};
+use segsplat_service::usecases::observe::called_from;
 use segsplat_service::usecases::query::{
     MaskRequest, QueryError, QueryFailure, QueryRequest as CoreQuery, query_with_masks,
 };
@@ -463,7 +464,9 @@ impl SceneQuery for SceneQueryService {
         let mut incoming = request.into_inner();
         let service = self.clone();
         let (replies, receiver) = tokio::sync::mpsc::channel(STREAM_BUFFER);
-        tokio::spawn(async move {
+        // The stream's answers are rendered in this task, outside the request's own future:
+        // label their latencies as gRPC here.
+        tokio::spawn(called_from("grpc", async move {
             let mut parts = QueryParts::default();
             loop {
                 let message = match incoming.message().await {
@@ -488,7 +491,7 @@ impl SceneQuery for SceneQueryService {
                     break;
                 }
             }
-        });
+        }));
         Ok(Response::new(Box::pin(
             tokio_stream::wrappers::ReceiverStream::new(receiver),
         )))

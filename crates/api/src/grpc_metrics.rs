@@ -59,7 +59,7 @@ where
         let started = Instant::now();
         let response = self.inner.call(request);
         Box::pin(async move {
-            let result = response.await;
+            let result = segsplat_service::usecases::observe::called_from("grpc", response).await;
             // Unary errors come as headers-only responses; a stream's final status is in its
             // trailers, after this layer, so it counts as `0` here.
             let code = match &result {

@@ -8,7 +8,7 @@ mod grpc;
 mod grpc_metrics;
 mod jobs;
 mod masks;
-mod metrics;
+pub mod metrics;
 mod objects;
 mod openapi;
 mod ops;

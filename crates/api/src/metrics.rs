@@ -46,7 +46,8 @@ pub async fn track_requests(request: Request, next: Next) -> Response {
         .map_or_else(|| "unmatched".to_string(), |path| path.as_str().to_string());
     let method = request.method().to_string();
     let started = Instant::now();
-    let response = next.run(request).await;
+    let response =
+        segsplat_service::usecases::observe::called_from("rest", next.run(request)).await;
     let status = response.status().as_u16().to_string();
     metrics::counter!("segsplat_http_requests_total", "route" => route.clone(),
         "method" => method.clone(), "status" => status)
@@ -61,6 +62,7 @@ pub async fn track_requests(request: Request, next: Next) -> Response {
 /// counter nobody incremented yet (no lease has expired) is exported as 0, not missing, so
 /// `rate()` and alert expressions work from the first scrape.
 pub fn register_zero_series() {
+    describe_families();
     metrics::counter!("segsplat_job_leases_expired_total").increment(0);
     metrics::gauge!("segsplat_scene_cache_bytes").increment(0.0);
     metrics::gauge!("segsplat_scene_cache_scenes").increment(0.0);
@@ -85,12 +87,150 @@ pub fn register_zero_series() {
         metrics::gauge!("segsplat_cluster_workers", "state" => state).increment(0.0);
     }
     for gauge in [
-        "segsplat_workers_total",
+        "segsplat_worker_slots",
         "segsplat_workers_busy",
         "segsplat_workers_idle",
     ] {
         metrics::gauge!(gauge).increment(0.0);
     }
+}
+
+/// Every metric family the service exports, with its type and help text: the one list the
+/// `# HELP` lines come from, that docs/service.md documents, and that `tests/metrics_families.rs`
+/// checks a running service against. Process metrics (`process_*`) come from `metrics-process`.
+pub const FAMILIES: &[(&str, MetricType, &str)] = &[
+    (
+        "segsplat_http_requests_total",
+        MetricType::Counter,
+        "REST requests answered, by route template, method and status.",
+    ),
+    (
+        "segsplat_http_request_duration_seconds",
+        MetricType::Histogram,
+        "Time to answer a REST request, by route template and method.",
+    ),
+    (
+        "segsplat_grpc_requests_total",
+        MetricType::Counter,
+        "gRPC calls answered, by method and status code (a stream counts when its headers go out).",
+    ),
+    (
+        "segsplat_grpc_request_duration_seconds",
+        MetricType::Histogram,
+        "Time to a gRPC call's response headers (for a stream, its first message), by method.",
+    ),
+    (
+        "segsplat_jobs",
+        MetricType::Gauge,
+        "Jobs in the database by state (the queue's depth), read at each scrape.",
+    ),
+    (
+        "segsplat_job_outcomes_total",
+        MetricType::Counter,
+        "Job attempts finished, by job kind and outcome.",
+    ),
+    (
+        "segsplat_job_attempt_seconds",
+        MetricType::Histogram,
+        "Duration of a job attempt, by job kind.",
+    ),
+    (
+        "segsplat_job_leases_expired_total",
+        MetricType::Counter,
+        "Running jobs taken back because their worker stopped renewing the lease.",
+    ),
+    (
+        "segsplat_job_steps_total",
+        MetricType::Counter,
+        "Steps done by jobs, by worker and stage; rate() is steps per second per worker.",
+    ),
+    (
+        "segsplat_worker_slots",
+        MetricType::Gauge,
+        "Worker slots (concurrent jobs) in this process.",
+    ),
+    (
+        "segsplat_workers_busy",
+        MetricType::Gauge,
+        "Worker slots of this process running a job.",
+    ),
+    (
+        "segsplat_workers_idle",
+        MetricType::Gauge,
+        "Worker slots of this process waiting for a job.",
+    ),
+    (
+        "segsplat_cluster_workers",
+        MetricType::Gauge,
+        "Worker slots of every process on this database, by state (busy, idle, or silent: no \
+         heartbeat for a lease).",
+    ),
+    (
+        "segsplat_scene_uploads_total",
+        MetricType::Counter,
+        "Scene uploads, by outcome (stored or rejected).",
+    ),
+    (
+        "segsplat_scene_cache_bytes",
+        MetricType::Gauge,
+        "GPU memory held by the serving cache of trained scenes.",
+    ),
+    (
+        "segsplat_scene_cache_scenes",
+        MetricType::Gauge,
+        "Trained scenes held by the serving cache.",
+    ),
+    (
+        "segsplat_query_seconds",
+        MetricType::Histogram,
+        "Time to score a text query (masks excluded), by API (rest, grpc, internal) and outcome.",
+    ),
+    (
+        "segsplat_mask_render_seconds",
+        MetricType::Histogram,
+        "Time to render masks, by API (rest, grpc, internal) and outcome.",
+    ),
+    (
+        "segsplat_build_info",
+        MetricType::Gauge,
+        "Always 1: this build's version and git commit, and this process's first GPU adapter.",
+    ),
+];
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MetricType {
+    Counter,
+    Gauge,
+    Histogram,
+}
+
+/// Gives every family its `# HELP` text and starts the process metrics (`process_*`).
+fn describe_families() {
+    for (name, kind, help) in FAMILIES {
+        match kind {
+            MetricType::Counter => metrics::describe_counter!(*name, *help),
+            MetricType::Gauge => metrics::describe_gauge!(*name, *help),
+            MetricType::Histogram => metrics::describe_histogram!(*name, *help),
+        }
+    }
+    process_collector().describe();
+}
+
+fn process_collector() -> &'static metrics_process::Collector {
+    static COLLECTOR: OnceLock<metrics_process::Collector> = OnceLock::new();
+    COLLECTOR.get_or_init(metrics_process::Collector::default)
+}
+
+/// Reads the process's CPU, memory, threads and file descriptors, for the scrape at hand.
+pub fn refresh_process_metrics() {
+    process_collector().collect();
+}
+
+/// `segsplat_build_info{version, git_commit, adapter} 1`.
+pub fn record_build_info(adapter: &str) {
+    metrics::gauge!("segsplat_build_info", "version" => env!("CARGO_PKG_VERSION"),
+        "git_commit" => env!("SEGSPLAT_GIT_COMMIT"), "adapter" => adapter.to_string())
+    .set(1.0);
 }
 
 /// Sets `segsplat_cluster_workers{state=busy|idle|silent}`: worker slots of every process on

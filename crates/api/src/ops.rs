@@ -182,6 +182,7 @@ pub async fn readyz(State(state): State<AppState>) -> impl IntoResponse {
 pub async fn metrics(State(state): State<AppState>) -> impl IntoResponse {
     refresh_queue_gauges(&state.core.database).await;
     refresh_cluster_gauges(&state.core).await;
+    crate::metrics::refresh_process_metrics();
     state.metrics.run_upkeep();
     (
         [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],

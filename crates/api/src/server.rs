@@ -184,6 +184,12 @@ impl ServiceBuilder {
             adapters: gpus.iter().map(|gpu| gpu.report.clone()).collect(),
             problems,
         };
+        crate::metrics::record_build_info(
+            readiness
+                .adapters
+                .first()
+                .map_or("none", |adapter| adapter.name.as_str()),
+        );
 
         spawn_periodic_sweep(
             places,

@@ -69,7 +69,7 @@ impl WorkerPool {
             )),
             shutdown_grace: options.shutdown_grace,
         };
-        metrics::gauge!("segsplat_workers_total").set(options.slots.len() as f64);
+        metrics::gauge!("segsplat_worker_slots").set(options.slots.len() as f64);
         let tasks = options
             .slots
             .into_iter()

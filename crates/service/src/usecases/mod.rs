@@ -5,6 +5,7 @@ pub mod ingest;
 pub mod job_bounds;
 pub mod jobs;
 pub mod objects;
+pub mod observe;
 pub mod query;
 pub mod scenes;
 pub mod serving;

@@ -5,7 +5,6 @@
 //! at the asked time for dynamic scenes, masks rendered by the serving cache).
 
 use std::sync::Arc;
-use std::time::Instant;
 
 use segsplat_method::segment_then_splat::objects::ObjectSummary;
 use segsplat_vision::language::{
@@ -70,73 +69,74 @@ pub async fn run_query(
     text: &str,
     options: QueryOptions,
 ) -> Result<QueryOutcome, QueryFailure> {
-    let started = Instant::now();
-    options.validate()?;
-    if text.trim().is_empty() {
-        return Err(QueryFailure::EmptyText);
-    }
-    if database.get_scene(scene_id, caller).await?.is_none() {
-        return Err(QueryFailure::SceneNotFound(scene_id.to_string()));
-    }
-    let model_id = text_encoder
-        .image_model_id()
-        .ok_or(TextEncoderUnavailable::NotConfigured)?;
-    let objects = database.list_objects(scene_id, None).await?;
-    if objects.is_empty() {
-        return Err(QueryFailure::NoObjects(scene_id.to_string()));
-    }
-    let embeddings = database.list_embeddings(scene_id, &model_id).await?;
-    if embeddings.is_empty() {
-        return Err(QueryFailure::NoEmbeddings {
-            scene_id: scene_id.to_string(),
+    super::observe::timed("segsplat_query_seconds", async move {
+        options.validate()?;
+        if text.trim().is_empty() {
+            return Err(QueryFailure::EmptyText);
+        }
+        if database.get_scene(scene_id, caller).await?.is_none() {
+            return Err(QueryFailure::SceneNotFound(scene_id.to_string()));
+        }
+        let model_id = text_encoder
+            .image_model_id()
+            .ok_or(TextEncoderUnavailable::NotConfigured)?;
+        let objects = database.list_objects(scene_id, None).await?;
+        if objects.is_empty() {
+            return Err(QueryFailure::NoObjects(scene_id.to_string()));
+        }
+        let embeddings = database.list_embeddings(scene_id, &model_id).await?;
+        if embeddings.is_empty() {
+            return Err(QueryFailure::NoEmbeddings {
+                scene_id: scene_id.to_string(),
+                model_id,
+            });
+        }
+        let encoder = Arc::clone(text_encoder);
+        let query_text = text.to_string();
+        let texts = tokio::task::spawn_blocking(move || {
+            let encoder = encoder.encoder()?;
+            let mut texts = vec![query_text.as_str()];
+            texts.extend(CANONICAL_PHRASES);
+            encoder
+                .encode(&texts)
+                .map_err(|error| QueryFailure::Encoding(error.to_string()))
+        })
+        .await
+        .map_err(|error| QueryFailure::Encoding(format!("worker thread failed: {error}")))??;
+        let Some((query, canonical)) = texts.split_first() else {
+            return Err(QueryFailure::Encoding("no text embedding".to_string()));
+        };
+        let canonical: Vec<&[f32]> = canonical.iter().map(|vector| &vector[..]).collect();
+        let candidates: Vec<CandidateObject> = embeddings
+            .iter()
+            .map(|embedding| CandidateObject {
+                level: embedding.level,
+                object_id: embedding.object_id,
+                vector: &embedding.vector,
+            })
+            .collect();
+        let answer = answer_query(query, &canonical, &candidates, &options)?;
+        let matches = answer
+            .objects
+            .iter()
+            .filter_map(|scored| {
+                let object = objects.iter().find(|object| {
+                    object.level == scored.level && object.object_id == scored.object_id
+                })?;
+                Some(QueryMatch {
+                    object: object.clone(),
+                    score: scored.score,
+                    relevancy: scored.relevancy,
+                })
+            })
+            .collect();
+        Ok(QueryOutcome {
+            matched: answer.matched,
+            matches,
             model_id,
-        });
-    }
-    let encoder = Arc::clone(text_encoder);
-    let query_text = text.to_string();
-    let texts = tokio::task::spawn_blocking(move || {
-        let encoder = encoder.encoder()?;
-        let mut texts = vec![query_text.as_str()];
-        texts.extend(CANONICAL_PHRASES);
-        encoder
-            .encode(&texts)
-            .map_err(|error| QueryFailure::Encoding(error.to_string()))
+        })
     })
     .await
-    .map_err(|error| QueryFailure::Encoding(format!("worker thread failed: {error}")))??;
-    let Some((query, canonical)) = texts.split_first() else {
-        return Err(QueryFailure::Encoding("no text embedding".to_string()));
-    };
-    let canonical: Vec<&[f32]> = canonical.iter().map(|vector| &vector[..]).collect();
-    let candidates: Vec<CandidateObject> = embeddings
-        .iter()
-        .map(|embedding| CandidateObject {
-            level: embedding.level,
-            object_id: embedding.object_id,
-            vector: &embedding.vector,
-        })
-        .collect();
-    let answer = answer_query(query, &canonical, &candidates, &options)?;
-    let matches = answer
-        .objects
-        .iter()
-        .filter_map(|scored| {
-            let object = objects.iter().find(|object| {
-                object.level == scored.level && object.object_id == scored.object_id
-            })?;
-            Some(QueryMatch {
-                object: object.clone(),
-                score: scored.score,
-                relevancy: scored.relevancy,
-            })
-        })
-        .collect();
-    metrics::histogram!("segsplat_query_seconds").record(started.elapsed().as_secs_f64());
-    Ok(QueryOutcome {
-        matched: answer.matched,
-        matches,
-        model_id,
-    })
 }
 
 /// A query, and what to render with its answer.

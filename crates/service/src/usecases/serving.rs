@@ -209,28 +209,29 @@ impl Serving {
         objects: Vec<(Level, u32)>,
         visible_too: bool,
     ) -> Result<Vec<ObjectMasks>, ServeFailure> {
-        let started = std::time::Instant::now();
-        let job = self.serving_job(scene_id, caller).await?;
-        // Unknown ids would render as empty masks; say so instead.
-        let known = self.database.list_objects(scene_id, None).await?;
-        if let Some(&(level, object_id)) = objects.iter().find(|(level, object_id)| {
-            !known
-                .iter()
-                .any(|known| known.level == *level && known.object_id == *object_id)
-        }) {
-            return Err(ServingError::NoSuchObject { level, object_id }.into());
-        }
-        let scene = self.load_job(job).await?;
-        let cache = Arc::clone(&self.cache);
-        let max_mask_side = self.max_mask_side;
-        let masks = blocking(move || {
-            let camera = view.render_camera(&scene.cameras, max_mask_side)?;
-            let time = scene.effective_time(time, view.frame_time(&scene.cameras));
-            Ok(cache.render_masks(&scene, &camera, &objects, visible_too, time)?)
+        super::observe::timed("segsplat_mask_render_seconds", async move {
+            let job = self.serving_job(scene_id, caller).await?;
+            // Unknown ids would render as empty masks; say so instead.
+            let known = self.database.list_objects(scene_id, None).await?;
+            if let Some(&(level, object_id)) = objects.iter().find(|(level, object_id)| {
+                !known
+                    .iter()
+                    .any(|known| known.level == *level && known.object_id == *object_id)
+            }) {
+                return Err(ServingError::NoSuchObject { level, object_id }.into());
+            }
+            let scene = self.load_job(job).await?;
+            let cache = Arc::clone(&self.cache);
+            let max_mask_side = self.max_mask_side;
+            let masks = blocking(move || {
+                let camera = view.render_camera(&scene.cameras, max_mask_side)?;
+                let time = scene.effective_time(time, view.frame_time(&scene.cameras));
+                Ok(cache.render_masks(&scene, &camera, &objects, visible_too, time)?)
+            })
+            .await?;
+            Ok(masks)
         })
-        .await?;
-        metrics::histogram!("segsplat_mask_render_seconds").record(started.elapsed().as_secs_f64());
-        Ok(masks)
+        .await
     }
 
     /// The objects where they are at `time` (or the frame's time) when the scene is dynamic;
