@@ -330,15 +330,18 @@ async fn masks_and_exports_of_a_trained_scene() {
         time: None,
         max_side: None,
     };
-    let rendered = grpc
-        .render_mask(proto::RenderMaskRequest {
+    let render_request = |object_id: u32, encoding: proto::MaskEncoding, visible_only: bool| {
+        proto::RenderMaskRequest {
             scene_id: scene_id.clone(),
-            object_id: 1,
+            object_id,
             level: proto::Level::Small as i32,
             view: Some(frame_view.clone()),
-            mask_encoding: proto::MaskEncoding::Png as i32,
-            visible_only: false,
-        })
+            mask_encoding: encoding as i32,
+            visible_only,
+        }
+    };
+    let rendered = grpc
+        .render_mask(render_request(1, proto::MaskEncoding::Png, false))
         .await
         .unwrap()
         .into_inner();
@@ -349,27 +352,13 @@ async fn masks_and_exports_of_a_trained_scene() {
         decode_mask(&by_frame["masks"][0]["mask"])
     );
     let missing = grpc
-        .render_mask(proto::RenderMaskRequest {
-            scene_id: scene_id.clone(),
-            object_id: 99,
-            level: proto::Level::Small as i32,
-            view: Some(frame_view.clone()),
-            mask_encoding: proto::MaskEncoding::CocoRle as i32,
-            visible_only: true,
-        })
+        .render_mask(render_request(99, proto::MaskEncoding::CocoRle, true))
         .await
         .unwrap_err();
     assert_eq!(missing.code(), tonic::Code::NotFound, "{missing}");
     // RenderMask's answer is a mask: "no mask" is refused, not answered in some other encoding.
     let no_encoding = grpc
-        .render_mask(proto::RenderMaskRequest {
-            scene_id: scene_id.clone(),
-            object_id: 1,
-            level: proto::Level::Small as i32,
-            view: Some(frame_view.clone()),
-            mask_encoding: proto::MaskEncoding::None as i32,
-            visible_only: false,
-        })
+        .render_mask(render_request(1, proto::MaskEncoding::None, false))
         .await
         .unwrap_err();
     assert_eq!(
@@ -381,6 +370,29 @@ async fn masks_and_exports_of_a_trained_scene() {
         no_encoding.message().contains("mask_encoding"),
         "{no_encoding}"
     );
+    // Deadlines: a call whose `grpc-timeout` passes is answered DEADLINE_EXCEEDED by the
+    // server, never CANCELLED. tonic's client also enforces the header with a timer of its own,
+    // which reports CANCELLED with a transport error as its source; those are the client's, not
+    // the server's answers, and are skipped.
+    let mut exceeded = 0;
+    for timeout in ["1m", "1m", "1m", "1m", "1m", "1m", "3m", "8m", "20m"] {
+        let mut request = tonic::Request::new(render_request(1, proto::MaskEncoding::Png, false));
+        request
+            .metadata_mut()
+            .insert("grpc-timeout", timeout.parse().unwrap());
+        if let Err(status) = grpc.render_mask(request).await {
+            if std::error::Error::source(&status).is_some() {
+                continue;
+            }
+            assert_eq!(
+                status.code(),
+                tonic::Code::DeadlineExceeded,
+                "{timeout}: {status}"
+            );
+            exceeded += 1;
+        }
+    }
+    assert!(exceeded >= 1, "a 1 ms deadline cannot be met");
     let cache = client.service.serving_stats();
     assert_eq!(cache.loads, 1, "one load, then cache hits: {cache:?}");
     assert!(cache.hits >= 10, "{cache:?}");

@@ -5,7 +5,7 @@ mod auth;
 pub mod error;
 mod exports;
 mod grpc;
-mod grpc_metrics;
+mod grpc_calls;
 mod jobs;
 mod masks;
 pub mod metrics;

@@ -33,6 +33,9 @@ impl From<ServeFailure> for ApiError {
             ServeFailure::NotTrained(_) => ApiError::conflict(message),
             ServeFailure::UnknownFile(_) => ApiError::not_found(message),
             ServeFailure::Blobs(blob) => blob.into(),
+            ServeFailure::DeadlineExceeded => {
+                ApiError::new(StatusCode::GATEWAY_TIMEOUT, "deadline_exceeded", message)
+            }
             ServeFailure::Serving(error) => match error {
                 ServingError::FrameOutOfRange { .. } | ServingError::BadView(_) => {
                     ApiError::bad_request(message)

@@ -14,7 +14,7 @@ use tracing::{info, warn};
 
 use super::auth::{TokenCheck, grpc_interceptor};
 use super::grpc::SceneQueryService;
-use super::grpc_metrics::GrpcMetricsLayer;
+use super::grpc_calls::GrpcCallLayer;
 use super::metrics::{prometheus_handle, register_zero_series};
 use super::router::{ops_router, router};
 use super::state::{AppState, WorkerReadiness};
@@ -363,7 +363,7 @@ async fn start_grpc(
     let task = tokio::spawn(async move {
         let served = tonic::transport::Server::builder()
             .trace_fn(|request| tracing::info_span!("grpc", path = %request.uri().path()))
-            .layer(GrpcMetricsLayer)
+            .layer(GrpcCallLayer)
             .add_service(health_service)
             .add_service(reflection)
             .add_service(reflection_v1alpha)

@@ -8,6 +8,23 @@ use std::time::Instant;
 
 tokio::task_local! {
     static INTERFACE: &'static str;
+    static DEADLINE: Instant;
+}
+
+/// Runs `future` with a deadline (a gRPC client's `grpc-timeout`): work that has not started
+/// by then is skipped ([`deadline_passed`]).
+pub async fn with_deadline<F: Future>(deadline: Instant, future: F) -> F::Output {
+    DEADLINE.scope(deadline, future).await
+}
+
+/// The current call's deadline, if its client set one; to carry into blocking work.
+pub fn deadline() -> Option<Instant> {
+    DEADLINE.try_with(|deadline| *deadline).ok()
+}
+
+/// Whether `deadline` (from [`deadline`]) has passed.
+pub fn deadline_passed(deadline: Option<Instant>) -> bool {
+    deadline.is_some_and(|deadline| Instant::now() >= deadline)
 }
 
 /// Runs `future` as a call from `interface` (`"rest"` or `"grpc"`).

@@ -48,6 +48,9 @@ pub enum ServeFailure {
     Blobs(BlobError),
     #[error("{0}")]
     Worker(String),
+    /// The client's deadline passed before the render started; it was skipped.
+    #[error("the call's deadline passed before the masks were rendered")]
+    DeadlineExceeded,
 }
 
 /// One object's encoded masks.
@@ -223,7 +226,12 @@ impl Serving {
             let scene = self.load_job(job).await?;
             let cache = Arc::clone(&self.cache);
             let max_mask_side = self.max_mask_side;
+            // Renders queue for the GPU: one whose caller has given up is not started.
+            let deadline = super::observe::deadline();
             let masks = blocking(move || {
+                if super::observe::deadline_passed(deadline) {
+                    return Err(ServeFailure::DeadlineExceeded);
+                }
                 let camera = view.render_camera(&scene.cameras, max_mask_side)?;
                 let time = scene.effective_time(time, view.frame_time(&scene.cameras));
                 Ok(cache.render_masks(&scene, &camera, &objects, visible_too, time)?)
