@@ -210,6 +210,48 @@ async fn cancel_stops_queued_and_running_jobs_and_guards_scene_deletion() {
     service.shutdown().await;
 }
 
+#[tokio::test]
+async fn a_cancel_stops_a_running_job_at_its_next_step_not_its_next_heartbeat() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut config = test_config(dir.path());
+    // Heartbeats 5 s apart: a cancel read only at the next heartbeat would let ~500 more
+    // 10 ms steps run.
+    config.jobs.heartbeat_secs = 5.0;
+    config.jobs.lease_secs = 30.0;
+    let handler = StepsHandler::new();
+    let service = TestService::start(config, vec![Arc::new(handler)]).await;
+    let scene_id = service.upload_test_scene().await;
+    let job_id = service
+        .create_job(
+            &scene_id,
+            STEPS_KIND,
+            json!({"steps": 100000, "step_ms": 10}),
+        )
+        .await;
+    let started = std::time::Instant::now();
+    let at_cancel = loop {
+        let job = service.job(&job_id).await;
+        let step = job["progress"]["step"].as_u64().unwrap_or(0);
+        if step >= 3 {
+            break step;
+        }
+        assert!(started.elapsed() < WAIT, "no progress: {job}");
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    };
+    let (status, body) = service
+        .post_json(&format!("/v1/jobs/{job_id}/cancel"), json!({}))
+        .await;
+    assert_eq!(status, 202, "{body}");
+    let job = service.wait_for_state(&job_id, "cancelled", WAIT).await;
+    let last = job["progress"]["step"].as_u64().unwrap();
+    assert!(
+        last < at_cancel + 100,
+        "{} steps ran after the cancel (from {at_cancel} to {last})",
+        last - at_cancel
+    );
+    service.shutdown().await;
+}
+
 /// Starts workers only (no API) on `dir`, as `segsplat worker` does.
 async fn start_worker_process(
     dir: &std::path::Path,

@@ -6,6 +6,8 @@ use tokio::sync::broadcast;
 
 /// Not a job id (ids are UUIDs): the wake-up meant for every subscriber.
 const EVERY_JOB: &str = "*";
+/// Marks a cancel request, `cancel:{job id}`; event followers ignore it.
+const CANCEL_PREFIX: &str = "cancel:";
 
 #[derive(Debug, Clone)]
 pub struct JobEventBus {
@@ -29,6 +31,17 @@ impl JobEventBus {
     /// missed).
     pub fn notify_all(&self) {
         let _ = self.sender.send(EVERY_JOB.to_string());
+    }
+
+    /// Tells the worker running `job_id` that a cancel was requested, so it stops at its next
+    /// step instead of at its next heartbeat.
+    pub fn notify_cancel(&self, job_id: &str) {
+        let _ = self.sender.send(format!("{CANCEL_PREFIX}{job_id}"));
+    }
+
+    /// Whether a received wake-up asks to cancel `job_id`.
+    pub fn cancels(woken: &str, job_id: &str) -> bool {
+        woken.strip_prefix(CANCEL_PREFIX) == Some(job_id) || woken == EVERY_JOB
     }
 
     /// Whether a received wake-up concerns `job_id`.

@@ -35,6 +35,7 @@ pub async fn forward_remote_wakeups(
             match wakeup {
                 Wakeup::JobQueued => job_queued.notify_waiters(),
                 Wakeup::JobEvent(job_id) => bus.notify(&job_id),
+                Wakeup::JobCancel(job_id) => bus.notify_cancel(&job_id),
                 Wakeup::Missed => {
                     job_queued.notify_waiters();
                     bus.notify_all();

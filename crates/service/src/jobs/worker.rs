@@ -246,6 +246,11 @@ impl Worker {
         let lease_ms = (self.shared.jobs.lease_secs * 1000.0).ceil() as i64;
         let mut heartbeat = tokio::time::interval(heartbeat_every);
         heartbeat.tick().await;
+        // A cancel request for this job (from this process, or another through the database's
+        // wake-ups) renews the heartbeat at once, which reads the cancel flag: the handler then
+        // stops at its next step instead of up to `heartbeat_secs` later.
+        let mut wakeups = self.shared.bus.subscribe();
+        let mut bus_open = true;
         let mut lease_lost = false;
         let mut grace_deadline: Option<tokio::time::Instant> = None;
         let result = loop {
@@ -257,6 +262,19 @@ impl Worker {
             };
             tokio::select! {
                 joined = &mut handler_task => break Some(joined),
+                woken = wakeups.recv(), if bus_open && !cancel.is_cancelled() => {
+                    let asks_to_cancel = match woken {
+                        Ok(woken) => JobEventBus::cancels(&woken, &job.id),
+                        Err(tokio::sync::broadcast::error::RecvError::Lagged(_)) => true,
+                        Err(tokio::sync::broadcast::error::RecvError::Closed) => {
+                            bus_open = false;
+                            false
+                        }
+                    };
+                    if asks_to_cancel {
+                        heartbeat.reset_immediately();
+                    }
+                }
                 _ = heartbeat.tick() => {
                     self.record_state(WorkerState::Busy, Some(&job.id)).await;
                     match self.shared.database.heartbeat(&job.id, &self.name, lease_ms).await {

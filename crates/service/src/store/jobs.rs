@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 
 use super::sql::{DbRow, Tx, query};
 use super::tenancy::{Caller, visible};
-use super::wakeups::announce_event;
+use super::wakeups::{announce_cancel, announce_event};
 use super::{Backend, Database, StoreError, now_ms};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -564,6 +564,7 @@ impl Database {
                 &serde_json::json!({}),
             )
             .await?;
+            announce_cancel(&mut transaction, job_id).await?;
             transaction.commit().await?;
             return Ok(CancelOutcome::Requested(job));
         }

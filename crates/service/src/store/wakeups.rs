@@ -1,6 +1,7 @@
 //! Cross-process wake-ups on PostgreSQL (LISTEN/NOTIFY): a transaction that appends a job event
-//! notifies `segsplat_job_events` with the job id, and one that leaves a job queued also
-//! notifies `segsplat_jobs_queued`. Postgres delivers them at commit, to every process
+//! notifies `segsplat_job_events` with the job id, one that leaves a job queued also notifies
+//! `segsplat_jobs_queued`, and a cancel of a running job notifies `segsplat_job_cancels` (so its
+//! worker, wherever it runs, stops at its next step). Postgres delivers them at commit, to every process
 //! listening, so idle workers claim at once and event followers on other API processes see
 //! progress without polling. SQLite has no such channel: there, processes wake each other only
 //! within one process and otherwise poll (`jobs.poll_interval_ms`), which stays the safety net
@@ -15,6 +16,7 @@ use super::{Database, StoreError};
 
 const JOBS_QUEUED: &str = "segsplat_jobs_queued";
 const JOB_EVENTS: &str = "segsplat_job_events";
+const JOB_CANCELS: &str = "segsplat_job_cancels";
 
 /// What another process announced.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -23,9 +25,23 @@ pub enum Wakeup {
     JobQueued,
     /// The job has new events.
     JobEvent(String),
+    /// A cancel was requested for the (running) job.
+    JobCancel(String),
     /// The listening connection was lost and re-established; announcements in between were
     /// missed, so every waiter should look again.
     Missed,
+}
+
+/// Queues the notification that a running job's cancel was requested (Postgres only).
+pub(super) async fn announce_cancel(transaction: &mut Tx, job_id: &str) -> Result<(), StoreError> {
+    if matches!(transaction, Tx::Postgres(_)) {
+        query("SELECT pg_notify(?, ?)")
+            .bind(JOB_CANCELS)
+            .bind(job_id)
+            .execute(&mut *transaction)
+            .await?;
+    }
+    Ok(())
 }
 
 /// Queues the notifications for a new event of `job_id` inside `transaction` (Postgres only).
@@ -59,7 +75,9 @@ pub struct WakeupListener {
 
 async fn subscribe(pool: &sqlx::PgPool) -> Result<PgListener, sqlx::Error> {
     let mut listener = PgListener::connect_with(pool).await?;
-    listener.listen_all([JOBS_QUEUED, JOB_EVENTS]).await?;
+    listener
+        .listen_all([JOBS_QUEUED, JOB_EVENTS, JOB_CANCELS])
+        .await?;
     Ok(listener)
 }
 
@@ -81,6 +99,7 @@ impl WakeupListener {
         match self.listener.try_recv().await {
             Ok(Some(notification)) => match notification.channel() {
                 JOB_EVENTS => Wakeup::JobEvent(notification.payload().to_string()),
+                JOB_CANCELS => Wakeup::JobCancel(notification.payload().to_string()),
                 _ => Wakeup::JobQueued,
             },
             // The connection dropped and the listener has already reconnected and listens.

@@ -131,6 +131,7 @@ pub async fn cancel_job(
 ) -> Result<Cancelled, JobFailure> {
     let outcome = core.database.request_cancel(job_id, caller).await?;
     core.bus.notify(job_id);
+    core.bus.notify_cancel(job_id);
     match outcome {
         CancelOutcome::Cancelled(job) => Ok(Cancelled::Now(job)),
         CancelOutcome::Requested(job) => Ok(Cancelled::Requested(job)),
