@@ -26,7 +26,7 @@ fi
 # side never pulls in tokio, axum, tonic or sqlx (docs/architecture.md).
 phase "layers"
 bash scripts/check_layers.sh
-# The real servers the storage tests use (an S3-compatible one), on 127.0.0.1.
+# The real servers the storage tests use (an S3-compatible one and PostgreSQL), on 127.0.0.1.
 phase "test servers"
 source scripts/test_servers.sh
 # Benches first (one quick pass each, to prove they still run), then every test target, so the
