@@ -419,6 +419,7 @@ async fn call_grpc(
                     object_id: OBJECT_ID,
                     level: proto::Level::Small as i32,
                     view,
+                    mask_encoding: proto::MaskEncoding::Png as i32,
                     ..Default::default()
                 },
                 token,
