@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use common::archives::{colmap_files, zip_of};
 use common::object_store::s3_blobs;
-use common::postgres::fresh_database;
+use common::postgres::{free_port, fresh_database};
 use segsplat_scene::Level;
 use segsplat_scene::colmap::ColmapEncoding;
 use segsplat_scene::synthetic::SyntheticSpec;
@@ -21,13 +21,6 @@ use segsplat_service::store::Database;
 use serde_json::json;
 
 const WAIT: Duration = Duration::from_secs(400);
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|listener| listener.local_addr())
-        .map(|addr| addr.port())
-        .unwrap()
-}
 
 /// A `segsplat` process, killed (SIGKILL) when dropped so a failing test leaves none behind.
 struct Process {

@@ -244,7 +244,7 @@ fn collect_keys(root: &Path, dir: &Path, keys: &mut Vec<String>) -> std::io::Res
     Ok(())
 }
 
-fn not_found_or_io(key: &str, source: std::io::Error) -> BlobError {
+pub(crate) fn not_found_or_io(key: &str, source: std::io::Error) -> BlobError {
     if source.kind() == std::io::ErrorKind::NotFound {
         BlobError::NotFound {
             key: key.to_string(),

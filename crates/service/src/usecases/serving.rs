@@ -10,6 +10,7 @@ use crate::serving::{
     EncodedMask, LoadedScene, MaskFormat, MaskView, ObjectMasks, SceneCache, ServingError,
     TrainedScene, encode_mask, object_ply,
 };
+use crate::store::blob::not_found_or_io;
 use crate::store::jobs::JobRecord;
 use crate::store::{BlobError, BlobStore, Caller, Database, StoreError};
 use segsplat_method::segment_then_splat::objects::ObjectSummary;
@@ -276,22 +277,13 @@ impl Serving {
         caller: &Caller,
         file: &str,
     ) -> Result<Vec<u8>, ServeFailure> {
-        if !DOWNLOADABLE_FILES.contains(&file) {
-            return Err(ServeFailure::UnknownFile(file.to_string()));
-        }
-        let job = self.serving_job(scene_id, caller).await?;
+        let (key, job_id) = self.trained_file_key(scene_id, caller, file).await?;
         let blobs = Arc::clone(&self.blobs);
         let file = file.to_string();
         blocking(move || {
-            let key = format!("{}/{file}", output_prefix(&job.id));
-            blobs.get_bytes(&key).map_err(|error| match error {
-                BlobError::NotFound { .. } => ServeFailure::FileNotStored {
-                    file,
-                    job_id: job.id.clone(),
-                },
-                unavailable @ BlobError::Unavailable { .. } => ServeFailure::Blobs(unavailable),
-                other => ServeFailure::Worker(other.to_string()),
-            })
+            blobs
+                .get_bytes(&key)
+                .map_err(|error| trained_file_failure(error, &file, &job_id))
         })
         .await
     }
@@ -306,26 +298,14 @@ impl Serving {
         caller: &Caller,
         file: &str,
     ) -> Result<OpenedFile, ServeFailure> {
-        if !DOWNLOADABLE_FILES.contains(&file) {
-            return Err(ServeFailure::UnknownFile(file.to_string()));
-        }
-        let job = self.serving_job(scene_id, caller).await?;
+        let (key, job_id) = self.trained_file_key(scene_id, caller, file).await?;
         let blobs = Arc::clone(&self.blobs);
         let scratch_dir = self.scratch_dir.clone();
         let file = file.to_string();
         blocking(move || {
-            let key = format!("{}/{file}", output_prefix(&job.id));
-            let not_stored = |file: String| ServeFailure::FileNotStored {
-                file,
-                job_id: job.id.clone(),
-            };
             let opened = match blobs.local_path(&key) {
-                Some(path) => std::fs::File::open(&path).map_err(|error| {
-                    if error.kind() == std::io::ErrorKind::NotFound {
-                        not_stored(file.clone())
-                    } else {
-                        ServeFailure::Worker(format!("cannot open {key}: {error}"))
-                    }
+                Some(path) => std::fs::File::open(&path).map_err(|source| {
+                    trained_file_failure(not_found_or_io(&key, source), &file, &job_id)
                 })?,
                 None => {
                     std::fs::create_dir_all(&scratch_dir).map_err(|error| {
@@ -336,21 +316,14 @@ impl Serving {
                         crate::store::process_tag::process_tag(),
                         uuid::Uuid::new_v4().simple()
                     ));
-                    let fetched = blobs.get_to_path(&key, &staged);
-                    let opened = fetched.and_then(|()| {
+                    let opened = blobs.get_to_path(&key, &staged).and_then(|()| {
                         std::fs::File::open(&staged).map_err(|source| BlobError::Io {
                             key: key.clone(),
                             source,
                         })
                     });
                     let _ = std::fs::remove_file(&staged);
-                    opened.map_err(|error| match error {
-                        BlobError::NotFound { .. } => not_stored(file.clone()),
-                        unavailable @ BlobError::Unavailable { .. } => {
-                            ServeFailure::Blobs(unavailable)
-                        }
-                        other => ServeFailure::Worker(other.to_string()),
-                    })?
+                    opened.map_err(|error| trained_file_failure(error, &file, &job_id))?
                 }
             };
             let len = opened
@@ -360,6 +333,20 @@ impl Serving {
             Ok(OpenedFile { file: opened, len })
         })
         .await
+    }
+
+    /// The blob key of `file` among the outputs of the scene's serving job, and that job's id.
+    async fn trained_file_key(
+        &self,
+        scene_id: &str,
+        caller: &Caller,
+        file: &str,
+    ) -> Result<(String, String), ServeFailure> {
+        if !DOWNLOADABLE_FILES.contains(&file) {
+            return Err(ServeFailure::UnknownFile(file.to_string()));
+        }
+        let job = self.serving_job(scene_id, caller).await?;
+        Ok((format!("{}/{file}", output_prefix(&job.id)), job.id))
     }
 
     /// One object's Gaussians as their own PLY.
@@ -377,6 +364,18 @@ impl Serving {
             Ok(object_ply(&trained.model, level, object_id)?)
         })
         .await
+    }
+}
+
+/// A trained file that could not be read: not stored, the store down, or another failure.
+fn trained_file_failure(error: BlobError, file: &str, job_id: &str) -> ServeFailure {
+    match error {
+        BlobError::NotFound { .. } => ServeFailure::FileNotStored {
+            file: file.to_string(),
+            job_id: job_id.to_string(),
+        },
+        unavailable @ BlobError::Unavailable { .. } => ServeFailure::Blobs(unavailable),
+        other => ServeFailure::Worker(other.to_string()),
     }
 }
 
