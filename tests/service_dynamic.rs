@@ -289,6 +289,32 @@ async fn a_moving_scene_is_segmented_and_queried_in_time() {
     let rest = centroid_at(&end);
     assert!((grpc_centroid.y - rest[1]).abs() < 1e-5);
 
+    // gRPC tells a robot the scene is dynamic and each camera's normalised time.
+    let described = grpc
+        .get_scene(proto::GetSceneRequest {
+            scene_id: scene_id.clone(),
+        })
+        .await
+        .expect("scene")
+        .into_inner();
+    assert!(described.dynamic);
+    assert!(described.time_count > 1, "{described:?}");
+    let grpc_cameras = grpc
+        .list_cameras(proto::ListCamerasRequest {
+            scene_id: scene_id.clone(),
+        })
+        .await
+        .expect("cameras")
+        .into_inner()
+        .cameras;
+    let stored = cameras.as_array().expect("cameras.json is a list");
+    assert_eq!(grpc_cameras.len(), stored.len());
+    for (camera, json) in grpc_cameras.iter().zip(stored) {
+        let time = camera.time.expect("a dynamic scene's frames have times");
+        assert!((0.0..=1.0).contains(&time));
+        assert!((time - json["time"].as_f64().unwrap()).abs() < 1e-6);
+    }
+
     // gRPC RenderMask for a (pose, t) pair: a held-out frame's camera as a pose at that frame's
     // time gives the frame's mask; the same pose at another time does not.
     let frame = 19;

@@ -323,8 +323,69 @@ async fn masks_and_exports_of_a_trained_scene() {
         );
     }
 
-    // gRPC RenderMask: the same mask as REST, as PNG bytes.
+    // gRPC has what a robot needs to pick a view: the cameras (as `cameras.json`) and the
+    // scene's frame sizes and time facts.
     let mut grpc = client.grpc().await;
+    let listed = grpc
+        .list_cameras(proto::ListCamerasRequest {
+            scene_id: scene_id.clone(),
+        })
+        .await
+        .unwrap()
+        .into_inner()
+        .cameras;
+    let stored = &cameras;
+    assert_eq!(listed.len(), stored.len());
+    for (index, (camera, json)) in listed.iter().zip(stored).enumerate() {
+        assert_eq!(camera.frame_index as usize, index);
+        assert_eq!(camera.name, json["name"].as_str().unwrap());
+        let intrinsics = camera.intrinsics.as_ref().unwrap();
+        assert_eq!((intrinsics.width, intrinsics.height), (80, 60));
+        assert_eq!(intrinsics.fx, json["fx"].as_f64().unwrap());
+        let pose = &camera.pose.as_ref().unwrap().camera_to_world;
+        // Stored as f32: the gRPC doubles are those f32 values exactly.
+        let json_pose: Vec<f32> = json["camera_to_world"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|row| row.as_array().unwrap().iter())
+            .map(|v| v.as_f64().unwrap() as f32)
+            .collect();
+        let grpc_pose: Vec<f32> = pose.iter().map(|&v| v as f32).collect();
+        assert_eq!(grpc_pose, json_pose);
+        assert_eq!(camera.time, None, "a static scene's frames have no time");
+    }
+    let described = grpc
+        .get_scene(proto::GetSceneRequest {
+            scene_id: scene_id.clone(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(
+        (
+            described.dynamic,
+            described.time_count,
+            described.resolutions
+        ),
+        (
+            false,
+            0,
+            vec![proto::FrameSize {
+                width: 80,
+                height: 60
+            }]
+        )
+    );
+    let unknown = grpc
+        .list_cameras(proto::ListCamerasRequest {
+            scene_id: "no-such-scene".into(),
+        })
+        .await
+        .unwrap_err();
+    assert_eq!(unknown.code(), tonic::Code::NotFound, "{unknown}");
+
+    // gRPC RenderMask: the same mask as REST, as PNG bytes.
     let frame_view = proto::View {
         source: Some(proto::view::Source::FrameIndex(6)),
         time: None,

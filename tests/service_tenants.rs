@@ -439,6 +439,10 @@ async fn call_grpc(
             .get_scene(with_token(proto::GetSceneRequest { scene_id }, token))
             .await
             .map(|answer| format!("{:?}", answer.into_inner())),
+        "ListCameras" => client
+            .list_cameras(with_token(proto::ListCamerasRequest { scene_id }, token))
+            .await
+            .map(|answer| format!("{:?}", answer.into_inner())),
         "ListScenes" => client
             .list_scenes(with_token(proto::ListScenesRequest {}, token))
             .await
@@ -454,9 +458,10 @@ async fn every_grpc_method_keeps_tenants_apart() {
     let beta = owned_by(&service, BETA).await;
     let mut client = service.grpc().await;
     let methods = grpc_methods();
-    assert_eq!(methods.len(), 7, "{methods:?}");
+    assert_eq!(methods.len(), 8, "{methods:?}");
     for method in &methods {
-        let lists = method.starts_with("List") && method != "ListObjects";
+        let lists = method.starts_with("List")
+            && !["ListObjects", "ListCameras"].contains(&method.as_str());
         match call_grpc(&mut client, method, &alpha, BETA).await {
             Ok(answer) => {
                 assert!(

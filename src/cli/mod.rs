@@ -4,6 +4,7 @@
 pub mod bench;
 pub mod eval;
 pub mod export;
+pub mod interrupt;
 pub mod local;
 pub mod models;
 pub mod query;

@@ -5,11 +5,15 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
+use std::time::Duration;
+
+use indicatif::{HumanDuration, ProgressBar, ProgressState, ProgressStyle};
 use segsplat_engine::checkpoint::Checkpoint;
 use segsplat_engine::deform::{DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE, DeformationConfig};
 use segsplat_engine::train::{TrainConfig, Trainer, TrainerMeta};
 use segsplat_method::scene_files::{ReconstructMetrics, write_scene_files};
+
+use super::interrupt::{INTERRUPTED_EXIT_CODE, Interrupt};
 
 #[derive(Args)]
 pub struct TrainArgs {
@@ -77,13 +81,20 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         eprintln!("warning: {warning}");
     }
     let total = trainer.config().steps;
+    let resumed_from = trainer.step();
     let bar = ProgressBar::new(total as u64).with_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} steps  {msg}  [{elapsed} < {eta}]")
+            .map(|style| style.with_key("eta", session_eta(resumed_from)))
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    bar.set_position(trainer.step() as u64);
+    bar.set_position(resumed_from as u64);
+    let interrupt = Interrupt::install()?;
+    eprintln!(
+        "training steps {resumed_from}..{total}; Ctrl-C stops with a checkpoint in {}",
+        checkpoint_path.display()
+    );
     let started = std::time::Instant::now();
-    while trainer.step() < total {
+    while trainer.step() < total && !interrupt.requested() {
         let next = match args.checkpoint_every {
             0 => total,
             every => (trainer.step() / every + 1) * every,
@@ -94,9 +105,20 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
                 "loss {:.4}  {} Gaussians  {:.1} steps/s",
                 progress.loss, progress.gaussians, progress.steps_per_sec
             ));
-            true
+            !interrupt.requested()
         })?;
         trainer.checkpoint()?.save(&checkpoint_path)?;
+    }
+    if interrupt.requested() {
+        bar.abandon();
+        eprintln!(
+            "stopped at step {} of {total}; checkpoint written to {}\nresume with: segsplat train {} --out {} --resume",
+            trainer.step(),
+            checkpoint_path.display(),
+            args.dataset.display(),
+            args.out.display()
+        );
+        std::process::exit(INTERRUPTED_EXIT_CODE);
     }
     bar.finish();
     let train_seconds = started.elapsed().as_secs_f64();
@@ -129,4 +151,56 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         args.out.join("scene.ply").display()
     );
     Ok(())
+}
+
+/// The `{eta}` of the bar, from this session's rate alone: after `--resume` the bar starts at
+/// the checkpoint's step, and indicatif's own estimate would count those steps as done in the
+/// first instant.
+fn session_eta(
+    resumed_from: u32,
+) -> impl Fn(&ProgressState, &mut dyn std::fmt::Write) + Send + Sync + Clone + 'static {
+    move |state, out| {
+        let remaining = remaining_time(
+            state.pos(),
+            state.len().unwrap_or(0),
+            u64::from(resumed_from),
+            state.elapsed(),
+        );
+        let _ = match remaining {
+            Some(eta) => write!(out, "{}", HumanDuration(eta)),
+            None => write!(out, "?"),
+        };
+    }
+}
+
+/// Time left at this session's rate: `done_now - resumed_from` steps took `elapsed`.
+fn remaining_time(
+    position: u64,
+    length: u64,
+    resumed_from: u64,
+    elapsed: Duration,
+) -> Option<Duration> {
+    let done = position
+        .checked_sub(resumed_from)
+        .filter(|&done| done > 0)?;
+    let left = length.saturating_sub(position);
+    Some(elapsed.mul_f64(left as f64 / done as f64))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn resumed_steps_do_not_count_as_done_this_session() {
+        // Resumed at 900 of 1000; 50 steps took 10 s: 50 left take 10 s more.
+        let eta = remaining_time(950, 1000, 900, Duration::from_secs(10));
+        assert_eq!(eta, Some(Duration::from_secs(10)));
+        // Nothing done yet this session: no estimate rather than a wrong one.
+        assert_eq!(remaining_time(900, 1000, 900, Duration::from_secs(3)), None);
+        assert_eq!(
+            remaining_time(100, 1000, 0, Duration::from_secs(1)),
+            Some(Duration::from_secs(9))
+        );
+    }
 }

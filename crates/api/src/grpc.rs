@@ -13,6 +13,7 @@ use crate::proto;
 use crate::proto::scene_query_server::SceneQuery;
 use segsplat_scene::Level;
 use segsplat_service::core::ServiceCore;
+use segsplat_service::serving::SceneCamera;
 use segsplat_service::serving::{
     EncodedMask, EncodedMaskData, MaskFormat, MaskView, PinholeIntrinsics, ServingError,
 };
@@ -408,9 +409,41 @@ fn scene_to_proto(scene: SceneRecord) -> proto::Scene {
         frame_count: scene.summary.frame_count,
         sparse_point_count: scene.summary.sparse_point_count,
         has_masks: !scene.summary.mask_levels.is_empty(),
+        dynamic: scene.summary.time_count > 0,
+        time_count: scene.summary.time_count,
+        resolutions: scene
+            .summary
+            .resolutions
+            .iter()
+            .map(|&[width, height]| proto::FrameSize { width, height })
+            .collect(),
         id: scene.id,
         name: scene.name,
         created_at_ms: scene.created_at_ms,
+    }
+}
+
+fn camera_to_proto(frame_index: usize, camera: SceneCamera) -> proto::Camera {
+    proto::Camera {
+        frame_index: u32::try_from(frame_index).unwrap_or(u32::MAX),
+        pose: Some(proto::Pose {
+            camera_to_world: camera
+                .camera_to_world
+                .iter()
+                .flatten()
+                .map(|&value| f64::from(value))
+                .collect(),
+        }),
+        intrinsics: Some(proto::Intrinsics {
+            fx: camera.fx,
+            fy: camera.fy,
+            cx: camera.cx,
+            cy: camera.cy,
+            width: camera.width,
+            height: camera.height,
+        }),
+        time: camera.time.map(f64::from),
+        name: camera.name,
     }
 }
 
@@ -614,6 +647,27 @@ impl SceneQuery for SceneQueryService {
             .map_err(scene_failure_status)?;
         Ok(Response::new(proto::ListScenesResponse {
             scenes: records.into_iter().map(scene_to_proto).collect(),
+        }))
+    }
+
+    async fn list_cameras(
+        &self,
+        request: Request<proto::ListCamerasRequest>,
+    ) -> Result<Response<proto::ListCamerasResponse>, Status> {
+        let caller = grpc_caller(&request)?;
+        let scene_id = request.into_inner().scene_id;
+        let cameras = self
+            .core
+            .serving
+            .cameras(&scene_id, &caller)
+            .await
+            .map_err(serve_failure_status)?;
+        Ok(Response::new(proto::ListCamerasResponse {
+            cameras: cameras
+                .into_iter()
+                .enumerate()
+                .map(|(index, camera)| camera_to_proto(index, camera))
+                .collect(),
         }))
     }
 }

@@ -22,7 +22,7 @@ pub struct SceneCamera {
     pub cy: f64,
     /// Camera-to-world, row-major 4x4, OpenCV axes (x right, y down, z forward).
     pub camera_to_world: [[f32; 4]; 4],
-    /// Capture time in seconds (dynamic scenes).
+    /// Normalised capture time, 0..1 over the dataset (dynamic scenes).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub time: Option<f32>,
 }

@@ -14,7 +14,7 @@ pub use object_export::{object_model, object_ply};
 pub use scene_cache::{CacheStats, LoadedScene, ObjectMasks, SceneCache};
 pub use segsplat_method::cameras::{CAMERAS_FILE, SceneCamera, scene_cameras};
 pub use segsplat_method::scene_files::{LABELS_FILE, SCENE_FILE};
-pub use trained_scene::TrainedScene;
+pub use trained_scene::{TrainedScene, parse_cameras};
 pub use view::{DEFAULT_MAX_MASK_SIDE, MaskView, PinholeIntrinsics};
 
 use segsplat_scene::Level;

@@ -166,6 +166,11 @@ impl SceneCache {
         Ok(gpu)
     }
 
+    /// The scene known as `key` when it is resident, without counting a hit or refreshing it.
+    pub fn peek(&self, key: &str) -> Option<Arc<LoadedScene>> {
+        lock(&self.resident).scenes.peek(key).cloned()
+    }
+
     /// The scene known as `key`, loading it with `load` (blocking) when it is not resident.
     pub fn get_or_load(
         &self,

@@ -12,6 +12,14 @@ use segsplat_engine::ply::read_ply;
 use segsplat_method::cameras::{CAMERAS_FILE, SceneCamera};
 use segsplat_method::scene_files::{LABELS_FILE, SCENE_FILE};
 
+/// Reads a stored `cameras.json`.
+pub fn parse_cameras(bytes: &[u8]) -> Result<Vec<SceneCamera>, ServingError> {
+    serde_json::from_slice(bytes).map_err(|error| ServingError::Corrupt {
+        file: CAMERAS_FILE.to_string(),
+        problem: error.to_string(),
+    })
+}
+
 #[derive(Debug, Clone)]
 pub struct TrainedScene {
     /// Gaussians with their object ids filled from the labels.
@@ -54,13 +62,7 @@ impl TrainedScene {
                 file: LABELS_FILE.to_string(),
                 problem: error.to_string(),
             })?;
-        let cameras: Vec<SceneCamera> =
-            serde_json::from_slice(&read(CAMERAS_FILE)?).map_err(|error| {
-                ServingError::Corrupt {
-                    file: CAMERAS_FILE.to_string(),
-                    problem: error.to_string(),
-                }
-            })?;
+        let cameras = parse_cameras(&read(CAMERAS_FILE)?)?;
         let deformation = match read(DEFORMATION_FILE) {
             Ok(header) => {
                 let weights = read(DEFORMATION_WEIGHTS_FILE)?;

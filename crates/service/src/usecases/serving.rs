@@ -8,11 +8,12 @@ use crate::job_kinds::segment_then_splat::KIND as SEGMENT_THEN_SPLAT;
 use crate::jobs::job_output_prefix as output_prefix;
 use crate::serving::{
     EncodedMask, LoadedScene, MaskFormat, MaskView, ObjectMasks, SceneCache, ServingError,
-    TrainedScene, encode_mask, object_ply,
+    TrainedScene, encode_mask, object_ply, parse_cameras,
 };
 use crate::store::blob::not_found_or_io;
 use crate::store::jobs::JobRecord;
 use crate::store::{BlobError, BlobStore, Caller, Database, StoreError};
+use segsplat_method::cameras::{CAMERAS_FILE, SceneCamera};
 use segsplat_method::segment_then_splat::objects::ObjectSummary;
 use segsplat_scene::Level;
 
@@ -286,6 +287,22 @@ impl Serving {
                 .map_err(|error| trained_file_failure(error, &file, &job_id))
         })
         .await
+    }
+
+    /// The cameras of the scene's served version, in frame order (what a frame index means).
+    /// Read from the loaded scene when it is in the cache, else from its stored `cameras.json`
+    /// (so asking for cameras never loads Gaussians onto the GPU).
+    pub async fn cameras(
+        &self,
+        scene_id: &str,
+        caller: &Caller,
+    ) -> Result<Vec<SceneCamera>, ServeFailure> {
+        let job = self.serving_job(scene_id, caller).await?;
+        if let Some(loaded) = self.cache.peek(&job.id) {
+            return Ok(loaded.cameras.clone());
+        }
+        let bytes = self.trained_file(scene_id, caller, CAMERAS_FILE).await?;
+        Ok(parse_cameras(&bytes)?)
     }
 
     /// A trained file of the scene's serving job, opened for streaming. From the local blob
