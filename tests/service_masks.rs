@@ -79,7 +79,7 @@ fn true_mask(
 async fn masks_and_exports_of_a_trained_scene() {
     let data = tempfile::tempdir().unwrap();
     let Some(client) =
-        TestService::start_on_gpu(data.path(), |config| config.query.max_mask_side = 512).await
+        TestService::start_on_gpu(data.path(), |config| config.query.max_mask_side = 4096).await
     else {
         return;
     };
@@ -202,6 +202,40 @@ async fn masks_and_exports_of_a_trained_scene() {
     assert_eq!(decode_mask(&half["masks"][0]["mask"]).width(), 40);
     assert!(half["masks"][0].get("visible_mask").is_none());
 
+    // A mask at the service's largest side: 4096 x 3072 RGBA f32 needs more than one storage
+    // binding holds on the software adapter (128 MiB), so it is rendered in bands of rows. Its
+    // pixels agree with the frame-sized mask at the matching pixel centres.
+    let scale = 4096.0 / camera["width"].as_f64().unwrap();
+    let mut large_view = pose_view.clone();
+    for key in ["fx", "fy", "cx", "cy"] {
+        large_view["intrinsics"][key] = serde_json::json!(camera[key].as_f64().unwrap() * scale);
+    }
+    large_view["intrinsics"]["width"] = serde_json::json!(4096);
+    large_view["intrinsics"]["height"] = serde_json::json!(3072);
+    let (status, large) = client
+        .post_json(
+            &masks_path,
+            serde_json::json!({"objects": small_one, "view": large_view, "mask_format": "png"}),
+        )
+        .await;
+    assert_eq!(status, 200, "{large}");
+    let large = decode_mask(&large["masks"][0]["mask"]);
+    assert_eq!((large.width(), large.height()), (4096, 3072));
+    let small = decode_mask(&by_frame["masks"][0]["mask"]);
+    let mut agree = 0;
+    for v in 0..small.height() {
+        for u in 0..small.width() {
+            let big_u = ((f64::from(u) + 0.5) * scale) as u32;
+            let big_v = ((f64::from(v) + 0.5) * scale) as u32;
+            agree += usize::from(small.get(u, v) == large.get(big_u, big_v));
+        }
+    }
+    let pixels = (small.width() * small.height()) as usize;
+    assert!(
+        agree * 100 >= pixels * 97,
+        "{agree} of {pixels} pixels agree"
+    );
+
     // The PNG endpoint.
     let (status, png) = client
         .get_bytes(&format!(
@@ -263,7 +297,7 @@ async fn masks_and_exports_of_a_trained_scene() {
                 view
             }),
             400,
-            "512",
+            "4096",
         ),
     ];
     for (body, expected_status, words) in bad {

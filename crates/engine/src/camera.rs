@@ -26,6 +26,10 @@ pub struct RenderCamera {
     /// Gaussians whose camera depth is at or below `near` (or at or beyond `far`) are culled.
     pub near: f32,
     pub far: f32,
+    /// The image whose field of view the projection's Jacobian is clamped to (x/z and y/z within
+    /// [`crate::FRUSTUM_SLACK`] times its half-extent), as `[width, height]`; `None` is this
+    /// image. A band of a larger image keeps the whole image's, so it sees the same splats.
+    pub clamp_to: Option<[u32; 2]>,
 }
 
 /// Near plane used for frames (3DGS / gsplat default).
@@ -72,6 +76,7 @@ impl RenderCamera {
             camera_from_world: frame.world_from_camera.inverse(),
             near: DEFAULT_NEAR,
             far: DEFAULT_FAR,
+            clamp_to: None,
         };
         if !(camera.fx > 0.0 && camera.fy > 0.0) {
             return Err(invalid(format!(
@@ -97,6 +102,33 @@ impl RenderCamera {
 
     pub fn pixel_count(&self) -> usize {
         self.width as usize * self.height as usize
+    }
+
+    /// The camera of rows `top .. top + rows` of this image: the same rays, with the principal
+    /// point moved up by `top`, so each of its pixels sees exactly what that pixel of the whole
+    /// image sees. Large images are rendered as such bands to stay within one storage binding.
+    pub fn band(&self, top: u32, rows: u32) -> Self {
+        Self {
+            height: rows,
+            cy: self.cy - top as f32,
+            clamp_to: Some(self.clamp_size()),
+            ..*self
+        }
+    }
+
+    /// The `[width, height]` the Jacobian's clamp follows (see [`Self::clamp_to`]).
+    pub fn clamp_size(&self) -> [u32; 2] {
+        self.clamp_to.unwrap_or([self.width, self.height])
+    }
+
+    /// Where x/z and y/z are clamped in the projection's Jacobian: [`crate::FRUSTUM_SLACK`]
+    /// times the tangent of the half field of view of [`Self::clamp_size`]'s image.
+    pub fn jacobian_limit(&self) -> [f32; 2] {
+        let [width, height] = self.clamp_size();
+        [
+            crate::FRUSTUM_SLACK * (0.5 * width as f32 / self.fx),
+            crate::FRUSTUM_SLACK * (0.5 * height as f32 / self.fy),
+        ]
     }
 }
 

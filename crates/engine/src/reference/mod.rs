@@ -127,6 +127,8 @@ pub struct ReferenceCamera {
     pub position: DVec3,
     pub near: f64,
     pub far: f64,
+    /// Where the Jacobian clamps x/z and y/z ([`RenderCamera::jacobian_limit`]).
+    pub jacobian_limit: [f64; 2],
 }
 
 impl ReferenceCamera {
@@ -146,6 +148,7 @@ impl ReferenceCamera {
             position: m.inverse().w_axis.truncate(),
             near: camera.near as f64,
             far: camera.far as f64,
+            jacobian_limit: camera.jacobian_limit().map(f64::from),
         }
     }
 

@@ -7,7 +7,7 @@ use glam::{DMat2, DMat3, DVec2, DVec3};
 
 use super::sh;
 use super::{ReferenceCamera, ReferenceGaussians};
-use crate::{ALPHA_MIN, COVARIANCE_DILATION, FRUSTUM_SLACK, RADIUS_SIGMAS, RenderSettings};
+use crate::{ALPHA_MIN, COVARIANCE_DILATION, RADIUS_SIGMAS, RenderSettings};
 
 /// A Gaussian as the rasteriser sees it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -100,11 +100,7 @@ fn geometry(gaussians: &ReferenceGaussians, index: usize, camera: &ReferenceCame
     let covariance_camera = w * covariance * w.transpose();
 
     let z = mean_camera.z;
-    let tan_fov = [
-        0.5 * camera.width as f64 / camera.fx,
-        0.5 * camera.height as f64 / camera.fy,
-    ];
-    let limit = tan_fov.map(|t| FRUSTUM_SLACK as f64 * t);
+    let limit = camera.jacobian_limit;
     let ratio = [mean_camera.x / z, mean_camera.y / z];
     let clamped = [
         ratio[0].clamp(-limit[0], limit[0]),

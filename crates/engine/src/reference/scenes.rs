@@ -21,6 +21,7 @@ pub fn test_camera(width: u32, height: u32) -> RenderCamera {
         camera_from_world: Mat4::IDENTITY,
         near: 0.01,
         far: 100.0,
+        clamp_to: None,
     }
 }
 

@@ -4,7 +4,7 @@ use bytemuck::{Pod, Zeroable};
 
 use crate::{ObjectFilter, RenderCamera, RenderSettings};
 
-/// `RenderUniforms` of `crates/engine/src/render/shaders/project_common.wgsl` (160 bytes, std140-compatible); a test
+/// `RenderUniforms` of `crates/engine/src/render/shaders/project_common.wgsl` (176 bytes, std140-compatible); a test
 /// parses the shader and checks every field's offset and the size.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
@@ -24,6 +24,9 @@ pub struct RenderUniforms {
     pub filter_id: u32,
     pub filter_enabled: u32,
     pub intersection_capacity: u32,
+    /// [`RenderCamera::jacobian_limit`].
+    pub jacobian_limit: [f32; 2],
+    pub padding: [u32; 2],
 }
 
 impl RenderUniforms {
@@ -55,6 +58,8 @@ impl RenderUniforms {
             filter_id,
             filter_enabled,
             intersection_capacity,
+            jacobian_limit: camera.jacobian_limit(),
+            padding: [0; 2],
         }
     }
 }
@@ -64,8 +69,8 @@ mod tests {
     use super::*;
 
     #[test]
-    fn uniform_block_is_160_bytes() {
-        assert_eq!(std::mem::size_of::<RenderUniforms>(), 160);
+    fn uniform_block_is_176_bytes() {
+        assert_eq!(std::mem::size_of::<RenderUniforms>(), 176);
     }
 
     /// Offsets and size of the struct `name` as WGSL lays it out in `source`.
@@ -131,6 +136,11 @@ mod tests {
                 "intersection_capacity",
                 std::mem::offset_of!(RenderUniforms, intersection_capacity),
             ),
+            (
+                "jacobian_limit",
+                std::mem::offset_of!(RenderUniforms, jacobian_limit),
+            ),
+            ("padding", std::mem::offset_of!(RenderUniforms, padding)),
         ];
         let host: Vec<(String, u32)> = host
             .iter()

@@ -115,11 +115,70 @@ const MIN_ALPHA_FOR_DEPTH: f32 = 1e-3;
 /// scene's depth there (soft edges blend depths slightly).
 const VISIBLE_DEPTH_TOLERANCE: f32 = 0.03;
 
-/// Renders `filter`'s Gaussians (the whole scene, or one object) from `camera`.
+/// Bytes per pixel of the largest per-pixel buffer a render binds (the RGBA f32 image).
+const IMAGE_BYTES_PER_PIXEL: u64 = 16;
+/// Bands start on tile rows (16 pixels), so no band splits a tile.
+const BAND_ROW_MULTIPLE: u32 = 16;
+/// Pixels of one band at most, whatever the adapter allows: keeps a band's tile-intersection
+/// list (which grows with the pixels covered) well inside one binding too.
+const MAX_BAND_PIXELS: u64 = 4 << 20;
+
+/// Renders `filter`'s Gaussians (the whole scene, or one object) from `camera`: in one pass
+/// when the image fits the adapter's storage bindings, else in bands of rows (any mask size up
+/// to the service's limit works on any adapter, e.g. lavapipe's 128 MiB bindings).
 pub fn render_layer<'g>(
     ctx: &GpuContext,
     renderer: &mut Renderer,
     gaussians: impl Into<GaussianView<'g>>,
+    camera: &RenderCamera,
+    filter: ObjectFilter,
+) -> Result<RenderedLayer, RenderError> {
+    let rows = band_rows(camera.width, ctx.limits.max_storage_buffer_binding_size);
+    render_layer_in_bands(ctx, renderer, gaussians, camera, filter, rows)
+}
+
+/// Rows per band for an image `width` pixels wide, given the adapter's largest binding.
+pub fn band_rows(width: u32, binding_limit_bytes: u64) -> u32 {
+    let row_bytes = u64::from(width.max(1)) * IMAGE_BYTES_PER_PIXEL;
+    let rows = (binding_limit_bytes / row_bytes).min(MAX_BAND_PIXELS / u64::from(width.max(1)));
+    let rows = u32::try_from(rows).unwrap_or(u32::MAX);
+    if rows >= BAND_ROW_MULTIPLE {
+        rows / BAND_ROW_MULTIPLE * BAND_ROW_MULTIPLE
+    } else {
+        rows.max(1)
+    }
+}
+
+/// [`render_layer`] in bands of at most `band_rows` rows, stacked into one layer.
+pub fn render_layer_in_bands<'g>(
+    ctx: &GpuContext,
+    renderer: &mut Renderer,
+    gaussians: impl Into<GaussianView<'g>>,
+    camera: &RenderCamera,
+    filter: ObjectFilter,
+    band_rows: u32,
+) -> Result<RenderedLayer, RenderError> {
+    let gaussians: GaussianView<'g> = gaussians.into();
+    let band_rows = band_rows.max(1);
+    let mut layer = RenderedLayer {
+        alpha: Vec::with_capacity(camera.pixel_count()),
+        depth: Vec::with_capacity(camera.pixel_count()),
+    };
+    let mut top = 0;
+    while top < camera.height {
+        let rows = band_rows.min(camera.height - top);
+        let band = render_band(ctx, renderer, gaussians, &camera.band(top, rows), filter)?;
+        layer.alpha.extend(band.alpha);
+        layer.depth.extend(band.depth);
+        top += rows;
+    }
+    Ok(layer)
+}
+
+fn render_band(
+    ctx: &GpuContext,
+    renderer: &mut Renderer,
+    gaussians: GaussianView<'_>,
     camera: &RenderCamera,
     filter: ObjectFilter,
 ) -> Result<RenderedLayer, RenderError> {

@@ -141,6 +141,7 @@ fn pose_camera(
         camera_from_world: world_from_camera.inverse(),
         near: DEFAULT_NEAR,
         far: DEFAULT_FAR,
+        clamp_to: None,
     })
 }
 

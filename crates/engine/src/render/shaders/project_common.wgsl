@@ -13,7 +13,6 @@ const ALPHA_MIN: f32 = 0.003921568627451; // 1 / 255
 const ALPHA_MAX: f32 = 0.99;
 const TRANSMITTANCE_MIN: f32 = 0.0001;
 const COVARIANCE_DILATION: f32 = 0.3;
-const FRUSTUM_SLACK: f32 = 1.3;
 const RADIUS_SIGMAS: f32 = 3.0;
 const CULLED_KEY: u32 = 0xffffffffu;
 
@@ -33,6 +32,10 @@ struct RenderUniforms {
     filter_id: u32,
     filter_enabled: u32,
     intersection_capacity: u32,
+    // FRUSTUM_SLACK x the half field of view the Jacobian clamps to (the whole image's, for a
+    // band of one): RenderCamera::jacobian_limit.
+    jacobian_limit: vec2<f32>,
+    padding: vec2<u32>,
 }
 
 // Flat invocation index of a 1D workload split over x and y workgroups (see `workgroups_2d`).
@@ -73,8 +76,7 @@ struct Jacobian {
 }
 
 fn perspective_jacobian(u: RenderUniforms, p: vec3<f32>) -> Jacobian {
-    let tan_fov = 0.5 * vec2<f32>(u.image_size) / u.focal;
-    let limit = FRUSTUM_SLACK * tan_fov;
+    let limit = u.jacobian_limit;
     let ratio = p.xy / p.z;
     let clamped = clamp(ratio, -limit, limit);
     let t = clamped * p.z;
