@@ -343,7 +343,27 @@ async fn masks_and_exports_of_a_trained_scene() {
         objects["objects"][0]["gaussian_count"], in_object as u64,
         "{objects}"
     );
+    // The same as compressed SPZ, read by a reader the project did not write (`spz_rs`).
+    let (status, scene_spz) = client
+        .get_bytes(&format!("/v1/scenes/{scene_id}/trained/scene.spz"))
+        .await;
+    assert_eq!(status, 200);
+    let packed = spz_rs::load_packed_gaussians_from_spz_buffer(scene_spz.as_slice()).unwrap();
+    assert_eq!(packed.num_points, scene_model.len());
+    assert!(
+        scene_spz.len() * 4 < ply.len(),
+        "{} vs {}",
+        scene_spz.len(),
+        ply.len()
+    );
+    let (status, object_spz) = client
+        .get_bytes(&format!("/v1/scenes/{scene_id}/objects/middle/1/spz"))
+        .await;
+    assert_eq!(status, 200);
+    let packed = spz_rs::load_packed_gaussians_from_spz_buffer(object_spz.as_slice()).unwrap();
+    assert_eq!(packed.num_points, in_object);
     for (path, expected) in [
+        (format!("/v1/scenes/{scene_id}/objects/middle/77/spz"), 404),
         (format!("/v1/scenes/{scene_id}/trained/secrets.txt"), 404),
         (format!("/v1/scenes/{scene_id}/objects/middle/77/ply"), 404),
         (format!("/v1/scenes/{scene_id}/objects/huge/1/ply"), 400),
@@ -514,18 +534,25 @@ fn local_commands_read_the_service_data(
 ) {
     let data = data_dir.to_str().unwrap();
     let work = tempfile::tempdir().unwrap();
-    let export_dir = work.path().join("export");
-    let output = segsplat(&[
-        "export",
-        scene_id,
-        "--data-dir",
-        data,
-        "--out",
-        export_dir.to_str().unwrap(),
-        "--object",
-        "middle:1",
-    ]);
-    assert!(output.status.success(), "{output:?}");
+    // `segsplat export` of the scene and object middle:1 into `folder`, in `format`.
+    let export = |folder: &str, format: &str| {
+        let dir = work.path().join(folder);
+        let output = segsplat(&[
+            "export",
+            scene_id,
+            "--data-dir",
+            data,
+            "--out",
+            dir.to_str().unwrap(),
+            "--object",
+            "middle:1",
+            "--format",
+            format,
+        ]);
+        assert!(output.status.success(), "{output:?}");
+        dir
+    };
+    let export_dir = export("export", "ply");
     for file in [
         "scene.ply",
         "labels.npy",
@@ -540,6 +567,14 @@ fn local_commands_read_the_service_data(
         read_ply(object.as_slice()).unwrap().model.len(),
         middle_one_gaussians
     );
+    let spz_dir = export("export-spz", "spz");
+    assert!(!spz_dir.join("scene.ply").exists());
+    for file in ["scene.spz", "middle-1.spz", "labels.npy"] {
+        assert!(spz_dir.join(file).is_file(), "{file}");
+    }
+    let object = std::fs::read(spz_dir.join("middle-1.spz")).unwrap();
+    let packed = spz_rs::load_packed_gaussians_from_spz_buffer(object.as_slice()).unwrap();
+    assert_eq!(packed.num_points, middle_one_gaussians);
     let output = segsplat(&["export", scene_id, "--data-dir", data, "--object", "tiny:1"]);
     assert!(!output.status.success());
     assert!(String::from_utf8_lossy(&output.stderr).contains("small, middle or large"));

@@ -1,6 +1,6 @@
-//! Downloads of a scene's trained version: the whole scene (`scene.ply`), the labels sidecar
-//! (`labels.npy`, object ids per Gaussian in PLY order), cameras and reports, and single objects
-//! as their own PLY.
+//! Downloads of a scene's trained version: the whole scene (`scene.ply`, or compressed
+//! `scene.spz`), the labels sidecar (`labels.npy`, object ids per Gaussian in PLY order), cameras
+//! and reports, and single objects as their own PLY or SPZ.
 
 use axum::Extension;
 use axum::extract::{Path as UrlPath, State};
@@ -10,7 +10,9 @@ use axum::response::{IntoResponse, Response};
 use super::error::{ApiResult, ErrorBody};
 use super::params::parse_level;
 use super::state::AppState;
+use segsplat_service::serving::SplatFormat;
 use segsplat_service::store::Caller;
+use segsplat_service::usecases::serving::SPZ_FILE;
 
 fn content_type(file: &str) -> &'static str {
     if file.ends_with(".json") {
@@ -36,8 +38,9 @@ fn attachment(name: &str, content_type: &'static str, bytes: Vec<u8>) -> Respons
 
 #[utoipa::path(get, path = "/v1/scenes/{id}/trained/{file}", tag = "objects",
     params(("id" = String, Path, description = "scene id"),
-           ("file" = String, Path, description = "scene.ply, labels.npy, cameras.json, \
-             objects.json, metrics.json or skipped_pairs.json")),
+           ("file" = String, Path, description = "scene.ply, scene.spz (compressed, encoded on \
+             request), labels.npy, cameras.json, objects.json, metrics.json, skipped_pairs.json, \
+             deformation.json or deformation.bin")),
     responses((status = 200, description = "the file", content_type = "application/octet-stream"),
               (status = 404, description = "unknown scene or file", body = ErrorBody),
               (status = 409, description = "the scene is not trained yet", body = ErrorBody)))]
@@ -46,6 +49,10 @@ pub async fn trained_file(
     Extension(caller): Extension<Caller>,
     UrlPath((id, file)): UrlPath<(String, String)>,
 ) -> ApiResult<Response> {
+    if file == SPZ_FILE {
+        let bytes = state.core.serving.scene_spz(&id, &caller).await?;
+        return Ok(attachment(&file, "application/octet-stream", bytes));
+    }
     let opened = state
         .core
         .serving
@@ -70,16 +77,41 @@ pub async fn trained_file(
               (status = 400, body = ErrorBody), (status = 404, body = ErrorBody),
               (status = 409, body = ErrorBody)))]
 pub async fn object_ply(
+    state: State<AppState>,
+    caller: Extension<Caller>,
+    path: UrlPath<(String, String, u32)>,
+) -> ApiResult<Response> {
+    object_file(state, caller, path, SplatFormat::Ply).await
+}
+
+#[utoipa::path(get, path = "/v1/scenes/{id}/objects/{level}/{object_id}/spz", tag = "objects",
+    params(("id" = String, Path, description = "scene id"),
+           ("level" = String, Path, description = "small, middle or large"),
+           ("object_id" = u32, Path, description = "object id at that level")),
+    responses((status = 200, description = "the object's Gaussians, compressed SPZ (version 2)",
+               content_type = "application/octet-stream"),
+              (status = 400, body = ErrorBody), (status = 404, body = ErrorBody),
+              (status = 409, body = ErrorBody)))]
+pub async fn object_spz(
+    state: State<AppState>,
+    caller: Extension<Caller>,
+    path: UrlPath<(String, String, u32)>,
+) -> ApiResult<Response> {
+    object_file(state, caller, path, SplatFormat::Spz).await
+}
+
+async fn object_file(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
     UrlPath((id, level, object_id)): UrlPath<(String, String, u32)>,
+    format: SplatFormat,
 ) -> ApiResult<Response> {
     let level = parse_level(&level)?;
     let bytes = state
         .core
         .serving
-        .object_ply(&id, &caller, level, object_id)
+        .object_export(&id, &caller, level, object_id, format)
         .await?;
-    let name = format!("{}-{object_id}.ply", level.name());
+    let name = format!("{}-{object_id}.{}", level.name(), format.extension());
     Ok(attachment(&name, "application/octet-stream", bytes))
 }

@@ -24,6 +24,7 @@ use super::{error, exports, jobs, masks, objects, ops, query, scenes, workers};
         masks::object_mask_png,
         exports::trained_file,
         exports::object_ply,
+        exports::object_spz,
         workers::list_workers,
         ops::healthz,
         ops::readyz,

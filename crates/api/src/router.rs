@@ -35,6 +35,10 @@ pub fn router(state: AppState) -> Router {
             "/v1/scenes/{id}/objects/{level}/{object_id}/ply",
             get(exports::object_ply),
         )
+        .route(
+            "/v1/scenes/{id}/objects/{level}/{object_id}/spz",
+            get(exports::object_spz),
+        )
         .route("/v1/scenes/{id}/trained/{file}", get(exports::trained_file))
         .route("/v1/jobs", get(jobs::list_jobs))
         .route("/v1/jobs/{id}", get(jobs::get_job))

@@ -18,6 +18,7 @@ pub mod ply;
 pub mod reference;
 pub mod render;
 pub mod schedule;
+pub mod spz;
 pub mod train;
 
 pub use camera::RenderCamera;

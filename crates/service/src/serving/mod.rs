@@ -10,7 +10,7 @@ pub mod trained_scene;
 pub mod view;
 
 pub use mask_encoding::{EncodedMask, EncodedMaskData, MaskFormat, encode_mask, mask_png};
-pub use object_export::{object_model, object_ply};
+pub use object_export::{SplatFormat, encode_splats, object_file, object_model};
 pub use scene_cache::{CacheStats, LoadedScene, ObjectMasks, SceneCache};
 pub use segsplat_method::cameras::{CAMERAS_FILE, SceneCamera, scene_cameras};
 pub use segsplat_method::scene_files::{LABELS_FILE, SCENE_FILE};

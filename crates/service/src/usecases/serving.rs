@@ -8,7 +8,7 @@ use crate::job_kinds::segment_then_splat::KIND as SEGMENT_THEN_SPLAT;
 use crate::jobs::job_output_prefix as output_prefix;
 use crate::serving::{
     EncodedMask, LoadedScene, MaskFormat, MaskView, ObjectMasks, SceneCache, ServingError,
-    TrainedScene, encode_mask, object_ply, parse_cameras,
+    SplatFormat, TrainedScene, encode_mask, encode_splats, object_file, parse_cameras,
 };
 use crate::store::blob::not_found_or_io;
 use crate::store::jobs::JobRecord;
@@ -16,6 +16,9 @@ use crate::store::{BlobError, BlobStore, Caller, Database, StoreError};
 use segsplat_method::cameras::{CAMERAS_FILE, SceneCamera};
 use segsplat_method::segment_then_splat::objects::ObjectSummary;
 use segsplat_scene::Level;
+
+/// The whole scene as SPZ: downloadable beside [`DOWNLOADABLE_FILES`], encoded on request.
+pub const SPZ_FILE: &str = "scene.spz";
 
 /// Results files a client may download from a scene's trained version (the deformation
 /// field's two files exist for dynamic scenes only).
@@ -37,7 +40,7 @@ pub enum ServeFailure {
     SceneNotFound(String),
     #[error("scene {0} has no finished segment_then_splat (or reconstruct) job yet")]
     NotTrained(String),
-    #[error("{0} is not a downloadable file; choose one of {files}", files = DOWNLOADABLE_FILES.join(", "))]
+    #[error("{0} is not a downloadable file; choose one of {files}, {SPZ_FILE}", files = DOWNLOADABLE_FILES.join(", "))]
     UnknownFile(String),
     #[error("{file} is not among this scene's results (job {job_id})")]
     FileNotStored { file: String, job_id: String },
@@ -366,19 +369,57 @@ impl Serving {
         Ok((format!("{}/{file}", output_prefix(&job.id)), job.id))
     }
 
-    /// One object's Gaussians as their own PLY.
-    pub async fn object_ply(
+    /// One object's Gaussians as their own file in `format`.
+    pub async fn object_export(
         &self,
         scene_id: &str,
         caller: &Caller,
         level: Level,
         object_id: u32,
+        format: SplatFormat,
     ) -> Result<Vec<u8>, ServeFailure> {
+        let trained = self.trained_scene(scene_id, caller).await?;
+        blocking(move || {
+            Ok(object_file(
+                &trained.model,
+                trained.sh_degree,
+                level,
+                object_id,
+                format,
+            )?)
+        })
+        .await
+    }
+
+    /// The whole scene as compressed SPZ ([`SPZ_FILE`]), encoded from its stored PLY.
+    pub async fn scene_spz(
+        &self,
+        scene_id: &str,
+        caller: &Caller,
+    ) -> Result<Vec<u8>, ServeFailure> {
+        let trained = self.trained_scene(scene_id, caller).await?;
+        blocking(move || {
+            Ok(encode_splats(
+                &trained.model,
+                trained.sh_degree,
+                SplatFormat::Spz,
+            )?)
+        })
+        .await
+    }
+
+    async fn trained_scene(
+        &self,
+        scene_id: &str,
+        caller: &Caller,
+    ) -> Result<TrainedScene, ServeFailure> {
         let job = self.serving_job(scene_id, caller).await?;
         let blobs = Arc::clone(&self.blobs);
         blocking(move || {
-            let trained = TrainedScene::from_blobs(blobs.as_ref(), &output_prefix(&job.id))?;
-            Ok(object_ply(&trained.model, level, object_id)?)
+            Ok(TrainedScene::from_blobs(
+                blobs.as_ref(),
+                &output_prefix(&job.id),
+            )?)
         })
         .await
     }
