@@ -18,6 +18,19 @@ async fn start_service(data: &std::path::Path) -> Option<TestService> {
 }
 
 /// A 60-step `segment_then_splat` job on `scene_id`, awaited: (job id, finished job record).
+/// The steps of the job's "segment" progress events, in order.
+async fn segment_steps(client: &TestService, job_id: &str) -> Vec<u64> {
+    let (status, events) = client.get_bytes(&format!("/v1/jobs/{job_id}/events")).await;
+    assert_eq!(status, 200);
+    String::from_utf8_lossy(&events)
+        .lines()
+        .filter_map(|line| line.strip_prefix("data:"))
+        .filter_map(|data| serde_json::from_str::<serde_json::Value>(data.trim()).ok())
+        .filter(|event| event["kind"] == "progress" && event["payload"]["stage"] == "segment")
+        .filter_map(|event| event["payload"]["step"].as_u64())
+        .collect()
+}
+
 async fn run_short_segment_then_splat(
     client: &TestService,
     scene_id: &str,
@@ -161,6 +174,12 @@ async fn segment_then_splat_job_stores_objects_at_three_levels() {
         .wait_for_state(&job_id, "succeeded", Duration::from_secs(240))
         .await;
     assert_eq!(job["progress"]["stage"], "persist", "{job}");
+    // The segmentation stage reports each view as it is segmented, not only its start and end.
+    let steps = segment_steps(&client, &job_id).await;
+    let train_views = steps.last().copied().unwrap_or_default();
+    assert!(train_views >= 7, "{steps:?}");
+    let expected: Vec<u64> = (0..=train_views).chain([train_views]).collect();
+    assert_eq!(steps, expected);
 
     let with_masks = SyntheticSpec {
         with_masks: Some(Level::ALL.to_vec()),

@@ -115,9 +115,26 @@ pub fn generated_view_masks(
     max_side: Option<u32>,
     options: &AssociationOptions,
 ) -> Result<(ViewMaskSet, AssociationReport), AssociationError> {
+    generated_view_masks_with_progress(scene, frames, generator, max_side, options, |_| {})
+}
+
+/// [`generated_view_masks`], calling `view_done` with the number of views segmented so far
+/// after each one (generation is most of the stage's time).
+pub fn generated_view_masks_with_progress(
+    scene: &Scene,
+    frames: &[usize],
+    generator: &mut MaskGenerator,
+    max_side: Option<u32>,
+    options: &AssociationOptions,
+    mut view_done: impl FnMut(usize),
+) -> Result<(ViewMaskSet, AssociationReport), AssociationError> {
+    let mut done = 0;
     associate_frame_masks(scene, frames, max_side, options, |frame_index| {
         let image = frame_rgb8(scene, frame_index, max_side)?;
-        Ok(generator.generate(&image, frame_index)?)
+        let masks = generator.generate(&image, frame_index)?;
+        done += 1;
+        view_done(done);
+        Ok(masks)
     })
 }
 

@@ -26,7 +26,9 @@ use segsplat_engine::checkpoint::Checkpoint;
 use segsplat_engine::deform::{DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE};
 use segsplat_engine::train::{EvalReport, ObjectLossConfig, TrainConfig, Trainer, TrainerMeta};
 use segsplat_gpu::GpuContext;
-use segsplat_method::segment_then_splat::association::{AssociationOptions, generated_view_masks};
+use segsplat_method::segment_then_splat::association::{
+    AssociationOptions, generated_view_masks_with_progress,
+};
 use segsplat_method::segment_then_splat::objects::{ObjectSummary, summarize_objects};
 use segsplat_method::segment_then_splat::propagated_masks::propagated_view_masks;
 use segsplat_method::segment_then_splat::scene_size::{SceneSize, SceneSizedFields};
@@ -294,7 +296,8 @@ fn masks_from(
     source: MaskSource,
 ) -> Result<(ViewMaskSet, SegmentFigures), JobFailure> {
     let max_side = config.train.max_resolution;
-    report(ctx, "segment", 0, 1, &[]);
+    let views = frames.len() as u64;
+    report(ctx, "segment", 0, views, &[]);
     let mut generator = match source {
         MaskSource::User | MaskSource::Auto => {
             if scene.masks.is_none() {
@@ -325,12 +328,14 @@ fn masks_from(
         }
     };
     tracing::info!(?source, views = frames.len(), "generating masks");
-    let (masks, association) = generated_view_masks(
+    // One report per view segmented (the progress reporter estimates the stage's ETA).
+    let (masks, association) = generated_view_masks_with_progress(
         scene,
         frames,
         &mut generator,
         max_side,
         &AssociationOptions::default(),
+        |done| report(ctx, "segment", done as u64, views, &[]),
     )
     .map_err(fatal)?;
     let objects = association.levels.map(|level| level.objects);
@@ -370,7 +375,8 @@ fn report_segmented(
         ("large_objects", objects[2] as f64),
     ];
     figures.extend_from_slice(extra);
-    report(ctx, "segment", 1, 1, &figures);
+    let views = masks.views.len() as u64;
+    report(ctx, "segment", views, views, &figures);
     figures
         .into_iter()
         .map(|(name, value)| (name.to_string(), value))
