@@ -3,12 +3,14 @@
 //! as their own PLY.
 
 use axum::Extension;
-use axum::extract::{Path as UrlPath, State};
+use axum::extract::State;
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
 
 use super::error::{ApiResult, ErrorBody};
+use super::extract::UrlPath;
 use super::params::parse_level;
+use super::schema_names::{BinaryFile, LevelName};
 use super::state::AppState;
 use segsplat_service::store::Caller;
 
@@ -38,7 +40,8 @@ fn attachment(name: &str, content_type: &'static str, bytes: Vec<u8>) -> Respons
     params(("id" = String, Path, description = "scene id"),
            ("file" = String, Path, description = "scene.ply, labels.npy, cameras.json, \
              objects.json, metrics.json or skipped_pairs.json")),
-    responses((status = 200, description = "the file", content_type = "application/octet-stream"),
+    responses((status = 200, description = "the file: JSON for the `.json` files, bytes for the others",
+               content((BinaryFile = "application/octet-stream"), (Object = "application/json"))),
               (status = 404, description = "unknown scene or file", body = ErrorBody),
               (status = 409, description = "the scene is not trained yet", body = ErrorBody)))]
 pub async fn trained_file(
@@ -63,12 +66,14 @@ pub async fn trained_file(
 
 #[utoipa::path(get, path = "/v1/scenes/{id}/objects/{level}/{object_id}/ply", tag = "objects",
     params(("id" = String, Path, description = "scene id"),
-           ("level" = String, Path, description = "small, middle or large"),
-           ("object_id" = u32, Path, description = "object id at that level")),
+           ("level" = LevelName, Path, description = "small, middle or large"),
+           ("object_id" = u32, Path, description = "object id at that level",
+            maximum = 4294967295_u64)),
     responses((status = 200, description = "the object's Gaussians, Inria-layout PLY",
-               content_type = "application/octet-stream"),
-              (status = 400, body = ErrorBody), (status = 404, body = ErrorBody),
-              (status = 409, body = ErrorBody)))]
+               content_type = "application/octet-stream", body = BinaryFile),
+              (status = 400, description = "unknown level", body = ErrorBody),
+              (status = 404, description = "unknown scene or object", body = ErrorBody),
+              (status = 409, description = "the scene is not trained yet", body = ErrorBody)))]
 pub async fn object_ply(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
