@@ -12,7 +12,7 @@ cd "$(dirname "$0")/.."
 
 max_examples=${1:-${SEGSPLAT_CONTRACT_EXAMPLES:-30}}
 # The whole schemathesis run stops after this many seconds, whatever is left.
-max_seconds=${SEGSPLAT_CONTRACT_SECONDS:-150}
+max_seconds=${SEGSPLAT_CONTRACT_SECONDS:-120}
 
 for tool in openapi-spec-validator schemathesis curl; do
   if ! command -v "$tool" >/dev/null 2>&1; then
