@@ -5,7 +5,9 @@
 # - ffmpeg, which extracts frames from Neu3D camera videos (and makes the test videos);
 # - s3rver (npm registry), the S3-compatible server the object-store tests run against, and
 #   PostgreSQL (Debian's package), the database the Postgres store tests run against
-#   (scripts/test_servers.sh starts both).
+#   (scripts/test_servers.sh starts both);
+# - openapi-spec-validator and schemathesis (PyPI), which scripts/contract.sh runs against the
+#   REST API's document and a live server.
 # Idempotent: skips what is already there.
 set -euo pipefail
 
@@ -28,6 +30,18 @@ if command -v python3 >/dev/null 2>&1; then
   if ! python3 -c "import onnxruntime" >/dev/null 2>&1; then
     python3 -m pip install --quiet --disable-pip-version-check "onnxruntime>=1.20" \
       || echo "warning: could not install onnxruntime; model features will report it missing" >&2
+  fi
+fi
+
+# The REST contract's tools (scripts/contract.sh), pinned: a newer schemathesis may bring new
+# checks, which should arrive as a deliberate change here rather than as a red CI run.
+pip_version() { python3 -m pip show "$1" 2>/dev/null | sed -n 's/^Version: //p'; }
+if command -v python3 >/dev/null 2>&1; then
+  if [ "$(pip_version openapi-spec-validator)" != "0.9.0" ] \
+    || [ "$(pip_version schemathesis)" != "4.32.5" ]; then
+    python3 -m pip install --quiet --disable-pip-version-check \
+      "openapi-spec-validator==0.9.0" "schemathesis==4.32.5" \
+      || echo "warning: could not install the contract tools; scripts/contract.sh needs them in CI" >&2
   fi
 fi
 

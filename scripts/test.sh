@@ -44,6 +44,11 @@ if [ -n "${SEGSPLAT_TEST_POSTGRES_URL:-}" ]; then
         --test service_tenants --test service_workers --test service_upload \
         --test service_object_store
 fi
+# The REST contract against a live server: the served OpenAPI document validates, and
+# schemathesis finds no failures in a bounded run (scripts/contract.sh; skips without its tools,
+# except under CI=true).
+phase "contract"
+bash scripts/contract.sh
 # Every fuzz target for a short bounded time on its committed corpus (docs/fuzzing.md). Needs
 # nightly Rust and cargo-fuzz; without them fuzz.sh says so and skips, and the stable replay of
 # the corpus in tests/fuzz_corpus.rs (above) is what guards the parsers.

@@ -1,5 +1,6 @@
 //! Optional bearer-token authentication for REST (middleware) and gRPC (interceptor). Health,
-//! readiness and metrics stay open so probes and scrapers need no secret.
+//! readiness and metrics stay open so probes and scrapers need no secret, and so does the
+//! OpenAPI document, which holds no tenant's data and tells a client how to authenticate.
 //!
 //! A token resolves to the [`Caller`] it acts for (tenant, admin), which the middleware and the
 //! interceptor attach to the request; handlers hand it to the store, which filters by it.
@@ -14,8 +15,8 @@ use super::error::ApiError;
 use segsplat_service::config::AuthConfig;
 use segsplat_service::store::{Caller, DEFAULT_TENANT};
 
-/// Paths reachable without a token.
-const OPEN_PATHS: [&str; 3] = ["/healthz", "/readyz", "/metrics"];
+/// Paths reachable without a token (the OpenAPI document declares them with `security: []`).
+pub const OPEN_PATHS: [&str; 4] = ["/healthz", "/readyz", "/metrics", "/v1/openapi.json"];
 
 #[derive(Debug, Clone, Default)]
 pub struct TokenCheck {

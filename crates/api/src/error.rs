@@ -88,6 +88,20 @@ impl ApiError {
         Self::new(StatusCode::INTERNAL_SERVER_ERROR, "internal", message)
     }
 
+    /// A request the framework refused before a handler ran (axum's rejection status and text),
+    /// with the code the same status has elsewhere in the API.
+    pub fn rejected(status: StatusCode, message: impl Into<String>) -> Self {
+        let code = match status {
+            StatusCode::BAD_REQUEST => "bad_request",
+            StatusCode::PAYLOAD_TOO_LARGE => "payload_too_large",
+            StatusCode::UNSUPPORTED_MEDIA_TYPE => "unsupported_media_type",
+            StatusCode::UNPROCESSABLE_ENTITY => "invalid_input",
+            status if status.is_server_error() => "internal",
+            _ => "bad_request",
+        };
+        Self::new(status, code, message)
+    }
+
     /// Maps a rejected input's class to its status (400/413/415/422/500).
     pub fn from_input_class(class: InputErrorClass, message: impl Into<String>) -> Self {
         match class {

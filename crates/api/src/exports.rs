@@ -3,12 +3,14 @@
 //! and reports, and single objects as their own PLY or SPZ.
 
 use axum::Extension;
-use axum::extract::{Path as UrlPath, State};
+use axum::extract::State;
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
 
 use super::error::{ApiResult, ErrorBody};
+use super::extract::UrlPath;
 use super::params::parse_level;
+use super::schema_names::{BinaryFile, LevelName};
 use super::state::AppState;
 use segsplat_service::serving::SplatFormat;
 use segsplat_service::store::Caller;
@@ -41,7 +43,8 @@ fn attachment(name: &str, content_type: &'static str, bytes: Vec<u8>) -> Respons
            ("file" = String, Path, description = "scene.ply, scene.spz (compressed, encoded on \
              request), labels.npy, cameras.json, objects.json, metrics.json, skipped_pairs.json, \
              deformation.json or deformation.bin")),
-    responses((status = 200, description = "the file", content_type = "application/octet-stream"),
+    responses((status = 200, description = "the file: JSON for the `.json` files, bytes for the others",
+               content((BinaryFile = "application/octet-stream"), (Object = "application/json"))),
               (status = 404, description = "unknown scene or file", body = ErrorBody),
               (status = 409, description = "the scene is not trained yet", body = ErrorBody)))]
 pub async fn trained_file(
@@ -70,12 +73,14 @@ pub async fn trained_file(
 
 #[utoipa::path(get, path = "/v1/scenes/{id}/objects/{level}/{object_id}/ply", tag = "objects",
     params(("id" = String, Path, description = "scene id"),
-           ("level" = String, Path, description = "small, middle or large"),
-           ("object_id" = u32, Path, description = "object id at that level")),
+           ("level" = LevelName, Path, description = "small, middle or large"),
+           ("object_id" = u32, Path, description = "object id at that level",
+            maximum = 4294967295_u64)),
     responses((status = 200, description = "the object's Gaussians, Inria-layout PLY",
-               content_type = "application/octet-stream"),
-              (status = 400, body = ErrorBody), (status = 404, body = ErrorBody),
-              (status = 409, body = ErrorBody)))]
+               content_type = "application/octet-stream", body = BinaryFile),
+              (status = 400, description = "unknown level", body = ErrorBody),
+              (status = 404, description = "unknown scene or object", body = ErrorBody),
+              (status = 409, description = "the scene is not trained yet", body = ErrorBody)))]
 pub async fn object_ply(
     state: State<AppState>,
     caller: Extension<Caller>,
@@ -86,12 +91,14 @@ pub async fn object_ply(
 
 #[utoipa::path(get, path = "/v1/scenes/{id}/objects/{level}/{object_id}/spz", tag = "objects",
     params(("id" = String, Path, description = "scene id"),
-           ("level" = String, Path, description = "small, middle or large"),
-           ("object_id" = u32, Path, description = "object id at that level")),
+           ("level" = LevelName, Path, description = "small, middle or large"),
+           ("object_id" = u32, Path, description = "object id at that level",
+            maximum = 4294967295_u64)),
     responses((status = 200, description = "the object's Gaussians, compressed SPZ (version 2)",
-               content_type = "application/octet-stream"),
-              (status = 400, body = ErrorBody), (status = 404, body = ErrorBody),
-              (status = 409, body = ErrorBody)))]
+               content_type = "application/octet-stream", body = BinaryFile),
+              (status = 400, description = "unknown level", body = ErrorBody),
+              (status = 404, description = "unknown scene or object", body = ErrorBody),
+              (status = 409, description = "the scene is not trained yet", body = ErrorBody)))]
 pub async fn object_spz(
     state: State<AppState>,
     caller: Extension<Caller>,

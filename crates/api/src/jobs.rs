@@ -2,7 +2,7 @@
 
 use std::convert::Infallible;
 
-use axum::extract::{Path as UrlPath, Query, State};
+use axum::extract::State;
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::{Extension, Json};
@@ -11,6 +11,8 @@ use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
 use super::error::{ApiResult, ErrorBody};
+use super::extract::{JsonBody, Query, UrlPath};
+use super::schema_names::{JobStateFilter, JobStateName};
 use super::state::AppState;
 use segsplat_service::store::Caller;
 use segsplat_service::store::events::JobEventRecord;
@@ -19,7 +21,7 @@ use segsplat_service::usecases::jobs::{self, Cancelled};
 
 #[derive(Debug, Deserialize, ToSchema)]
 pub struct CreateJobRequest {
-    /// A registered job kind.
+    /// A job kind this server has registered (the served document lists them).
     pub kind: String,
     /// Kind-specific settings, validated by the kind's handler.
     #[serde(default)]
@@ -33,6 +35,7 @@ pub struct JobResponse {
     pub scene_id: String,
     pub kind: String,
     /// queued, running, succeeded, failed or cancelled.
+    #[schema(value_type = JobStateName)]
     pub state: String,
     #[schema(value_type = Object)]
     pub config: serde_json::Value,
@@ -89,6 +92,7 @@ pub struct JobList {
 #[derive(Debug, Deserialize, IntoParams)]
 pub struct JobListParams {
     /// Only jobs in this state.
+    #[param(value_type = Option<JobStateFilter>)]
     pub state: Option<String>,
 }
 
@@ -96,13 +100,16 @@ pub struct JobListParams {
 #[utoipa::path(post, path = "/v1/scenes/{id}/jobs", tag = "jobs",
     params(("id" = String, Path, description = "scene id")),
     request_body = CreateJobRequest,
-    responses((status = 201, body = JobResponse), (status = 404, body = ErrorBody),
+    responses((status = 201, description = "the job, queued; `Location` names it",
+            body = JobResponse,
+            headers(("Location" = String, description = "the job's URL"))),
+        (status = 404, description = "no such scene (for this caller)", body = ErrorBody),
         (status = 422, description = "unknown kind or invalid config", body = ErrorBody)))]
 pub async fn create_job(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
     UrlPath(scene_id): UrlPath<String>,
-    Json(request): Json<CreateJobRequest>,
+    JsonBody(request): JsonBody<CreateJobRequest>,
 ) -> ApiResult<(StatusCode, HeaderMap, Json<JobResponse>)> {
     let job = jobs::create_job(
         &state.core,
@@ -121,7 +128,8 @@ pub async fn create_job(
 
 #[utoipa::path(get, path = "/v1/jobs/{id}", tag = "jobs",
     params(("id" = String, Path, description = "job id")),
-    responses((status = 200, body = JobResponse), (status = 404, body = ErrorBody)))]
+    responses((status = 200, description = "the job", body = JobResponse),
+        (status = 404, description = "no such job (for this caller)", body = ErrorBody)))]
 pub async fn get_job(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
@@ -132,7 +140,8 @@ pub async fn get_job(
 }
 
 #[utoipa::path(get, path = "/v1/jobs", tag = "jobs", params(JobListParams),
-    responses((status = 200, body = JobList), (status = 400, body = ErrorBody)))]
+    responses((status = 200, description = "the jobs the caller may see", body = JobList),
+        (status = 400, description = "unknown state", body = ErrorBody)))]
 pub async fn list_jobs(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
@@ -150,7 +159,8 @@ pub async fn list_jobs(
     params(("id" = String, Path, description = "job id")),
     responses((status = 200, description = "cancelled", body = JobResponse),
         (status = 202, description = "cancel requested", body = JobResponse),
-        (status = 404, body = ErrorBody), (status = 409, description = "already finished", body = ErrorBody)))]
+        (status = 404, description = "no such job (for this caller)", body = ErrorBody),
+        (status = 409, description = "already finished", body = ErrorBody)))]
 pub async fn cancel_job(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
@@ -166,9 +176,13 @@ pub async fn cancel_job(
 /// happen; the stream ends after the job's final state. Event names are the event kinds
 /// (`state`, `progress`, `cancel_requested`); ids allow resuming with `Last-Event-ID`.
 #[utoipa::path(get, path = "/v1/jobs/{id}/events", tag = "jobs",
-    params(("id" = String, Path, description = "job id")),
-    responses((status = 200, description = "text/event-stream of job events"),
-        (status = 404, body = ErrorBody)))]
+    params(("id" = String, Path, description = "job id"),
+        ("Last-Event-ID" = Option<i64>, Header,
+            description = "resume after this event id (the `id:` of the last event received)")),
+    responses((status = 200, description = "Server-Sent Events, one per job event: `id:` the \
+            event id, `event:` its kind, `data:` a JSON `JobEvent`",
+            content_type = "text/event-stream", body = String),
+        (status = 404, description = "no such job (for this caller)", body = ErrorBody)))]
 pub async fn job_events(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
@@ -191,16 +205,32 @@ pub async fn job_events(
     Ok(Sse::new(events.map(sse_event)).keep_alive(KeepAlive::default()))
 }
 
+/// One job event: the `data:` of each Server-Sent Event of `GET /v1/jobs/{id}/events`.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct JobEvent {
+    /// Increasing across all jobs; also the event's `id:`, for `Last-Event-ID`.
+    pub id: i64,
+    pub job_id: String,
+    pub at_ms: i64,
+    /// `state`, `progress`, `cancel_requested` or a job kind's own; also the event's `event:`.
+    pub kind: String,
+    /// `state`: the new state (and error); `progress`: stage, step, total_steps, metrics,
+    /// eta_secs.
+    #[schema(value_type = Object)]
+    pub payload: serde_json::Value,
+}
+
 fn sse_event(event: JobEventRecord) -> Result<Event, Infallible> {
-    let data = serde_json::json!({
-        "id": event.id,
-        "job_id": event.job_id,
-        "at_ms": event.at_ms,
-        "kind": event.kind,
-        "payload": event.payload,
-    });
-    Ok(Event::default()
+    let sse = Event::default()
         .id(event.id.to_string())
-        .event(event.kind)
-        .data(data.to_string()))
+        .event(event.kind.clone());
+    let data = JobEvent {
+        id: event.id,
+        job_id: event.job_id,
+        at_ms: event.at_ms,
+        kind: event.kind,
+        payload: event.payload,
+    };
+    // A JSON value always serialises; the fallback only keeps the stream's type infallible.
+    Ok(sse.data(serde_json::to_string(&data).unwrap_or_default()))
 }

@@ -4,20 +4,25 @@
 mod auth;
 pub mod error;
 mod exports;
+mod extract;
 mod grpc;
 mod grpc_calls;
 mod jobs;
+mod json_numbers;
 mod masks;
 pub mod metrics;
 mod objects;
 mod openapi;
+mod openapi_shared;
 mod ops;
 mod params;
 pub mod query;
 mod router;
 mod scenes;
+mod schema_names;
 mod server;
 mod state;
+mod view_schema;
 mod workers;
 
 pub use openapi::ApiDoc;

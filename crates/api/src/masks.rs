@@ -3,7 +3,7 @@
 //! a plain PNG for browsers and curl). Also the view and mask JSON shapes the query endpoint
 //! shares.
 
-use axum::extract::{Path as UrlPath, Query, State};
+use axum::extract::State;
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
@@ -12,7 +12,9 @@ use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
 use super::error::{ApiError, ApiResult, ErrorBody};
+use super::extract::{JsonBody, Query, UrlPath};
 use super::params::{parse_level, parse_mask_format, parse_time};
+use super::schema_names::{BinaryFile, LevelName, MaskFormatName, TimeValue};
 use super::state::AppState;
 use segsplat_service::serving::{
     EncodedMask, EncodedMaskData, MaskFormat, MaskView, PinholeIntrinsics, ServingError,
@@ -57,13 +59,14 @@ impl From<ServeFailure> for ApiError {
 }
 
 /// The view to render masks for: either `frame_index` (with optional `max_side`), or
-/// `camera_to_world` with `intrinsics`.
-#[derive(Debug, Clone, Deserialize, ToSchema)]
+/// `camera_to_world` with `intrinsics`. Its schema (`view_schema.rs`) states the two shapes.
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ViewRequest {
     /// One of the scene's frames, 0-based in dataset order (`cameras.json`).
-    pub frame_index: Option<usize>,
-    /// With `frame_index`: the longest side of the mask in pixels (default: the frame's size).
+    pub frame_index: Option<u32>,
+    /// With `frame_index`: the longest side of the mask in pixels (default: the frame's size;
+    /// larger values are capped at the frame's size and `query.max_mask_side`).
     pub max_side: Option<u32>,
     /// Camera-to-world, row-major 4x4 (last row 0 0 0 1), OpenCV axes (x right, y down,
     /// z forward), in the scene's world frame and units.
@@ -72,7 +75,7 @@ pub struct ViewRequest {
     /// Dynamic scenes: the normalised capture time (0..1 spans the training frames) to render
     /// at. Default: the frame's own time for `frame_index`, else the scene's first time. Static
     /// scenes ignore it.
-    pub time: Option<f32>,
+    pub time: Option<f64>,
 }
 
 impl ViewRequest {
@@ -83,7 +86,7 @@ impl ViewRequest {
     pub fn to_view(&self) -> Result<MaskView, ApiError> {
         match (self.frame_index, self.camera_to_world, self.intrinsics) {
             (Some(index), None, None) => Ok(MaskView::Frame {
-                index,
+                index: index as usize,
                 max_side: self.max_side,
             }),
             (None, Some(camera_to_world), Some(intrinsics)) if self.max_side.is_none() => {
@@ -104,6 +107,7 @@ impl ViewRequest {
 #[derive(Debug, Serialize, ToSchema)]
 pub struct MaskBody {
     /// `png` or `coco_rle`.
+    #[schema(value_type = MaskFormatName)]
     pub format: String,
     pub width: u32,
     pub height: u32,
@@ -135,7 +139,9 @@ impl From<&EncodedMask> for MaskBody {
 #[serde(deny_unknown_fields)]
 pub struct ObjectRef {
     /// `small`, `middle` or `large`.
+    #[schema(value_type = LevelName)]
     pub level: String,
+    #[schema(maximum = 4294967295_u64)]
     pub object_id: u32,
 }
 
@@ -143,9 +149,11 @@ pub struct ObjectRef {
 #[serde(deny_unknown_fields)]
 pub struct MasksRequest {
     /// 1..=64 objects.
+    #[schema(min_items = 1, max_items = 64)]
     pub objects: Vec<ObjectRef>,
     pub view: ViewRequest,
     /// `coco_rle` (default) or `png`.
+    #[schema(value_type = Option<MaskFormatName>)]
     pub mask_format: Option<String>,
     /// Also return each object's visible-only mask (the part no other Gaussian hides).
     pub visible_masks: Option<bool>,
@@ -153,6 +161,7 @@ pub struct MasksRequest {
 
 #[derive(Debug, Serialize, ToSchema)]
 pub struct ObjectMasksResponse {
+    #[schema(value_type = LevelName)]
     pub level: String,
     pub object_id: u32,
     /// Alpha > 0.5 of the object rendered alone: occluded parts included.
@@ -180,17 +189,19 @@ pub struct MasksResponse {
 #[utoipa::path(post, path = "/v1/scenes/{id}/masks", tag = "objects",
     params(("id" = String, Path, description = "scene id")),
     request_body = MasksRequest,
-    responses((status = 200, body = MasksResponse),
+    responses((status = 200, description = "one mask (and visible mask) per object, in \
+               the order asked", body = MasksResponse),
               (status = 400, description = "bad view, level, format or object count",
                body = ErrorBody),
               (status = 404, description = "unknown scene or object", body = ErrorBody),
               (status = 409, description = "the scene is not trained yet", body = ErrorBody),
-              (status = 503, description = "no GPU to render on", body = ErrorBody)))]
+              (status = 503, description = "no GPU to render on", body = ErrorBody),
+              (status = 504, description = "rendering took too long", body = ErrorBody)))]
 pub async fn render_masks(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
     UrlPath(id): UrlPath<String>,
-    Json(request): Json<MasksRequest>,
+    JsonBody(request): JsonBody<MasksRequest>,
 ) -> ApiResult<Json<MasksResponse>> {
     if request.objects.is_empty() || request.objects.len() > MAX_OBJECTS_PER_REQUEST {
         return Err(ApiError::bad_request(format!(
@@ -226,24 +237,32 @@ pub async fn render_masks(
 #[derive(Debug, Deserialize, IntoParams)]
 pub struct MaskPngParams {
     /// Frame index, 0-based in dataset order.
-    pub frame_index: usize,
+    #[param(maximum = 4294967295_u64)]
+    pub frame_index: u32,
     /// Longest side in pixels (default: the frame's size).
+    #[param(minimum = 1, maximum = 4294967295_u64)]
     pub max_side: Option<u32>,
     /// `true`: only the part no other Gaussian hides.
     pub visible: Option<bool>,
     /// Dynamic scenes: the time to render at (default: the frame's own time).
-    pub time: Option<f32>,
+    #[param(value_type = Option<TimeValue>)]
+    pub time: Option<f64>,
 }
 
 #[utoipa::path(get, path = "/v1/scenes/{id}/objects/{level}/{object_id}/mask.png",
     tag = "objects",
     params(("id" = String, Path, description = "scene id"),
-           ("level" = String, Path, description = "small, middle or large"),
-           ("object_id" = u32, Path, description = "object id at that level"),
+           ("level" = LevelName, Path, description = "small, middle or large"),
+           ("object_id" = u32, Path, description = "object id at that level",
+            maximum = 4294967295_u64),
            MaskPngParams),
-    responses((status = 200, description = "8-bit grey PNG, 255 inside", content_type = "image/png"),
-              (status = 400, body = ErrorBody), (status = 404, body = ErrorBody),
-              (status = 409, body = ErrorBody), (status = 503, body = ErrorBody)))]
+    responses((status = 200, description = "8-bit grey PNG, 255 inside", content_type = "image/png",
+               body = BinaryFile),
+              (status = 400, description = "unknown level, bad frame index or size", body = ErrorBody),
+              (status = 404, description = "unknown scene or object", body = ErrorBody),
+              (status = 409, description = "the scene is not trained yet", body = ErrorBody),
+              (status = 503, description = "no GPU to render on", body = ErrorBody),
+              (status = 504, description = "rendering took too long", body = ErrorBody)))]
 pub async fn object_mask_png(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
@@ -253,7 +272,7 @@ pub async fn object_mask_png(
     let level = parse_level(&level)?;
     let visible = params.visible.unwrap_or(false);
     let view = MaskView::Frame {
-        index: params.frame_index,
+        index: params.frame_index as usize,
         max_side: params.max_side,
     };
     let masks = state

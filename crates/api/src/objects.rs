@@ -1,12 +1,14 @@
 //! Object endpoints: what a finished `segment_then_splat` job found in a scene.
 
-use axum::extract::{Path as UrlPath, Query, State};
+use axum::extract::State;
 use axum::{Extension, Json};
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
 use super::error::{ApiError, ApiResult, ErrorBody};
+use super::extract::{Query, UrlPath};
 use super::params::{parse_level, parse_time};
+use super::schema_names::{LevelName, TimeValue};
 use super::state::AppState;
 use segsplat_service::store::Caller;
 use segsplat_service::store::objects::ObjectRecord;
@@ -17,6 +19,7 @@ use segsplat_service::usecases::objects::ListObjectsError;
 #[derive(Debug, Serialize, ToSchema)]
 pub struct ObjectResponse {
     /// `small`, `middle` or `large`.
+    #[schema(value_type = LevelName)]
     pub level: String,
     pub object_id: u32,
     pub gaussian_count: u64,
@@ -36,10 +39,12 @@ pub struct ObjectList {
 #[derive(Debug, Deserialize, IntoParams)]
 pub struct ObjectListParams {
     /// Only objects of this level (`small`, `middle`, `large`).
+    #[param(value_type = Option<LevelName>)]
     pub level: Option<String>,
     /// Dynamic scenes: centroids and bounds where the objects are at this normalised time
     /// (0..1 spans the training frames). Default: the scene's first time, as stored.
-    pub time: Option<f32>,
+    #[param(value_type = Option<TimeValue>)]
+    pub time: Option<f64>,
 }
 
 impl From<&ObjectRecord> for ObjectResponse {
@@ -58,8 +63,13 @@ impl From<&ObjectRecord> for ObjectResponse {
 
 #[utoipa::path(get, path = "/v1/scenes/{id}/objects", tag = "objects",
     params(("id" = String, Path, description = "scene id"), ObjectListParams),
-    responses((status = 200, body = ObjectList), (status = 400, body = ErrorBody),
-              (status = 404, body = ErrorBody)))]
+    responses((status = 200, description = "the scene's objects (none before a \
+               segment_then_splat job succeeded)", body = ObjectList),
+              (status = 400, description = "unknown level or a time that is not a number",
+               body = ErrorBody),
+              (status = 404, description = "no such scene (for this caller)", body = ErrorBody),
+              (status = 409, description = "with a time: the trained version that moves the \
+               objects is missing", body = ErrorBody)))]
 pub async fn list_objects(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,

@@ -1,9 +1,16 @@
-//! The OpenAPI document, generated from the handlers' annotations.
+//! The OpenAPI 3.1 document: generated from the handlers' annotations, then completed with what
+//! depends on the running configuration (which job kinds exist, whether tokens are required) and
+//! with the answers every operation shares (`openapi_shared.rs`). The served document is thus
+//! true of the server that serves it; `ApiDoc::openapi()` alone is the configuration-free part.
 
 use axum::Json;
+use axum::extract::State;
+use serde_json::{Value, json};
 use utoipa::OpenApi;
 
-use super::{error, exports, jobs, masks, objects, ops, query, scenes, workers};
+use super::openapi_shared::{add_shared_responses, declare_security};
+use super::state::AppState;
+use super::{error, exports, jobs, masks, objects, ops, query, scenes, schema_names, workers};
 
 #[derive(OpenApi)]
 #[openapi(
@@ -29,6 +36,7 @@ use super::{error, exports, jobs, masks, objects, ops, query, scenes, workers};
         ops::healthz,
         ops::readyz,
         ops::metrics,
+        openapi_json,
     ),
     components(schemas(
         error::ErrorBody,
@@ -38,6 +46,7 @@ use super::{error, exports, jobs, masks, objects, ops, query, scenes, workers};
         jobs::CreateJobRequest,
         jobs::JobResponse,
         jobs::JobList,
+        jobs::JobEvent,
         workers::WorkerResponse,
         workers::WorkerList,
         objects::ObjectResponse,
@@ -55,28 +64,101 @@ use super::{error, exports, jobs, masks, objects, ops, query, scenes, workers};
         ops::HealthResponse,
         ops::ReadinessResponse,
         ops::ClusterWorkers,
-    )),
-    modifiers(&BearerAuth),
-    security(("bearer" = [])),
+        // Referenced from parameters and annotations, which utoipa does not collect from.
+        schema_names::BinaryFile,
+        schema_names::GranularityName,
+        schema_names::JobStateFilter,
+        schema_names::JobStateName,
+        schema_names::LevelName,
+        schema_names::MaskFormatName,
+        schema_names::TimeValue,
+        schema_names::WorkerStateName,
+    ))
 )]
 pub struct ApiDoc;
 
-/// Declares the optional bearer-token scheme.
-struct BearerAuth;
+/// What the served document says that depends on the running configuration.
+#[derive(Debug, Clone, Default)]
+pub struct DocumentFacts {
+    /// Tokens are configured, so every route but the open ones needs one.
+    pub auth: bool,
+    /// The job kinds this server has handlers for.
+    pub job_kinds: Vec<String>,
+}
 
-impl utoipa::Modify for BearerAuth {
-    fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
-        use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
-        let components = openapi.components.get_or_insert_with(Default::default);
-        components.add_security_scheme(
-            "bearer",
-            SecurityScheme::Http(HttpBuilder::new().scheme(HttpAuthScheme::Bearer).build()),
+impl DocumentFacts {
+    pub fn of(state: &AppState) -> Self {
+        Self {
+            auth: state.core.config.auth.enabled(),
+            job_kinds: state
+                .core
+                .handlers
+                .kinds()
+                .into_iter()
+                .map(str::to_string)
+                .collect(),
+        }
+    }
+}
+
+/// The document as served: the generated part, completed for `facts`.
+pub fn document(facts: &DocumentFacts) -> Value {
+    // Serialising the generated document cannot fail (it is plain data); an empty object would
+    // only make the contract checks fail loudly.
+    let mut document = serde_json::to_value(ApiDoc::openapi()).unwrap_or_default();
+    describe_upload_body(&mut document);
+    add_shared_responses(&mut document, facts.auth);
+    declare_security(&mut document, facts.auth);
+    list_job_kinds(&mut document, &facts.job_kinds);
+    document
+}
+
+/// `POST /v1/scenes` takes the archive's bytes as the raw body in any of the accepted media types,
+/// or as the file field of a multipart form.
+fn describe_upload_body(document: &mut Value) {
+    let binary = json!({"schema": {"type": "string", "format": "binary"}});
+    let mut content: serde_json::Map<String, Value> = scenes::RAW_ARCHIVE_TYPES
+        .iter()
+        .map(|media_type| (media_type.to_string(), binary.clone()))
+        .collect();
+    content.insert(
+        "multipart/form-data".to_string(),
+        json!({"schema": {
+            "type": "object",
+            "required": ["file"],
+            "properties": {"file": {"type": "string", "format": "binary"}},
+        }}),
+    );
+    if let Some(upload) = document.pointer_mut("/paths/~1v1~1scenes/post")
+        && let Some(upload) = upload.as_object_mut()
+    {
+        upload.insert(
+            "requestBody".to_string(),
+            json!({
+                "description": "a zip, tar or tar.gz dataset archive (the kind is read from \
+                    the bytes), at most `limits.max_upload_bytes`",
+                "required": true,
+                "content": content,
+            }),
         );
     }
 }
 
+/// `CreateJobRequest.kind` may only name a registered kind (else 422); which ones is known only
+/// at run time.
+fn list_job_kinds(document: &mut Value, kinds: &[String]) {
+    if let Some(kind) = document.pointer_mut("/components/schemas/CreateJobRequest/properties/kind")
+        && let Some(kind) = kind.as_object_mut()
+    {
+        kind.insert("enum".to_string(), Value::from(kinds.to_vec()));
+    }
+}
+
+/// This document, for this server's configuration. Open, like the probes: it holds no tenant's
+/// data and tells a client how to authenticate.
 #[utoipa::path(get, path = "/v1/openapi.json", tag = "ops",
-    responses((status = 200, description = "this document")))]
-pub async fn openapi_json() -> Json<utoipa::openapi::OpenApi> {
-    Json(ApiDoc::openapi())
+    responses((status = 200, description = "this document (OpenAPI 3.1)",
+        content_type = "application/json", body = Object)))]
+pub async fn openapi_json(State(state): State<AppState>) -> Json<Value> {
+    Json(document(&DocumentFacts::of(&state)))
 }

@@ -71,7 +71,7 @@ async fn cluster_summary(state: &AppState) -> ClusterWorkers {
 
 /// The process is alive.
 #[utoipa::path(get, path = "/healthz", tag = "ops",
-    responses((status = 200, body = HealthResponse)))]
+    responses((status = 200, description = "alive", body = HealthResponse)))]
 pub async fn healthz() -> Json<HealthResponse> {
     Json(HealthResponse {
         status: "ok".to_string(),
@@ -81,7 +81,8 @@ pub async fn healthz() -> Json<HealthResponse> {
 /// Whether the service can do its work: database and blob store reachable, GPU workers
 /// available, models.
 #[utoipa::path(get, path = "/readyz", tag = "ops",
-    responses((status = 200, body = ReadinessResponse), (status = 503, body = ReadinessResponse)))]
+    responses((status = 200, description = "ready", body = ReadinessResponse),
+        (status = 503, description = "not ready; `reasons` says why", body = ReadinessResponse)))]
 pub async fn readyz(State(state): State<AppState>) -> impl IntoResponse {
     let database = match state.core.database.ping().await {
         Ok(()) => ReadinessCheck {
@@ -178,7 +179,8 @@ pub async fn readyz(State(state): State<AppState>) -> impl IntoResponse {
 
 /// Prometheus metrics in the text exposition format.
 #[utoipa::path(get, path = "/metrics", tag = "ops",
-    responses((status = 200, description = "Prometheus text format", body = String)))]
+    responses((status = 200, description = "Prometheus text format", body = String,
+        content_type = "text/plain; version=0.0.4")))]
 pub async fn metrics(State(state): State<AppState>) -> impl IntoResponse {
     refresh_queue_gauges(&state.core.database).await;
     refresh_cluster_gauges(&state.core).await;

@@ -17,13 +17,21 @@ pub fn parse_level(name: &str) -> Result<Level, ApiError> {
         })
 }
 
-/// Checks a requested time is a number.
-pub fn parse_time(time: Option<f32>) -> Result<Option<f32>, ApiError> {
+/// The largest requested time, either side of 0. Times are normalised (0..1 spans the training
+/// frames); far outside that the deformation field extrapolates into noise. A bound with few
+/// digits also parses exactly, so the server and the document ([`super::schema_names::TimeValue`])
+/// agree on which values pass, where `f32::MAX` would be at the mercy of rounding.
+pub const TIME_LIMIT: f64 = 1e6;
+
+/// Checks a requested time is a number within [`TIME_LIMIT`] (read as `f64`, so the check is the
+/// documented one and not that of a value rounded to `f32`).
+pub fn parse_time(time: Option<f64>) -> Result<Option<f32>, ApiError> {
     match time {
-        Some(value) if !value.is_finite() => Err(ApiError::bad_request(format!(
-            "time: {value} is not a finite number"
+        None => Ok(None),
+        Some(value) if value.abs() <= TIME_LIMIT => Ok(Some(value as f32)),
+        Some(value) => Err(ApiError::bad_request(format!(
+            "time: {value} is outside -{TIME_LIMIT}..={TIME_LIMIT}"
         ))),
-        other => Ok(other),
     }
 }
 

@@ -1,21 +1,23 @@
 //! `POST /v1/scenes/{id}/query`: parses the request, calls the query use case
 //! ([`segsplat_service::usecases::query::query_with_masks`]) and maps its answer and errors.
 
-use axum::extract::{Path as UrlPath, State};
+use axum::extract::State;
 use axum::http::StatusCode;
 use axum::{Extension, Json};
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::error::{ApiError, ApiResult, ErrorBody};
+use super::extract::{JsonBody, UrlPath};
 use super::masks::{MaskBody, ViewRequest};
 use super::params::{parse_mask_format, parse_time};
+use super::schema_names::{GranularityName, LevelName, MaskFormatName, TimeValue};
 use super::state::AppState;
 use segsplat_service::store::Caller;
 use segsplat_service::usecases::query::{
     MaskRequest, QueryError, QueryFailure, QueryRequest as CoreQuery, query_with_masks,
 };
-use segsplat_vision::language::{DEFAULT_RELEVANCY_THRESHOLD, QueryOptions};
+use segsplat_vision::language::{DEFAULT_RELEVANCY_THRESHOLD, QueryOptions, QueryOptionsError};
 
 impl From<QueryError> for ApiError {
     fn from(error: QueryError) -> Self {
@@ -48,31 +50,39 @@ impl From<QueryFailure> for ApiError {
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct QueryRequest {
+    /// What to look for; not empty or only spaces.
+    #[schema(min_length = 1, pattern = r"\S")]
     pub text: String,
     /// `auto` (default: the better of the best middle and best large object), `small`,
     /// `middle` or `large`.
+    #[schema(value_type = Option<GranularityName>)]
     pub granularity: Option<String>,
     /// How many matching objects to return, 1..=100 (default 1).
+    #[schema(minimum = 1, maximum = 100)]
     pub top_k: Option<usize>,
     /// Minimum LERF relevancy against "object", "things", "stuff", "texture" for a match
     /// (default 0.55; 0.5 = no better than those phrases).
-    pub threshold: Option<f32>,
+    #[schema(minimum = 0.0, maximum = 1.0)]
+    pub threshold: Option<f64>,
     /// When given, each match carries its mask rendered for this view.
     pub view: Option<ViewRequest>,
     /// `coco_rle` (default) or `png`.
+    #[schema(value_type = Option<MaskFormatName>)]
     pub mask_format: Option<String>,
     /// With `view`: also the visible-only masks (the part no other Gaussian hides).
     pub visible_masks: Option<bool>,
     /// Dynamic scenes: the normalised capture time of the answer (0..1 spans the training
     /// frames). Centroids, bounds and masks are where the objects are then. Default: the view's
     /// `time`, else its frame's time, else the scene's first time. Static scenes ignore it.
-    pub time: Option<f32>,
+    #[schema(value_type = Option<TimeValue>)]
+    pub time: Option<f64>,
 }
 
 /// One matching object.
 #[derive(Debug, Serialize, ToSchema)]
 pub struct QueryMatchResponse {
     /// `small`, `middle` or `large`.
+    #[schema(value_type = LevelName)]
     pub level: String,
     pub object_id: u32,
     /// Cosine similarity of the text and object embeddings.
@@ -109,7 +119,13 @@ impl QueryRequest {
                 None => defaults.granularity,
             },
             top_k: self.top_k.unwrap_or(defaults.top_k),
-            threshold: self.threshold.unwrap_or(DEFAULT_RELEVANCY_THRESHOLD),
+            // Checked before narrowing: a value just past 1 (or below 0) would round onto the
+            // bound as `f32` and pass the options' own check, against the documented range.
+            threshold: match self.threshold {
+                Some(value) if (0.0..=1.0).contains(&value) => value as f32,
+                Some(value) => return Err(QueryOptionsError::Threshold(value as f32).into()),
+                None => DEFAULT_RELEVANCY_THRESHOLD,
+            },
         })
     }
 }
@@ -117,19 +133,23 @@ impl QueryRequest {
 #[utoipa::path(post, path = "/v1/scenes/{id}/query", tag = "objects",
     params(("id" = String, Path, description = "scene id")),
     request_body = QueryRequest,
-    responses((status = 200, body = QueryResponse),
+    responses((status = 200, description = "the matching objects, best first",
+               body = QueryResponse),
               (status = 400, description = "bad granularity, top_k, threshold, view, mask \
                format or empty text",
                body = ErrorBody),
               (status = 404, description = "unknown scene", body = ErrorBody),
               (status = 409, description = "no trained objects or embeddings yet",
                body = ErrorBody),
-              (status = 503, description = "no text encoder configured", body = ErrorBody)))]
+              (status = 503, description = "no text encoder configured (or, with a view, no \
+               GPU to render on)", body = ErrorBody),
+              (status = 504, description = "rendering the masks took too long",
+               body = ErrorBody)))]
 pub async fn query_scene(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
     UrlPath(id): UrlPath<String>,
-    Json(request): Json<QueryRequest>,
+    JsonBody(request): JsonBody<QueryRequest>,
 ) -> ApiResult<Json<QueryResponse>> {
     let options = request.options()?;
     // Bad view or format fail before the (slower) text encoding.

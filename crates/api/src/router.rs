@@ -8,7 +8,7 @@ use tower_http::trace::TraceLayer;
 use super::auth::{TokenCheck, require_token};
 use super::metrics::track_requests;
 use super::state::AppState;
-use super::{exports, jobs, masks, objects, openapi, ops, query, scenes, workers};
+use super::{exports, extract, jobs, masks, objects, openapi, ops, query, scenes, workers};
 
 pub fn router(state: AppState) -> Router {
     let tokens = TokenCheck::from_config(&state.core.config.auth);
@@ -49,7 +49,9 @@ pub fn router(state: AppState) -> Router {
         .route("/healthz", get(ops::healthz))
         .route("/readyz", get(ops::readyz))
         .route("/metrics", get(ops::metrics))
-        .fallback(|| async { super::error::ApiError::not_found("no such endpoint") })
+        // After the routes: it applies to those already added.
+        .method_not_allowed_fallback(extract::method_not_allowed)
+        .fallback(extract::no_such_endpoint)
         .layer(axum::middleware::from_fn_with_state(tokens, require_token))
         .layer(axum::middleware::from_fn(track_requests))
         .layer(TraceLayer::new_for_http())

@@ -4,7 +4,7 @@ use std::path::Path;
 
 use axum::Extension;
 use axum::Json;
-use axum::extract::{FromRequest, Multipart, Path as UrlPath, Query, Request, State};
+use axum::extract::{FromRequest, Multipart, Request, State};
 use axum::http::{HeaderMap, StatusCode, header};
 use futures::StreamExt;
 use serde::{Deserialize, Serialize};
@@ -12,6 +12,8 @@ use tokio::io::AsyncWriteExt;
 use utoipa::{IntoParams, ToSchema};
 
 use super::error::{ApiError, ApiResult, ErrorBody};
+use super::extract::{Query, UrlPath};
+use super::schema_names::LevelName;
 use super::state::AppState;
 use segsplat_service::store::Caller;
 use segsplat_service::store::process_tag::process_tag;
@@ -19,7 +21,7 @@ use segsplat_service::store::scenes::SceneRecord;
 use segsplat_service::usecases::scenes;
 
 /// Raw upload bodies we accept; the archive kind itself is sniffed from the bytes.
-const RAW_ARCHIVE_TYPES: [&str; 7] = [
+pub const RAW_ARCHIVE_TYPES: [&str; 7] = [
     "application/zip",
     "application/x-zip-compressed",
     "application/x-tar",
@@ -44,6 +46,7 @@ pub struct SceneResponse {
     pub resolutions: Vec<[u32; 2]>,
     pub sparse_point_count: u64,
     /// Levels (`small`, `middle`, `large`) with user-provided masks.
+    #[schema(value_type = Vec<LevelName>)]
     pub mask_levels: Vec<String>,
     /// Files in the upload the dataset does not use (not cameras, frames, masks or the
     /// format's own files); they were not stored.
@@ -97,11 +100,13 @@ pub struct UploadParams {
 /// Uploads a dataset archive (zip, tar or tar.gz; COLMAP, nerfstudio, Blender/D-NeRF,
 /// Nerfies/HyperNeRF or Neu3D layout), as the
 /// raw body or as the one file field of a multipart form. The body is streamed to disk.
+// The request body (raw bytes in several media types, or a multipart file) is declared by
+// `openapi::describe_upload_body`: utoipa would describe `Vec<u8>` as an array of integers.
 #[utoipa::path(post, path = "/v1/scenes", tag = "scenes", params(UploadParams),
-    request_body(content = Vec<u8>, description = "zip, tar or tar.gz archive",
-        content_type = "application/octet-stream"),
     responses(
-        (status = 201, body = SceneResponse),
+        (status = 201, description = "the scene, stored; `Location` names it",
+            body = SceneResponse,
+            headers(("Location" = String, description = "the scene's URL"))),
         (status = 400, description = "malformed archive or unsafe entry", body = ErrorBody),
         (status = 413, description = "over an upload or unpack limit", body = ErrorBody),
         (status = 415, description = "not an archive or not a known dataset format", body = ErrorBody),
@@ -275,7 +280,7 @@ impl UploadWriter {
 
 /// The caller's tenant's scenes (every tenant's for an admin), oldest first.
 #[utoipa::path(get, path = "/v1/scenes", tag = "scenes",
-    responses((status = 200, body = SceneList)))]
+    responses((status = 200, description = "the scenes the caller may see", body = SceneList)))]
 pub async fn list_scenes(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
@@ -288,7 +293,8 @@ pub async fn list_scenes(
 
 #[utoipa::path(get, path = "/v1/scenes/{id}", tag = "scenes",
     params(("id" = String, Path, description = "scene id")),
-    responses((status = 200, body = SceneResponse), (status = 404, body = ErrorBody)))]
+    responses((status = 200, description = "the scene", body = SceneResponse),
+        (status = 404, description = "no such scene (for this caller)", body = ErrorBody)))]
 pub async fn get_scene(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
@@ -302,7 +308,9 @@ pub async fn get_scene(
 /// running.
 #[utoipa::path(delete, path = "/v1/scenes/{id}", tag = "scenes",
     params(("id" = String, Path, description = "scene id")),
-    responses((status = 204), (status = 404, body = ErrorBody), (status = 409, body = ErrorBody)))]
+    responses((status = 204, description = "deleted; no body"),
+        (status = 404, description = "no such scene (for this caller)", body = ErrorBody),
+        (status = 409, description = "one of its jobs is queued or running", body = ErrorBody)))]
 pub async fn delete_scene(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,

@@ -6,6 +6,7 @@ use serde::Serialize;
 use utoipa::ToSchema;
 
 use super::error::{ApiError, ApiResult, ErrorBody};
+use super::schema_names::WorkerStateName;
 use super::state::AppState;
 use segsplat_service::store::Caller;
 use segsplat_service::usecases::workers::{self, WorkerStatus, WorkersFailure};
@@ -19,6 +20,7 @@ pub struct WorkerResponse {
     pub device: String,
     pub kinds: Vec<String>,
     /// idle, busy or stopped, as last reported.
+    #[schema(value_type = WorkerStateName)]
     pub state: String,
     /// The job it runs, when busy.
     pub job_id: Option<String>,
@@ -66,7 +68,9 @@ impl From<WorkersFailure> for ApiError {
 /// Every worker slot registered by any process on this database (admin tokens only; with
 /// authentication off, everyone), newest heartbeat first, with busy/idle/silent counts.
 #[utoipa::path(get, path = "/v1/workers", tag = "ops",
-    responses((status = 200, body = WorkerList), (status = 403, body = ErrorBody)))]
+    responses((status = 200, description = "every worker slot, newest heartbeat first",
+               body = WorkerList),
+              (status = 403, description = "the token is not an admin's", body = ErrorBody)))]
 pub async fn list_workers(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,

@@ -32,11 +32,17 @@ pub enum MaskView {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PinholeIntrinsics {
+    /// Focal lengths: positive (`pose_camera` refuses others).
+    #[schema(exclusive_minimum = 0.0)]
     pub fx: f64,
+    #[schema(exclusive_minimum = 0.0)]
     pub fy: f64,
     pub cx: f64,
     pub cy: f64,
+    /// Image size: 1 to `query.max_mask_side` (4096 by default) per side.
+    #[schema(minimum = 1, maximum = 4294967295_u64)]
     pub width: u32,
+    #[schema(minimum = 1, maximum = 4294967295_u64)]
     pub height: u32,
 }
 
