@@ -5,7 +5,7 @@
 use std::pin::Pin;
 use std::time::Instant;
 
-use futures::Stream;
+use futures::{Stream, StreamExt};
 use tonic::{Request, Response, Status};
 
 use super::auth::grpc_caller;
@@ -33,6 +33,10 @@ use segsplat_vision::language::{DEFAULT_RELEVANCY_THRESHOLD, Granularity, QueryO
 
 /// Replies a stream query may have waiting before the client reads them.
 const STREAM_BUFFER: usize = 4;
+/// Messages of one stream answered at once. Renders share the GPU (one at a time), so more
+/// would only queue there; two lets one answer encode and send while the next renders, and a
+/// third lets the next message be read and parsed meanwhile.
+const STREAM_PIPELINE: usize = 3;
 
 #[derive(Clone)]
 pub struct SceneQueryService {
@@ -461,6 +465,54 @@ fn object_to_proto(object: ObjectRecord) -> proto::ObjectInfo {
     }
 }
 
+/// The work of one `StreamQuery`: reads messages, answers up to [`STREAM_PIPELINE`] of them at
+/// once, and sends the answers in the order the messages came.
+async fn answer_stream(
+    service: SceneQueryService,
+    caller: Caller,
+    mut incoming: tonic::Streaming<proto::StreamQueryRequest>,
+    replies: tokio::sync::mpsc::Sender<Result<proto::StreamQueryResponse, Status>>,
+) {
+    let mut parts = QueryParts::default();
+    let mut answering = futures::stream::FuturesOrdered::new();
+    let mut reading = true;
+    loop {
+        tokio::select! {
+            // Answers first: a finished one frees a place in the pipeline.
+            biased;
+            Some(reply) = answering.next(), if !answering.is_empty() => {
+                let failed = Result::is_err(&reply);
+                if replies.send(reply).await.is_err() || failed {
+                    break;
+                }
+            }
+            message = incoming.message(), if reading && answering.len() < STREAM_PIPELINE => {
+                match message {
+                    Ok(Some(message)) => {
+                        let sequence = message.sequence;
+                        parts.update(message);
+                        let (service, caller, parts) = (service.clone(), caller.clone(), parts.clone());
+                        answering.push_back(async move {
+                            service.answer(parts, &caller).await.map(|response| {
+                                proto::StreamQueryResponse {
+                                    sequence,
+                                    response: Some(response),
+                                }
+                            })
+                        });
+                    }
+                    Ok(None) => reading = false,
+                    Err(status) => {
+                        tracing::debug!(%status, "stream query client went away");
+                        break;
+                    }
+                }
+            }
+            else => break,
+        }
+    }
+}
+
 type StreamQueryStream =
     Pin<Box<dyn Stream<Item = Result<proto::StreamQueryResponse, Status>> + Send + 'static>>;
 
@@ -488,44 +540,25 @@ impl SceneQuery for SceneQueryService {
 
     type StreamQueryStream = StreamQueryStream;
 
-    /// Answers each incoming message in order, echoing its `sequence`. A message that fails
-    /// (say, a bad pose) ends the stream with that error, like a unary call would.
+    /// Answers each incoming message in order, echoing its `sequence`. Up to
+    /// [`STREAM_PIPELINE`] messages are answered at once: the next pose's render starts while
+    /// the previous answer is still encoding or waiting to be sent, and reading the client's
+    /// next message never waits on an answer. A message that fails (say, a bad pose) ends the
+    /// stream with that error, after the answers before it, like a unary call would.
     async fn stream_query(
         &self,
         request: Request<tonic::Streaming<proto::StreamQueryRequest>>,
     ) -> Result<Response<Self::StreamQueryStream>, Status> {
         let caller = grpc_caller(&request)?;
-        let mut incoming = request.into_inner();
+        let incoming = request.into_inner();
         let service = self.clone();
         let (replies, receiver) = tokio::sync::mpsc::channel(STREAM_BUFFER);
         // The stream's answers are rendered in this task, outside the request's own future:
         // label their latencies as gRPC here.
-        tokio::spawn(called_from("grpc", async move {
-            let mut parts = QueryParts::default();
-            loop {
-                let message = match incoming.message().await {
-                    Ok(Some(message)) => message,
-                    Ok(None) => break,
-                    Err(status) => {
-                        tracing::debug!(%status, "stream query client went away");
-                        break;
-                    }
-                };
-                let sequence = message.sequence;
-                parts.update(message);
-                let reply = service
-                    .answer(parts.clone(), &caller)
-                    .await
-                    .map(|response| proto::StreamQueryResponse {
-                        sequence,
-                        response: Some(response),
-                    });
-                let failed = reply.is_err();
-                if replies.send(reply).await.is_err() || failed {
-                    break;
-                }
-            }
-        }));
+        tokio::spawn(called_from(
+            "grpc",
+            answer_stream(service, caller, incoming, replies),
+        ));
         Ok(Response::new(Box::pin(
             tokio_stream::wrappers::ReceiverStream::new(receiver),
         )))
