@@ -126,34 +126,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             client.render_mask(render.clone()).await?;
             render_times.push(started.elapsed());
         }
-        // Lock-step stream: the next pose goes out when the previous answer is in.
-        let (sender, receiver) = tokio::sync::mpsc::channel(1);
-        let mut replies = client
-            .stream_query(tokio_stream::wrappers::ReceiverStream::new(receiver))
-            .await?
-            .into_inner();
-        let mut stream_times = Vec::new();
-        for sequence in 0..(calls + 3) as u64 {
-            let started = Instant::now();
-            sender
-                .send(proto::StreamQueryRequest {
-                    scene_id: scene_id.clone(),
-                    text: "red".into(),
-                    granularity: proto::Granularity::Small as i32,
-                    top_k: 1,
-                    view: Some(view.clone()),
-                    time: None,
-                    mask_encoding: proto::MaskEncoding::Png as i32,
-                    sequence,
-                })
-                .await?;
-            replies.message().await?.ok_or("the stream ended")?;
-            if sequence >= 3 {
-                stream_times.push(started.elapsed());
-            }
-        }
-        drop(sender);
-        // Pipelined stream: every pose sent at once; the server answers several at a time.
         let stream_request = |sequence: u64| proto::StreamQueryRequest {
             scene_id: scene_id.clone(),
             text: "red".into(),
@@ -164,6 +136,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             mask_encoding: proto::MaskEncoding::Png as i32,
             sequence,
         };
+        // Lock-step stream: the next pose goes out when the previous answer is in.
+        let (sender, receiver) = tokio::sync::mpsc::channel(1);
+        let mut replies = client
+            .stream_query(tokio_stream::wrappers::ReceiverStream::new(receiver))
+            .await?
+            .into_inner();
+        let mut stream_times = Vec::new();
+        for sequence in 0..(calls + 3) as u64 {
+            let started = Instant::now();
+            sender.send(stream_request(sequence)).await?;
+            replies.message().await?.ok_or("the stream ended")?;
+            if sequence >= 3 {
+                stream_times.push(started.elapsed());
+            }
+        }
+        drop(sender);
+        // Pipelined stream: every pose sent at once; the server answers several at a time.
         let requests: Vec<_> = (0..calls as u64).map(stream_request).collect();
         let started = Instant::now();
         let mut replies = client
