@@ -10,7 +10,7 @@ use segsplat_engine::image_metrics::psnr;
 use segsplat_engine::ply::{read_ply, write_ply};
 use segsplat_engine::reference::scenes::{random_scene, test_camera};
 use segsplat_engine::render::Renderer;
-use segsplat_engine::spz::{SPZ_MAGIC, write_spz};
+use segsplat_engine::spz::{SH_SIGN_RDF_TO_RUB, SPZ_MAGIC, write_spz};
 use segsplat_engine::{GaussianModel, GpuGaussians, RenderCamera, RenderSettings};
 use segsplat_gpu::GpuContext;
 
@@ -32,11 +32,9 @@ fn decode_with_spz_rs(bytes: &[u8], ids_from: &GaussianModel) -> GaussianModel {
         model.opacity_logits.push(gaussian.alpha);
         let mut sh = [[0.0f32; 3]; 16];
         sh[0] = gaussian.color;
-        let rub_to_rdf = [
-            -1.0, -1.0, 1.0, -1.0, 1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0, -1.0, 1.0, -1.0, 1.0,
-        ];
         for k in 0..15 {
-            let sign = rub_to_rdf[k];
+            // Each sign is its own inverse: the same table turns RUB back into RDF.
+            let sign = SH_SIGN_RDF_TO_RUB[k];
             sh[k + 1] = [
                 gaussian.sh_r[k] * sign,
                 gaussian.sh_g[k] * sign,
@@ -79,15 +77,7 @@ fn a_foreign_reader_gets_back_what_was_written() {
     let model = random_scene(3, 600, &camera);
     let mut spz = Vec::new();
     write_spz(&model, 3, &mut spz).unwrap();
-    assert_eq!(
-        u32::from_le_bytes(
-            flate2::read::GzDecoder::new(spz.as_slice())
-                .bytes_prefix(4)
-                .try_into()
-                .unwrap()
-        ),
-        SPZ_MAGIC
-    );
+    assert_eq!(gunzipped_magic(&spz), SPZ_MAGIC);
     let decoded = decode_with_spz_rs(&spz, &model);
     for index in 0..model.len() {
         for axis in 0..3 {
@@ -139,17 +129,11 @@ fn a_foreign_reader_gets_back_what_was_written() {
     assert!(ply.len() > 4 * spz.len());
 }
 
-/// Reads the first `count` bytes of a stream.
-trait BytesPrefix {
-    fn bytes_prefix(self, count: usize) -> Vec<u8>;
-}
-
-impl<R: std::io::Read> BytesPrefix for R {
-    fn bytes_prefix(mut self, count: usize) -> Vec<u8> {
-        let mut bytes = vec![0; count];
-        self.read_exact(&mut bytes).unwrap();
-        bytes
-    }
+/// The first little-endian u32 of the gzip-compressed `bytes`.
+fn gunzipped_magic(bytes: &[u8]) -> u32 {
+    let mut magic = [0; 4];
+    std::io::Read::read_exact(&mut flate2::read::GzDecoder::new(bytes), &mut magic).unwrap();
+    u32::from_le_bytes(magic)
 }
 
 #[test]

@@ -26,7 +26,7 @@ pub const COLOR_SCALE: f32 = 0.15;
 const MAX_FRACTIONAL_BITS: u8 = 12;
 /// Sign of each higher SH coefficient (3DGS order, degree 1 to 3) when y and z flip: the basis
 /// functions odd in y*z-parity change sign (e.g. y, z, xy, xz; not x, yz, xyz).
-const SH_SIGN_RDF_TO_RUB: [f32; 15] = [
+pub const SH_SIGN_RDF_TO_RUB: [f32; 15] = [
     -1.0, -1.0, 1.0, // y, z, x
     -1.0, 1.0, 1.0, -1.0, 1.0, // xy, yz, 3z^2-1, xz, x^2-y^2
     -1.0, 1.0, -1.0, -1.0, 1.0, -1.0,
