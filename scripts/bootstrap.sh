@@ -7,12 +7,14 @@
 #   PostgreSQL (Debian's package), the database the Postgres store tests run against
 #   (scripts/test_servers.sh starts both);
 # - openapi-spec-validator and schemathesis (PyPI), which scripts/contract.sh runs against the
-#   REST API's document and a live server.
+#   REST API's document and a live server;
+# - Chromium (Debian's package) and playwright-core (npm), which scripts/console_e2e.sh uses to
+#   test the web console in a real browser.
 # Idempotent: skips what is already there.
 set -euo pipefail
 
 need_apt=()
-for package in mesa-vulkan-drivers libvulkan1 curl ffmpeg postgresql; do
+for package in mesa-vulkan-drivers libvulkan1 curl ffmpeg postgresql chromium; do
   dpkg -s "$package" >/dev/null 2>&1 || need_apt+=("$package")
 done
 # Node.js for s3rver, unless the machine has its own.
@@ -59,4 +61,12 @@ if [ ! -x "$SEGSPLAT_TOOLS_DIR/s3rver/node_modules/.bin/s3rver" ]; then
   mkdir -p "$SEGSPLAT_TOOLS_DIR/s3rver"
   npm install --silent --no-audit --no-fund --prefix "$SEGSPLAT_TOOLS_DIR/s3rver" s3rver@3.7.1 \
     || echo "warning: could not install s3rver; the object-store tests need it in CI" >&2
+fi
+
+# The browser-test driver for the web console (scripts/console_e2e.sh), pinned, beside s3rver.
+# playwright-core brings no browser of its own: it drives Debian's chromium.
+if [ ! -d "$SEGSPLAT_TOOLS_DIR/playwright/node_modules/playwright-core" ]; then
+  mkdir -p "$SEGSPLAT_TOOLS_DIR/playwright"
+  npm install --silent --no-audit --no-fund --prefix "$SEGSPLAT_TOOLS_DIR/playwright" playwright-core@1.65.1 \
+    || echo "warning: could not install playwright-core; the console browser tests need it in CI" >&2
 fi

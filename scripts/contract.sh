@@ -30,53 +30,16 @@ done
 cargo test --locked --workspace --no-run --test openapi_contract
 binary=target/debug/segsplat
 
-work=$(mktemp -d)
-server_pid=""
-cleanup() {
-  if [ -n "$server_pid" ]; then
-    kill "$server_pid" 2>/dev/null || true
-    wait "$server_pid" 2>/dev/null || true
-  fi
-  rm -rf "$work"
-}
-trap cleanup EXIT
-
-free_port() {
-  python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])'
-}
-http_port=$(free_port)
-grpc_port=$(free_port)
-token="contract-$(python3 -c 'import secrets; print(secrets.token_hex(8))')"
-base="http://127.0.0.1:$http_port"
+LIVE_TOKEN_PREFIX=contract source scripts/live_server.sh
 
 # API only (workers.enabled=false): schemathesis may queue jobs, which then stay queued instead
 # of training on this machine's CPU. An admin token (so `GET /v1/workers` is reachable too), so
 # the document declares bearer auth and schemathesis checks that routes refuse requests without.
 # A 4 MiB upload limit keeps what generated uploads can write to the temporary dir small.
-SEGSPLAT_DATA_DIR="$work/data" \
-SEGSPLAT_HTTP_ADDR="127.0.0.1:$http_port" \
-SEGSPLAT_GRPC_ADDR="127.0.0.1:$grpc_port" \
-SEGSPLAT_AUTH__TOKEN="[{token = \"$token\", admin = true}]" \
-SEGSPLAT_WORKERS__ENABLED=false \
-SEGSPLAT_LIMITS__MAX_UPLOAD_BYTES=$((4 << 20)) \
-SEGSPLAT_LOG__LEVEL=warn \
-  "$binary" serve >"$work/server.log" 2>&1 &
-server_pid=$!
-
-up=""
-for _ in $(seq 1 120); do
-  if curl -fsS "$base/healthz" >/dev/null 2>&1; then
-    up=yes
-    break
-  fi
-  kill -0 "$server_pid" 2>/dev/null || break
-  sleep 0.5
-done
-if [ -z "$up" ]; then
-  echo "contract: segsplat serve did not come up on $base; its log:" >&2
-  cat "$work/server.log" >&2
-  exit 1
-fi
+live_server_start contract "$binary" \
+  SEGSPLAT_AUTH__TOKEN="[{token = \"$token\", admin = true}]" \
+  SEGSPLAT_WORKERS__ENABLED=false \
+  SEGSPLAT_LIMITS__MAX_UPLOAD_BYTES=$((4 << 20))
 curl -fsS "$base/v1/openapi.json" -o "$work/openapi.json"
 
 echo "== openapi-spec-validator"

@@ -49,6 +49,12 @@ fi
 # except under CI=true).
 phase "contract"
 bash scripts/contract.sh
+# The web console in a real browser: playwright-core driving Debian's chromium headless against
+# a live server, from upload to a text query's masks (scripts/console_e2e.sh; skips without its
+# tools, except under CI=true). Screenshots land in console-screenshots/.
+phase "console"
+bash scripts/console_e2e.sh
+
 # Every fuzz target for a short bounded time on its committed corpus (docs/fuzzing.md). Needs
 # nightly Rust and cargo-fuzz; without them fuzz.sh says so and skips, and the stable replay of
 # the corpus in tests/fuzz_corpus.rs (above) is what guards the parsers.

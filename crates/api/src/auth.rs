@@ -1,6 +1,7 @@
 //! Optional bearer-token authentication for REST (middleware) and gRPC (interceptor). Health,
 //! readiness and metrics stay open so probes and scrapers need no secret, and so does the
-//! OpenAPI document, which holds no tenant's data and tells a client how to authenticate.
+//! OpenAPI document, which holds no tenant's data and tells a client how to authenticate, and the
+//! web console's static files (they call the API with the token the user enters).
 //!
 //! A token resolves to the [`Caller`] it acts for (tenant, admin), which the middleware and the
 //! interceptor attach to the request; handlers hand it to the store, which filters by it.
@@ -87,7 +88,8 @@ pub async fn require_token(
     mut request: Request,
     next: Next,
 ) -> Response {
-    if OPEN_PATHS.contains(&request.uri().path()) {
+    let path = request.uri().path();
+    if OPEN_PATHS.contains(&path) || super::console::is_console_path(path) {
         return next.run(request).await;
     }
     let header = request

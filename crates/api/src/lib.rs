@@ -2,6 +2,7 @@
 //! the process lifecycle that ties them to the store and the worker pool.
 
 mod auth;
+mod console;
 pub mod error;
 mod exports;
 mod extract;

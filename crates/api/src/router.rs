@@ -8,7 +8,9 @@ use tower_http::trace::TraceLayer;
 use super::auth::{TokenCheck, require_token};
 use super::metrics::track_requests;
 use super::state::AppState;
-use super::{exports, extract, jobs, masks, objects, openapi, ops, query, scenes, workers};
+use super::{
+    console, exports, extract, jobs, masks, objects, openapi, ops, query, scenes, workers,
+};
 
 pub fn router(state: AppState) -> Router {
     let tokens = TokenCheck::from_config(&state.core.config.auth);
@@ -49,6 +51,10 @@ pub fn router(state: AppState) -> Router {
         .route("/healthz", get(ops::healthz))
         .route("/readyz", get(ops::readyz))
         .route("/metrics", get(ops::metrics))
+        // The web console (docs/console.md); `config.json` before the catch-all file route.
+        .route("/", get(console::index))
+        .route("/console/config.json", get(console::settings))
+        .route("/console/{file}", get(console::asset))
         // After the routes: it applies to those already added.
         .method_not_allowed_fallback(extract::method_not_allowed)
         .fallback(extract::no_such_endpoint)

@@ -55,6 +55,7 @@ pub struct Config {
     pub database: DatabaseConfig,
     pub blobs: BlobsConfig,
     pub log: LogConfig,
+    pub console: ConsoleConfig,
 }
 
 impl Default for Config {
@@ -74,6 +75,7 @@ impl Default for Config {
             database: DatabaseConfig::default(),
             blobs: BlobsConfig::default(),
             log: LogConfig::default(),
+            console: ConsoleConfig::default(),
         }
     }
 }
@@ -379,6 +381,15 @@ impl Default for LogConfig {
             level: "info".to_string(),
         }
     }
+}
+
+/// The web console served at `/` (docs/console.md).
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ConsoleConfig {
+    /// The operators' Grafana dashboard, linked from the console's status page when set
+    /// (e.g. `http://grafana.internal:3000/d/segsplat`).
+    pub grafana_url: Option<String>,
 }
 
 /// Values given on the command line; they win over file and environment.

@@ -1,0 +1,305 @@
+// The web console in a real browser, against a real `segsplat serve` (scripts/console_e2e.sh
+// starts the server and sets the environment). Each step checks what a person would see; the
+// screenshots go to SEGSPLAT_CONSOLE_SHOTS.
+
+import assert from "node:assert/strict";
+import { readFileSync } from "node:fs";
+import { createRequire } from "node:module";
+import path from "node:path";
+
+const env = (name) => {
+  const value = process.env[name];
+  if (!value) throw new Error(`${name} is not set (run scripts/console_e2e.sh)`);
+  return value;
+};
+const require = createRequire(import.meta.url);
+const { chromium } = require(env("SEGSPLAT_PLAYWRIGHT"));
+const base = env("SEGSPLAT_URL");
+const token = env("SEGSPLAT_TOKEN");
+const shots = env("SEGSPLAT_CONSOLE_SHOTS");
+const JOB_STEPS = 80;
+// The synthetic scene's green sphere at the small level (the tiny CLIP model knows colours).
+const GREEN_OBJECT = 2;
+
+// Console errors are failures, except the failed loads a step provokes on purpose (a refused
+// token, a refused upload, a refused delete), which Chromium also logs as errors.
+let phase = "start";
+const expectedRefusals = { "wrong token": [401], "bad upload": [400, 413, 415, 422], "delete running": [409] };
+const consoleErrors = [];
+
+function step(name) {
+  phase = name;
+  console.log(`== ${name}`);
+}
+
+async function api(method, route, body) {
+  const response = await fetch(`${base}${route}`, {
+    method,
+    headers: { Authorization: `Bearer ${token}`, "Content-Type": "application/json" },
+    body: body === undefined ? undefined : JSON.stringify(body),
+  });
+  return { status: response.status, body: await response.json().catch(() => null) };
+}
+
+async function shot(page, name) {
+  await page.screenshot({ path: path.join(shots, `${name}.png`), fullPage: false });
+}
+
+// The WebGL canvas's pixels (it keeps its drawing buffer), as RGBA bytes with its size.
+async function canvasPixels(page, selector) {
+  return page.evaluate((selector) => {
+    const source = document.querySelector(selector);
+    const copy = document.createElement("canvas");
+    copy.width = source.width;
+    copy.height = source.height;
+    const context = copy.getContext("2d");
+    context.drawImage(source, 0, 0);
+    const { data } = context.getImageData(0, 0, copy.width, copy.height);
+    return { width: copy.width, height: copy.height, cssWidth: source.clientWidth, data: Array.from(data) };
+  }, selector);
+}
+
+// Mean over a rectangle (canvas pixels) of f(pixel index), and over everything outside it.
+function insideOutside(image, box, f) {
+  let inside = 0;
+  let insideCount = 0;
+  let outside = 0;
+  let outsideCount = 0;
+  for (let y = 0; y < image.height; y++) {
+    for (let x = 0; x < image.width; x++) {
+      const value = f((y * image.width + x) * 4);
+      if (x >= box.x0 && x <= box.x1 && y >= box.y0 && y <= box.y1) {
+        inside += value;
+        insideCount++;
+      } else {
+        outside += value;
+        outsideCount++;
+      }
+    }
+  }
+  return { inside: inside / Math.max(1, insideCount), outside: outside / Math.max(1, outsideCount) };
+}
+
+async function waitForFrames(page, atLeast) {
+  await page.waitForFunction((atLeast) => Number(document.getElementById("view3d").dataset.frames || 0) >= atLeast, atLeast);
+}
+
+async function main() {
+  const browser = await chromium.launch({
+    executablePath: env("SEGSPLAT_CHROMIUM"),
+    headless: true,
+    // No GPU in CI: WebGL2 through SwiftShader, which Chromium only uses when asked.
+    args: ["--enable-unsafe-swiftshader", "--use-angle=swiftshader", "--ignore-gpu-blocklist", "--no-sandbox"],
+  });
+  const context = await browser.newContext({ viewport: { width: 1280, height: 800 }, acceptDownloads: true });
+  const page = await context.newPage();
+  page.setDefaultTimeout(30_000);
+  page.on("console", (message) => {
+    if (message.type() !== "error") return;
+    const status = Number((message.text().match(/status of (\d{3})/) || [])[1]);
+    if ((expectedRefusals[phase] || []).includes(status)) return;
+    const where = message.location();
+    consoleErrors.push(`[${phase}] ${message.text()} (${where.url}:${where.lineNumber})`);
+  });
+  page.on("response", (response) => {
+    if (response.status() >= 400) console.log(`   ${response.status()} ${response.request().method()} ${response.url()}`);
+  });
+  page.on("pageerror", (error) => consoleErrors.push(`[${phase}] page error: ${error.message}`));
+  page.on("dialog", (dialog) => dialog.accept());
+
+  try {
+    step("wrong token");
+    await page.goto(base);
+    await page.locator("#token-panel").waitFor();
+    await page.fill("#token-input", "not-the-token");
+    await page.click("#token-save");
+    await page.locator("#token-error").filter({ hasText: "refused" }).waitFor();
+    assert.ok(await page.locator("#scenes-page").isHidden(), "nothing shows without an accepted token");
+    await shot(page, "01-token-refused");
+
+    step("token");
+    await page.fill("#token-input", token);
+    await page.click("#token-save");
+    await page.locator("#scenes-page").waitFor();
+
+    step("bad upload");
+    // Dropped on the drop zone, as a person would; the server's own 4xx message is shown.
+    await page.evaluate(() => {
+      const transfer = new DataTransfer();
+      transfer.items.add(new File(["this is not an archive"], "not-a-scene.zip", { type: "application/zip" }));
+      document.getElementById("drop-zone").dispatchEvent(new DragEvent("drop", { dataTransfer: transfer, bubbles: true, cancelable: true }));
+    });
+    const refusal = page.locator("#upload-error");
+    await refusal.filter({ hasText: /Upload refused: 4\d\d / }).waitFor();
+    const direct = await fetch(`${base}/v1/scenes`, {
+      method: "POST",
+      headers: { Authorization: `Bearer ${token}`, "Content-Type": "application/zip" },
+      body: readFileSync(env("SEGSPLAT_BAD_UPLOAD")),
+    });
+    const directMessage = (await direct.json()).error.message;
+    assert.ok((await refusal.textContent()).includes(directMessage), `the server's message is shown as it is: ${directMessage}`);
+    await shot(page, "02-bad-upload");
+
+    step("upload");
+    await page.setInputFiles("#upload-input", env("SEGSPLAT_SCENE_ZIP"));
+    const result = page.locator("#upload-result");
+    await result.waitFor();
+    const facts = await result.textContent();
+    for (const expected of ["colmap", "9", "96x72", "no"]) assert.ok(facts.includes(expected), `upload facts show ${expected}: ${facts}`);
+    const row = page.locator("#scene-list tr").first();
+    await row.waitFor();
+
+    step("job");
+    await row.click();
+    await page.locator("#scene-page").waitFor();
+    await page.locator("#view-status").filter({ hasText: "Not trained yet" }).waitFor();
+    await page.selectOption("#job-kind", "segment_then_splat");
+    await page.fill("#job-steps", String(JOB_STEPS));
+    await page.selectOption("#job-masks", "user");
+    await page.click("#job-start");
+    await page.locator("#job-live").waitFor();
+    const seenSteps = new Set();
+    await page.waitForFunction(() => /^\d+ \/ \d+$/.test(document.getElementById("job-step").textContent)
+      && Number(document.getElementById("job-step").textContent.split(" / ")[0]) > 0, null, { timeout: 240_000 });
+    seenSteps.add(await page.textContent("#job-step"));
+    await shot(page, "03-job-running");
+    await page.waitForFunction(() => document.getElementById("job-live").dataset.state === "succeeded", null, { timeout: 300_000 });
+    seenSteps.add(await page.textContent("#job-step"));
+    assert.ok(seenSteps.size >= 1);
+    assert.equal(await page.locator("#job-progress").evaluate((bar) => bar.value), 1, "the bar is full");
+    assert.ok(!(await page.textContent("#job-loss")).startsWith("-"), "a loss was shown");
+
+    step("3d view");
+    await page.locator("#view-status").filter({ hasText: "Gaussians" }).waitFor({ timeout: 60_000 });
+    await page.locator("#object-list tr").first().waitFor();
+    await waitForFrames(page, 1);
+    await page.waitForTimeout(300);
+    const before = await canvasPixels(page, "#view3d");
+    const lit = before.data.filter((_, i) => i % 4 === 0).filter((_, p) => {
+      const i = p * 4;
+      return before.data[i] + before.data[i + 1] + before.data[i + 2] > 30;
+    }).length;
+    assert.ok(lit > before.width * before.height * 0.01, `the view shows the scene (${lit} lit pixels)`);
+    await page.locator("#view-panel").scrollIntoViewIfNeeded();
+    await shot(page, "04-scene-3d");
+
+    step("orbit by keyboard");
+    const framesBefore = Number(await page.locator("#view3d").getAttribute("data-frames"));
+    await page.focus("#view3d");
+    await page.keyboard.press("ArrowLeft");
+    await waitForFrames(page, framesBefore + 1);
+    await page.selectOption("#camera-select", "0");
+    await page.dispatchEvent("#camera-select", "change");
+    await page.waitForTimeout(300);
+
+    step("query");
+    const reference = await canvasPixels(page, "#view3d");
+    await page.fill("#query-text", "green");
+    await page.selectOption("#query-granularity", "small");
+    await page.click("#query-run");
+    await page.locator(`#query-results li[data-object-id="${GREEN_OBJECT}"]`).waitFor();
+    await page.waitForFunction((id) => document.getElementById("view3d").dataset.selected === String(id)
+      && Number(document.getElementById("view3d").dataset.masks) >= 1, GREEN_OBJECT);
+    await page.waitForTimeout(300);
+    const answer = await page.textContent("#query-results");
+    assert.ok(/score [0-9.-]+, relevancy [0-9.]+/.test(answer), answer);
+    const after = await canvasPixels(page, "#view3d");
+    const box = await page.evaluate((id) => window.segsplatConsole.view.projectedBox(id), GREEN_OBJECT);
+    assert.ok(box, "the green object projects into the view");
+    const ratio = after.width / after.cssWidth;
+    const pixelBox = { x0: box.x0 * ratio, y0: box.y0 * ratio, x1: box.x1 * ratio, y1: box.y1 * ratio };
+    const change = insideOutside(after, pixelBox, (i) =>
+      Math.abs(after.data[i] - reference.data[i]) + Math.abs(after.data[i + 1] - reference.data[i + 1]) + Math.abs(after.data[i + 2] - reference.data[i + 2]));
+    const brightness = (image) => (i) => image.data[i] + image.data[i + 1] + image.data[i + 2];
+    const litBefore = insideOutside(reference, pixelBox, brightness(reference));
+    const litAfter = insideOutside(after, pixelBox, brightness(after));
+    console.log(`   box ${JSON.stringify(pixelBox)} change inside ${change.inside.toFixed(1)} outside ${change.outside.toFixed(1)}; brightness inside/outside before ${(litBefore.inside / Math.max(1, litBefore.outside)).toFixed(2)} after ${(litAfter.inside / Math.max(1, litAfter.outside)).toFixed(2)}`);
+    assert.ok(change.inside > 10, `the view changes where the object is (mean change ${change.inside})`);
+    assert.ok(litAfter.inside / Math.max(1, litAfter.outside) > 1.5 * (litBefore.inside / Math.max(1, litBefore.outside)),
+      "the object stands out from the rest after the query");
+
+    step("mask overlay");
+    const overlay = await canvasPixels(page, "#mask-overlay");
+    const masked = insideOutside(overlay, pixelBox, (i) => (overlay.data[i + 3] > 0 ? 1 : 0));
+    assert.ok(masked.inside > 0.05, `the mask covers the object's box (${masked.inside})`);
+    assert.ok(masked.inside > 5 * masked.outside, `the mask lies on the object (${JSON.stringify(masked)})`);
+    await page.locator("#view-panel").scrollIntoViewIfNeeded();
+    await shot(page, "05-query-green");
+
+    step("visible-only masks");
+    await page.check("#query-visible");
+    await page.click("#query-run");
+    await page.waitForFunction(() => Number(document.getElementById("view3d").dataset.masks) >= 1);
+    await page.uncheck("#query-visible");
+
+    step("nothing matches");
+    await page.fill("#query-text", "a chair");
+    await page.click("#query-run");
+    await page.locator("#query-nothing").waitFor();
+    await page.waitForFunction(() => document.getElementById("view3d").dataset.selected === "");
+
+    step("objects");
+    await page.hover(`#object-list tr[data-object-id="1"]`);
+    await page.waitForFunction(() => document.getElementById("view3d").dataset.selected === "1");
+    const downloadEvent = page.waitForEvent("download");
+    await page.click(`#object-list tr[data-object-id="${GREEN_OBJECT}"] button.download`);
+    const downloaded = await downloadEvent;
+    const plyPath = path.join(env("SEGSPLAT_DOWNLOADS"), downloaded.suggestedFilename());
+    await downloaded.saveAs(plyPath);
+    const ply = readFileSync(plyPath);
+    assert.equal(ply.subarray(0, 4).toString(), "ply\n", "the download is a PLY");
+    assert.ok(ply.toString("latin1").includes("element vertex"), "with vertices");
+
+    step("phone");
+    await page.setViewportSize({ width: 390, height: 844 });
+    await page.waitForTimeout(300);
+    const overflow = await page.evaluate(() => document.documentElement.scrollWidth - window.innerWidth);
+    const wide = await page.evaluate(() => [`body ${document.body.scrollWidth}`, ...[...document.querySelectorAll("body *")]
+      .map((node) => [node.getBoundingClientRect().right, node])
+      .sort((a, b) => b[0] - a[0]).slice(0, 6)
+      .map(([right, node]) => `${node.tagName.toLowerCase()}#${node.id}.${node.className}@${Math.round(right)}<${node.parentElement.tagName.toLowerCase()}#${node.parentElement.id}`)]);
+    assert.ok(overflow <= 1, `nothing overflows a phone-sized viewport (${overflow}px): ${wide.join(" ")}`);
+    await shot(page, "06-phone");
+    await page.setViewportSize({ width: 1280, height: 800 });
+
+    step("status");
+    await page.click("#nav-status");
+    await page.locator("#queue-list tr").first().waitFor();
+    assert.ok(await page.locator("#grafana-link").isVisible(), "the Grafana link is shown when configured");
+    const ready = await page.textContent("#status-facts");
+    assert.ok(ready.includes("Workers"), ready);
+    await shot(page, "07-status");
+
+    step("delete running");
+    await page.click("#nav-scenes");
+    const sceneId = await page.locator("#scene-list tr").first().getAttribute("data-scene-id");
+    const long = await api("POST", `/v1/scenes/${sceneId}/jobs`, { kind: "reconstruct", config: { steps: 100000 } });
+    assert.equal(long.status, 201, JSON.stringify(long.body));
+    await page.click(`#scene-list tr[data-scene-id="${sceneId}"] button.delete`);
+    await page.locator("#scenes-error").filter({ hasText: "409" }).waitFor();
+    await shot(page, "08-delete-refused");
+    await api("POST", `/v1/jobs/${long.body.id}/cancel`);
+    for (let i = 0; i < 240; i++) {
+      const job = await api("GET", `/v1/jobs/${long.body.id}`);
+      if (["cancelled", "failed", "succeeded"].includes(job.body.state)) break;
+      await new Promise((resolve) => setTimeout(resolve, 500));
+    }
+
+    step("delete");
+    await page.click(`#scene-list tr[data-scene-id="${sceneId}"] button.delete`);
+    await page.locator(`#scene-list tr[data-scene-id="${sceneId}"]`).waitFor({ state: "detached" });
+
+    step("console errors");
+    assert.deepEqual(consoleErrors, [], "the console logged no errors");
+  } catch (error) {
+    await shot(page, `failed-${phase.replace(/\W+/g, "-")}`).catch(() => {});
+    console.error(`console e2e failed at "${phase}":`, error);
+    console.error(`view status: ${await page.textContent("#view-status").catch(() => "?")}`);
+    if (consoleErrors.length) console.error("console errors:", consoleErrors);
+    process.exitCode = 1;
+  } finally {
+    await browser.close();
+  }
+}
+
+await main();
