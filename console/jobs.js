@@ -102,6 +102,10 @@ export class JobPanel {
     $("job-live").hidden = false;
     $("job-title").textContent = `${job.kind} ${job.id}`;
     this.chart.clear();
+    for (const id of ["job-stage", "job-step", "job-loss", "job-psnr", "job-gaussians", "job-eta"]) {
+      $(id).textContent = "-";
+    }
+    showError($("job-error"), "");
     this.showProgress(job.progress || {});
     this.showState(job.state, job.error);
   }

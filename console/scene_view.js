@@ -134,7 +134,8 @@ export class ScenePage {
     $("view-status").textContent = message;
   }
 
-  async loadTrained() {
+  // keepCamera: the same scene at another time, seen from where the user left the camera.
+  async loadTrained(keepCamera = false) {
     const sceneId = this.sceneId;
     this.status("Loading the trained scene...");
     try {
@@ -149,11 +150,13 @@ export class ScenePage {
       this.labels = labels ? parseLabels(labels) : null;
       if (this.labels && this.labels.rows !== this.splats.count) this.labels = null;
       if (!this.renderer) this.renderer = new SplatRenderer(this.canvas);
-      $("camera-select").replaceChildren(...cameras.map((camera, index) =>
-        el("option", { value: String(index) }, `${index}: ${camera.name}`)));
-      this.target = medianCenter(this.splats.centers, this.splats.count);
       this.renderer.setSplats(this.splats, null);
-      this.toTrainingView();
+      if (!keepCamera || !this.camera) {
+        $("camera-select").replaceChildren(...cameras.map((camera, index) =>
+          el("option", { value: String(index) }, `${index}: ${camera.name}`)));
+        this.target = medianCenter(this.splats.centers, this.splats.count);
+        this.toTrainingView();
+      }
       await this.showLevel($("level-select").value);
       this.status(`${formatNumber(this.splats.count, 0)} Gaussians. Drag to orbit, shift-drag to pan, wheel to zoom.`);
     } catch (error) {
@@ -381,7 +384,7 @@ export class ScenePage {
 
   async moveToTime() {
     if (!this.scene?.dynamic) return;
-    await this.loadTrained();
+    await this.loadTrained(true);
     if (this.lastQuery?.matched) await this.ask();
   }
 }

@@ -103,7 +103,9 @@ export class ScenesPage {
     $("upload-result").hidden = true;
     $("upload-status").textContent = `Uploading ${file.name}...`;
     try {
-      const scene = await upload("/v1/scenes", file, (fraction) => {
+      // The scene is named after the file, without its archive extension.
+      const name = file.name.replace(/\.(zip|tar|tgz|tar\.gz|gz)$/i, "");
+      const scene = await upload(`/v1/scenes?name=${encodeURIComponent(name)}`, file, (fraction) => {
         progress.value = fraction;
         $("upload-status").textContent =
           fraction < 1 ? `Uploading ${file.name}: ${Math.round(fraction * 100)}%`

@@ -43,6 +43,8 @@ LIVE_TOKEN_PREFIX=console source scripts/live_server.sh
 # CLIP model tells apart by colour ("red", "green", "blue").
 "$binary" synthetic-scene "$work/scene" --frames 9 --width 96 --height 72 >/dev/null
 (cd "$work/scene" && python3 -m zipfile -c "$work/scene.zip" .)
+# The same scene without its masks: a job that asks for the user's masks fails on it.
+(cd "$work/scene" && python3 -m zipfile -c "$work/no-masks.zip" images sparse)
 echo "this is not an archive" >"$work/not-a-scene.zip"
 
 live_server_start "console e2e" "$binary" \
@@ -56,6 +58,7 @@ SEGSPLAT_URL="$base" \
 SEGSPLAT_TOKEN="$token" \
 SEGSPLAT_SCENE_ZIP="$work/scene.zip" \
 SEGSPLAT_BAD_UPLOAD="$work/not-a-scene.zip" \
+SEGSPLAT_NO_MASKS_ZIP="$work/no-masks.zip" \
 SEGSPLAT_CHROMIUM="$chromium" \
 SEGSPLAT_CONSOLE_SHOTS="$shots" \
 SEGSPLAT_DOWNLOADS="$work/downloads" \

@@ -148,6 +148,7 @@ async function main() {
     for (const expected of ["colmap", "9", "96x72", "no"]) assert.ok(facts.includes(expected), `upload facts show ${expected}: ${facts}`);
     const row = page.locator("#scene-list tr").first();
     await row.waitFor();
+    assert.ok((await row.textContent()).startsWith("scene"), "the scene is named after its file");
 
     step("job");
     await row.click();
@@ -278,16 +279,32 @@ async function main() {
     await page.click(`#scene-list tr[data-scene-id="${sceneId}"] button.delete`);
     await page.locator("#scenes-error").filter({ hasText: "409" }).waitFor();
     await shot(page, "08-delete-refused");
-    await api("POST", `/v1/jobs/${long.body.id}/cancel`);
-    for (let i = 0; i < 240; i++) {
-      const job = await api("GET", `/v1/jobs/${long.body.id}`);
-      if (["cancelled", "failed", "succeeded"].includes(job.body.state)) break;
-      await new Promise((resolve) => setTimeout(resolve, 500));
-    }
+
+    step("cancel");
+    await page.click(`#scene-list tr[data-scene-id="${sceneId}"]`);
+    await page.waitForFunction(() => ["queued", "running"].includes(document.getElementById("job-live").dataset.state));
+    await page.click("#job-cancel");
+    await page.waitForFunction(() => document.getElementById("job-live").dataset.state === "cancelled", null, { timeout: 120_000 });
+    await page.locator("#job-error").filter({ hasText: "cancelled" }).waitFor();
 
     step("delete");
+    await page.click("#nav-scenes");
     await page.click(`#scene-list tr[data-scene-id="${sceneId}"] button.delete`);
     await page.locator(`#scene-list tr[data-scene-id="${sceneId}"]`).waitFor({ state: "detached" });
+
+    step("failed job");
+    await page.setInputFiles("#upload-input", env("SEGSPLAT_NO_MASKS_ZIP"));
+    await page.locator("#upload-result").filter({ hasText: "no-masks" }).waitFor();
+    await page.click("#scene-list tr >> nth=0");
+    await page.locator("#view-status").filter({ hasText: "Not trained yet" }).waitFor();
+    await page.selectOption("#job-kind", "segment_then_splat");
+    await page.fill("#job-steps", "20");
+    await page.selectOption("#job-masks", "user");
+    await page.click("#job-start");
+    await page.waitForFunction(() => document.getElementById("job-live").dataset.state === "failed", null, { timeout: 120_000 });
+    const reason = await page.textContent("#job-error");
+    assert.ok(reason.startsWith("The job failed: ") && reason.includes("masks"), `the reason is shown: ${reason}`);
+    await shot(page, "09-job-failed");
 
     step("console errors");
     assert.deepEqual(consoleErrors, [], "the console logged no errors");
