@@ -6,10 +6,15 @@
 //! - masks: each small object's visible mask for a held-out frame against the true silhouette;
 //! - positions: each object's centroid at held-out times against its true path;
 //! - the same through gRPC `ListObjects` with a time, and errors for a bad time;
+//! - the whole scene as a PLY (and SPZ) moved to a time (`trained/scene.ply?time=t`): the
+//!   canonical layout and order, each object's Gaussians (by `labels.npy`) at its centroid at `t`;
 //! - text queries at a time (REST `query.time`) and a gRPC `StreamQuery` of (pose, t) pairs,
 //!   through the tiny stand-in CLIP, which embeds each object from every training frame's mask.
 //!
-//! A second test uploads a Neu3D camera rig without masks: `auto` masks with the stand-in SAM are
+//! Two short tests check `?time=` where nothing moves: a static scene (400) and a dynamic scene
+//! trained without a field (the stored file).
+//!
+//! Another test uploads a Neu3D camera rig without masks: `auto` masks with the stand-in SAM are
 //! propagated along each camera's video in turn (`scene::sequence::video_order`).
 //!
 //! Measured (1000 steps, 64x48, lavapipe): held-out mIoU 0.79 (asserted >= 0.6); centroid error
@@ -23,6 +28,9 @@ use std::time::Duration;
 use base64::Engine;
 use common::{TestService, archives};
 use segsplat_api::proto;
+use segsplat_engine::GaussianModel;
+use segsplat_engine::labels::read_labels;
+use segsplat_engine::ply::read_ply;
 use segsplat_scene::Level;
 use segsplat_scene::synthetic::SyntheticSpec;
 use segsplat_scene::synthetic_dynamic::{
@@ -118,6 +126,43 @@ fn png_bools(bytes: &[u8]) -> Vec<bool> {
 /// A listed object's centroid (REST `objects` or a query match).
 fn centroid_of(object: &serde_json::Value) -> [f32; 3] {
     serde_json::from_value(object["centroid"].clone()).expect("centroid")
+}
+
+/// GET answered 200 (else a panic showing the body): its bytes.
+async fn get_ok(client: &TestService, path: &str) -> Vec<u8> {
+    let (status, bytes) = client.get_bytes(path).await;
+    assert_eq!(status, 200, "{path}: {}", String::from_utf8_lossy(&bytes));
+    bytes
+}
+
+/// A PLY's header: everything before `end_header` (format, vertex count, properties).
+fn ply_header(bytes: &[u8]) -> &[u8] {
+    let end = bytes
+        .windows(b"end_header".len())
+        .position(|window| window == b"end_header")
+        .expect("a PLY header");
+    &bytes[..end]
+}
+
+/// Opacity-weighted mean position of the Gaussians `labels` gives `object_id` at `level`, over
+/// those more than 5% opaque: how the service summarises an object's centroid.
+fn labelled_centroid(
+    model: &GaussianModel,
+    labels: &[[u32; 3]],
+    level: Level,
+    object_id: u32,
+) -> glam::Vec3 {
+    let mut sum = glam::DVec3::ZERO;
+    let mut weight_sum = 0.0;
+    for (index, ids) in labels.iter().enumerate() {
+        let opacity = 1.0 / (1.0 + (-f64::from(model.opacity_logits[index])).exp());
+        if ids[level.index()] == object_id && opacity > 0.05 {
+            weight_sum += opacity;
+            sum += opacity * glam::DVec3::from_array(model.means[index].map(f64::from));
+        }
+    }
+    assert!(weight_sum > 0.0, "no opaque Gaussian of object {object_id}");
+    (sum / weight_sum).as_vec3()
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -268,6 +313,54 @@ async fn a_moving_scene_is_segmented_and_queried_in_time() {
         .await;
     let moved = centroid_at(&end)[1] - centroid_at(&start)[1];
     assert!(moved > 0.4 && moved < 0.9, "object 1 moved {moved} along y");
+
+    // The whole scene moved to a time (what a viewer's time slider downloads): the canonical
+    // PLY's layout and Gaussian order, so labels.npy lines up and each object's Gaussians sit
+    // where `objects?time=t` places it; only the geometry moves.
+    let trained = format!("/v1/scenes/{scene_id}/trained");
+    let canonical_bytes = get_ok(&client, &format!("{trained}/scene.ply")).await;
+    let canonical = read_ply(canonical_bytes.as_slice()).expect("PLY").model;
+    let labels = get_ok(&client, &format!("{trained}/labels.npy")).await;
+    let labels = read_labels(labels.as_slice(), canonical.len()).expect("labels");
+    let mut object_1_at = Vec::new();
+    for time in [0.0, 0.5, 1.0] {
+        let bytes = get_ok(&client, &format!("{trained}/scene.ply?time={time}")).await;
+        assert_eq!(ply_header(&bytes), ply_header(&canonical_bytes));
+        let at_time = read_ply(bytes.as_slice()).expect("PLY at a time").model;
+        assert_eq!(at_time.len(), canonical.len());
+        assert_eq!(at_time.opacity_logits, canonical.opacity_logits);
+        assert_eq!(at_time.sh_coefficients, canonical.sh_coefficients);
+        let (_, list) = client
+            .get_json(&format!(
+                "/v1/scenes/{scene_id}/objects?level=small&time={time}"
+            ))
+            .await;
+        for object in list["objects"].as_array().expect("objects") {
+            let id = object["object_id"].as_u64().expect("id") as u32;
+            let mean = labelled_centroid(&at_time, &labels, Level::Small, id);
+            let gap = distance(centroid_of(object), mean);
+            assert!(
+                gap < 1e-4,
+                "t = {time}: object {id}'s Gaussians are {gap} off"
+            );
+        }
+        object_1_at.push(labelled_centroid(&at_time, &labels, Level::Small, 1));
+    }
+    let ply_moved = object_1_at[2].y - object_1_at[0].y;
+    println!("object 1's Gaussians in the PLY move {ply_moved:.3} along y from t = 0 to 1");
+    assert!(ply_moved > 0.4, "object 1's Gaussians moved {ply_moved}");
+    let spz_start = get_ok(&client, &format!("{trained}/scene.spz?time=0")).await;
+    let spz_end = get_ok(&client, &format!("{trained}/scene.spz?time=1")).await;
+    assert_ne!(spz_start, spz_end, "the SPZ moves too");
+    for (asked, why) in [
+        ("labels.npy?time=0.5", "a time with another file"),
+        ("scene.ply?time=soon", "a time that is not a number"),
+        ("scene.ply?time=2e6", "a time out of range"),
+    ] {
+        let (status, body) = client.get_json(&format!("{trained}/{asked}")).await;
+        assert_eq!(status, 400, "{why}: {body}");
+        assert_eq!(body["error"]["code"], "bad_request", "{why}: {body}");
+    }
 
     // gRPC ListObjects at a time agrees with REST.
     let mut grpc = client.grpc().await;
@@ -484,6 +577,65 @@ async fn a_moving_scene_is_segmented_and_queried_in_time() {
         )
         .await;
     assert!(status == 400 || status == 422, "{status}: {body}");
+    client.shutdown().await;
+}
+
+/// `?time=` on a static scene's trained files is refused, saying why, whether or not it is
+/// trained (no GPU needed); without a time the files answer as before.
+#[tokio::test]
+async fn a_time_is_refused_for_a_static_scene() {
+    let data = tempfile::tempdir().expect("tempdir");
+    let client = TestService::start(common::test_config(data.path()), Vec::new()).await;
+    let scene_id = client.upload_test_scene().await;
+    for file in ["scene.ply", "scene.spz"] {
+        let path = format!("/v1/scenes/{scene_id}/trained/{file}");
+        let (status, body) = client.get_json(&format!("{path}?time=0.5")).await;
+        assert_eq!(status, 400, "{body}");
+        let message = body["error"]["message"].as_str().expect("message");
+        assert!(
+            message.contains(&scene_id) && message.contains("static"),
+            "{message}"
+        );
+        let (status, body) = client.get_json(&path).await;
+        assert_eq!(status, 409, "not trained yet, as before: {body}");
+    }
+    let (status, body) = client
+        .get_json("/v1/scenes/no-such-scene/trained/scene.ply?time=0.5")
+        .await;
+    assert_eq!(status, 404, "{body}");
+    client.shutdown().await;
+}
+
+/// A dynamic scene trained without a field (`"deformation": null`) looks the same at every time:
+/// `scene.ply?time=` is the stored file.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_dynamic_scene_trained_static_serves_its_stored_scene_at_any_time() {
+    let data = tempfile::tempdir().expect("tempdir");
+    let Some(client) = TestService::start_on_gpu(data.path(), |_| {}).await else {
+        return;
+    };
+    let files = archives::dataset_files(|dir| write_dynamic_blender(dir, &spec()));
+    let scene_id = upload_dynamic(&client, &files, FRAMES).await;
+    let job_id = client
+        .create_job(
+            &scene_id,
+            "reconstruct",
+            serde_json::json!({"steps": 30, "checkpoint_every": 0, "deformation": null}),
+        )
+        .await;
+    client
+        .wait_for_state(&job_id, "succeeded", Duration::from_secs(300))
+        .await;
+    let trained = format!("/v1/scenes/{scene_id}/trained");
+    let (status, _) = client
+        .get_bytes(&format!("{trained}/deformation.json"))
+        .await;
+    assert_eq!(status, 404, "trained without a field");
+    let stored = get_ok(&client, &format!("{trained}/scene.ply")).await;
+    assert_eq!(
+        get_ok(&client, &format!("{trained}/scene.ply?time=0.5")).await,
+        stored
+    );
     client.shutdown().await;
 }
 

@@ -249,6 +249,7 @@ fn serve_failure_status(failure: ServeFailure) -> Status {
         | ServeFailure::FileNotStored { .. }
         | ServeFailure::UnknownFile(_) => Status::not_found(message),
         ServeFailure::NotTrained(_) => Status::failed_precondition(message),
+        ServeFailure::StaticScene(_) => Status::invalid_argument(message),
         ServeFailure::Blobs(_) => Status::unavailable(message),
         ServeFailure::DeadlineExceeded => Status::deadline_exceeded(message),
         ServeFailure::Serving(error) => match error {

@@ -34,6 +34,7 @@ impl From<ServeFailure> for ApiError {
             }
             ServeFailure::NotTrained(_) => ApiError::conflict(message),
             ServeFailure::UnknownFile(_) => ApiError::not_found(message),
+            ServeFailure::StaticScene(_) => ApiError::bad_request(message),
             ServeFailure::Blobs(blob) => blob.into(),
             ServeFailure::DeadlineExceeded => {
                 ApiError::new(StatusCode::GATEWAY_TIMEOUT, "deadline_exceeded", message)

@@ -15,7 +15,7 @@ use super::ServingError;
 use super::scene_motion::SceneMotion;
 use super::trained_scene::TrainedScene;
 use segsplat_engine::render::Renderer;
-use segsplat_engine::{GpuGaussians, ObjectFilter, RenderCamera};
+use segsplat_engine::{GaussianModel, GpuGaussians, ObjectFilter, RenderCamera};
 use segsplat_gpu::GpuContext;
 use segsplat_method::cameras::SceneCamera;
 use segsplat_method::segment_then_splat::objects::{
@@ -34,6 +34,8 @@ pub struct LoadedScene {
     pub key: String,
     pub cameras: Vec<SceneCamera>,
     pub gaussian_count: usize,
+    /// SH degree the stored PLY carries (what an SPZ of the scene keeps).
+    pub sh_degree: u32,
     gaussians: GpuGaussians,
     /// The deformation field of a dynamic scene.
     motion: Option<Mutex<SceneMotion>>,
@@ -208,6 +210,7 @@ impl SceneCache {
             key: key.to_string(),
             cameras: trained.cameras,
             gaussian_count,
+            sh_degree: trained.sh_degree,
             bytes,
             gaussians,
             motion: motion.map(Mutex::new),
@@ -298,6 +301,17 @@ impl SceneCache {
         scene: &LoadedScene,
         time: f32,
     ) -> Result<Option<Vec<ObjectSummary>>, ServingError> {
+        let model = self.model_at(scene, time)?;
+        Ok(model.as_ref().map(summarize_objects))
+    }
+
+    /// The scene's Gaussians moved to `time` by its deformation field, read back from the GPU in
+    /// the canonical order (object ids included); `None` for a scene without a field.
+    pub fn model_at(
+        &self,
+        scene: &LoadedScene,
+        time: f32,
+    ) -> Result<Option<GaussianModel>, ServingError> {
         let Some(motion) = scene.motion.as_ref() else {
             return Ok(None);
         };
@@ -305,6 +319,6 @@ impl SceneCache {
         // The renderer lock orders this after any render using the moved geometry.
         let _renderer = lock(&gpu.renderer);
         let model = lock(motion).model_at(&gpu.ctx, &scene.gaussians, time)?;
-        Ok(Some(summarize_objects(&model)))
+        Ok(Some(model))
     }
 }

@@ -42,6 +42,9 @@ pub enum ServeFailure {
     NotTrained(String),
     #[error("{0} is not a downloadable file; choose one of {files}, {SPZ_FILE}", files = DOWNLOADABLE_FILES.join(", "))]
     UnknownFile(String),
+    /// A time was asked of a scene whose frames carry none: nothing moves it.
+    #[error("scene {0} is static; time applies to dynamic scenes only")]
+    StaticScene(String),
     #[error("{file} is not among this scene's results (job {job_id})")]
     FileNotStored { file: String, job_id: String },
     #[error(transparent)]
@@ -406,6 +409,42 @@ impl Serving {
             )?)
         })
         .await
+    }
+
+    /// The whole scene in `format` with its Gaussians moved to `time` by the deformation field
+    /// (means, log-scales, rotations; opacity and colour stay canonical), in the canonical
+    /// file's layout and Gaussian order, so `labels.npy` still lines up. Built in memory from
+    /// the scene cache's GPU copy. `None` when the served version has no field (a dynamic scene
+    /// trained static): its stored file is the scene at every time.
+    pub async fn scene_at_time(
+        &self,
+        scene_id: &str,
+        caller: &Caller,
+        time: f32,
+        format: SplatFormat,
+    ) -> Result<Option<Vec<u8>>, ServeFailure> {
+        // Checked before the trained version, so a static scene says why whatever its state.
+        if !self.is_dynamic(scene_id, caller).await? {
+            return Err(ServeFailure::StaticScene(scene_id.to_string()));
+        }
+        let scene = self.loaded_scene(scene_id, caller).await?;
+        let cache = Arc::clone(&self.cache);
+        blocking(move || {
+            let Some(model) = cache.model_at(&scene, time)? else {
+                return Ok(None);
+            };
+            Ok(Some(encode_splats(&model, scene.sh_degree, format)?))
+        })
+        .await
+    }
+
+    /// Whether the scene's frames carry times; [`ServeFailure::SceneNotFound`] when `caller`
+    /// does not see it.
+    async fn is_dynamic(&self, scene_id: &str, caller: &Caller) -> Result<bool, ServeFailure> {
+        match self.database.get_scene(scene_id, caller).await? {
+            Some(scene) => Ok(scene.summary.time_count > 0),
+            None => Err(ServeFailure::SceneNotFound(scene_id.to_string())),
+        }
     }
 
     async fn trained_scene(
