@@ -158,6 +158,7 @@ export class ScenePage {
         this.toTrainingView();
       }
       await this.showLevel($("level-select").value);
+      this.canvas.dataset.time = String(this.time() ?? "");
       this.status(`${formatNumber(this.splats.count, 0)} Gaussians. Drag to orbit, shift-drag to pan, wheel to zoom.`);
     } catch (error) {
       if (sceneId !== this.sceneId) return;

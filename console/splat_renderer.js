@@ -67,10 +67,10 @@ void main() {
       if (i < u_selectedCount && u_selected[i] == t3.a) selected = true;
     }
     if (selected) {
-      color = mix(color, vec3(1.0, 0.85, 0.1), 0.45);
-      alpha = max(alpha, 0.6);
+      // Lit: its own colours, a little brighter and warmer, so the object stays recognisable.
+      color = min(mix(color, vec3(1.0, 0.85, 0.2), 0.12) * 1.1, vec3(1.0));
     } else {
-      color = vec3(dot(color, vec3(0.3, 0.59, 0.11))) * 0.5;
+      color = vec3(dot(color, vec3(0.3, 0.59, 0.11))) * 0.35;
       alpha *= 0.15;
     }
   }

@@ -46,6 +46,9 @@ LIVE_TOKEN_PREFIX=console source scripts/live_server.sh
 # The same scene without its masks: a job that asks for the user's masks fails on it.
 (cd "$work/scene" && python3 -m zipfile -c "$work/no-masks.zip" images sparse)
 echo "this is not an archive" >"$work/not-a-scene.zip"
+# Moving spheres in the D-NeRF layout (a time per frame), for the time slider.
+"$binary" synthetic-scene "$work/moving" --dynamic --frames 12 --width 64 --height 48 >/dev/null
+(cd "$work/moving" && python3 -m zipfile -c "$work/moving.zip" .)
 
 live_server_start "console e2e" "$binary" \
   SEGSPLAT_AUTH__TOKENS="[\"$token\"]" \
@@ -59,6 +62,7 @@ SEGSPLAT_TOKEN="$token" \
 SEGSPLAT_SCENE_ZIP="$work/scene.zip" \
 SEGSPLAT_BAD_UPLOAD="$work/not-a-scene.zip" \
 SEGSPLAT_NO_MASKS_ZIP="$work/no-masks.zip" \
+SEGSPLAT_DYNAMIC_ZIP="$work/moving.zip" \
 SEGSPLAT_CHROMIUM="$chromium" \
 SEGSPLAT_CONSOLE_SHOTS="$shots" \
 SEGSPLAT_DOWNLOADS="$work/downloads" \
