@@ -42,10 +42,9 @@ function route() {
   const target = name === "scenes" && id ? "scene" : pages[name] ? name : "scenes";
   if (current && current !== pages[target]) current.page.leave?.();
   for (const [key, { element }] of Object.entries(pages)) element.hidden = key !== target;
-  $("nav-scenes").toggleAttribute("aria-current", target !== "status");
-  $("nav-status").toggleAttribute("aria-current", target === "status");
-  if (target !== "status") $("nav-scenes").setAttribute("aria-current", "page");
-  else $("nav-status").setAttribute("aria-current", "page");
+  const [active, inactive] = target === "status" ? ["nav-status", "nav-scenes"] : ["nav-scenes", "nav-status"];
+  $(active).setAttribute("aria-current", "page");
+  $(inactive).removeAttribute("aria-current");
   current = pages[target];
   current.page.enter(decodeURIComponent(id || ""), settings);
 }
