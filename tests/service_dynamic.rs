@@ -599,10 +599,23 @@ async fn a_time_is_refused_for_a_static_scene() {
         let (status, body) = client.get_json(&path).await;
         assert_eq!(status, 409, "not trained yet, as before: {body}");
     }
-    let (status, body) = client
-        .get_json("/v1/scenes/no-such-scene/trained/scene.ply?time=0.5")
-        .await;
-    assert_eq!(status, 404, "{body}");
+    // What does not exist is a 404 (and an untrained scene a 409) whatever the time says;
+    // only a file that exists is refused for having one.
+    for (path, expected) in [
+        ("/v1/scenes/no-such-scene/trained/scene.ply?time=0.5", 404),
+        ("/v1/scenes/no-such-scene/trained/0?time=999999", 404),
+        (
+            &format!("/v1/scenes/{scene_id}/trained/nope.bin?time=0.5"),
+            404,
+        ),
+        (
+            &format!("/v1/scenes/{scene_id}/trained/labels.npy?time=0.5"),
+            409,
+        ),
+    ] {
+        let (status, body) = client.get_json(path).await;
+        assert_eq!(status, expected, "{path}: {body}");
+    }
     client.shutdown().await;
 }
 

@@ -92,6 +92,13 @@ async fn scene_at_time(
         SCENE_FILE => SplatFormat::Ply,
         SPZ_FILE => SplatFormat::Spz,
         _ => {
+            // An unknown scene or file is a 404 (and an untrained scene a 409) whatever the
+            // query says; only a file that exists is refused for its time.
+            state
+                .core
+                .serving
+                .open_trained_file(id, caller, file)
+                .await?;
             return Err(ApiError::bad_request(format!(
                 "time: applies to {SCENE_FILE} and {SPZ_FILE} only, not {file}"
             )));
