@@ -91,6 +91,64 @@ fn short_training_reaches_held_out_psnr() {
     assert_ne!(progress.gaussians, initial_gaussians);
 }
 
+/// The coarse steps (the first half by default) train on each view filtered down to half
+/// resolution through the same camera at half the pixel grid, and the job ends as well trained as
+/// one at full resolution throughout.
+#[test]
+fn coarse_steps_train_at_half_resolution_as_well_as_full() {
+    let Some(ctx) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let scene = synthetic_scene(dir.path());
+    let coarse = Trainer::new(&ctx, &scene, config(500), None).unwrap();
+    assert_eq!(coarse.schedule().coarse_until, 250);
+    assert_eq!(coarse.schedule().resolution_divisor_at(0), 2);
+    for view in &coarse.views().train {
+        let [half] = view.coarse.as_slice() else {
+            panic!("{} coarse images, expected one", view.coarse.len());
+        };
+        assert_eq!(
+            (half.divisor, half.camera.width, half.camera.height),
+            (2, 32, 24)
+        );
+        // The filtered image keeps the full one's mean colour.
+        let full: Vec<[f32; 4]> = ctx.read_vec(&view.target).unwrap();
+        let reduced: Vec<[f32; 4]> = ctx.read_vec(&half.target).unwrap();
+        assert_eq!(reduced.len(), 32 * 24);
+        let mean = |pixels: &[[f32; 4]]| {
+            pixels.iter().map(|p| p[0] + p[1] + p[2]).sum::<f32>() / pixels.len() as f32
+        };
+        assert!((mean(&full) - mean(&reduced)).abs() < 0.02);
+    }
+    assert!(
+        coarse
+            .views()
+            .test
+            .iter()
+            .all(|view| view.coarse.is_empty())
+    );
+    let mut results = Vec::new();
+    for coarse_until in [None, Some(0)] {
+        let config = TrainConfig {
+            coarse_until,
+            ..config(500)
+        };
+        let mut trainer = Trainer::new(&ctx, &scene, config, None).unwrap();
+        let progress = trainer.run(|_| true).unwrap();
+        let report = trainer.evaluate().unwrap();
+        eprintln!(
+            "coarse_until {coarse_until:?}: held-out PSNR {:.2} dB, SSIM {:.3}, {} Gaussians",
+            report.psnr, report.ssim, progress.gaussians
+        );
+        results.push(report.psnr);
+    }
+    assert!(
+        results[0] > 25.0 && results[0] > results[1] - 1.0,
+        "coarse then fine {:.2} dB against full resolution throughout {:.2} dB",
+        results[0],
+        results[1]
+    );
+}
+
 #[test]
 fn checkpoint_restores_state_exactly() {
     let Some(ctx) = gpu() else { return };

@@ -305,8 +305,11 @@ fn plain_baseline(
     model: GaussianModel,
     timing_repeats: u32,
 ) -> anyhow::Result<(usize, f64, f64, f64)> {
+    // At the object run's resolution throughout: without the object loss the schedule would
+    // otherwise start coarse, and the ratio would compare steps of different sizes.
     let config = TrainConfig {
         object_loss: None,
+        coarse_until: Some(0),
         ..config.clone()
     };
     let mut trainer = Trainer::new(ctx, scene, config, Some(model))?;

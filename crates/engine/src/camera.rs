@@ -116,6 +116,33 @@ impl RenderCamera {
         }
     }
 
+    /// The same camera over an image `divisor` times smaller each way (sides rounded, at least
+    /// one pixel): the intrinsics follow the realised pixel grid, so every pixel sees the same
+    /// cone of rays as the `divisor` x `divisor` block it stands for, and the field of view (and
+    /// with it the Jacobian's clamp) is unchanged. The coarse steps of training render through it.
+    pub fn downscaled(&self, divisor: u32) -> Self {
+        let divisor = divisor.max(1) as f32;
+        let width = ((self.width as f32 / divisor).round() as u32).max(1);
+        let height = ((self.height as f32 / divisor).round() as u32).max(1);
+        let scale_x = width as f32 / self.width as f32;
+        let scale_y = height as f32 / self.height as f32;
+        Self {
+            width,
+            height,
+            fx: self.fx * scale_x,
+            fy: self.fy * scale_y,
+            cx: self.cx * scale_x,
+            cy: self.cy * scale_y,
+            clamp_to: self.clamp_to.map(|[w, h]| {
+                [
+                    ((w as f32 * scale_x).round() as u32).max(1),
+                    ((h as f32 * scale_y).round() as u32).max(1),
+                ]
+            }),
+            ..*self
+        }
+    }
+
     /// The `[width, height]` the Jacobian's clamp follows (see [`Self::clamp_to`]).
     pub fn clamp_size(&self) -> [u32; 2] {
         self.clamp_to.unwrap_or([self.width, self.height])
@@ -179,5 +206,28 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(error.contains("f0") && error.contains("scale"), "{error}");
+    }
+
+    #[test]
+    fn downscaled_keeps_the_field_of_view() {
+        let camera = RenderCamera::from_frame(&frame(Mat4::IDENTITY), 1.0).unwrap();
+        let half = camera.downscaled(2);
+        assert_eq!((half.width, half.height), (51, 30));
+        let [lx, ly] = half.jacobian_limit();
+        let [cx, cy] = camera.jacobian_limit();
+        assert!((lx - cx).abs() < 1e-5 && (ly - cy).abs() < 1e-5);
+        // A point's pixel position scales with the grid.
+        let point = Vec3::new(0.3, -0.2, 2.0);
+        let project = |c: &RenderCamera| {
+            [
+                c.fx * point.x / point.z + c.cx,
+                c.fy * point.y / point.z + c.cy,
+            ]
+        };
+        let [u, v] = project(&camera);
+        let [u2, v2] = project(&half);
+        assert!((u2 - u * 51.0 / 101.0).abs() < 1e-4 && (v2 - v * 0.5).abs() < 1e-4);
+        assert_eq!(camera.downscaled(1), camera);
+        assert_eq!(camera.downscaled(1000).width, 1);
     }
 }

@@ -568,6 +568,14 @@ impl Renderer {
         k.sh_backward.dispatch(encoder, &colour, per_gaussian);
     }
 
+    /// Multiplies the intersection capacity by `factor` (within one storage binding), for a
+    /// caller that knows its next renders need more (a finer training resolution).
+    pub fn grow_intersection_capacity(&mut self, ctx: &GpuContext, factor: f64) {
+        let grown = (self.intersection_capacity as f64 * factor).ceil();
+        let limit = Self::max_intersections(ctx).min(u32::MAX as u64) as f64;
+        self.set_intersection_capacity(grown.min(limit).max(1.0) as u32);
+    }
+
     /// Reads the peak intersection count of the renders since the last sync (one small
     /// read-back; waits for submitted work), grows the capacity when the peak nears it, and
     /// reports whether any of those renders overflowed.

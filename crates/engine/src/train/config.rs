@@ -9,6 +9,9 @@ use crate::schedule::LearningRates;
 use crate::train::object_loss::ObjectLossConfig;
 use crate::train::schedule::TrainSchedule;
 
+/// Most halvings the coarse steps may use (a 16th of the resolution each way).
+pub const MAX_COARSE_HALVINGS: u32 = 4;
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TrainConfig {
@@ -39,6 +42,12 @@ pub struct TrainConfig {
     /// Every `opacity_reset_interval` steps (while densifying) opacities are capped at 0.01;
     /// 0 never resets.
     pub opacity_reset_interval: Option<u32>,
+    /// Coarse to fine: steps before `coarse_until` render the training views at reduced
+    /// resolution ([`crate::train::schedule`]); `None` is half the steps up to 250, 0 never, and
+    /// it always ends before the settle margin. Off with the object loss.
+    pub coarse_until: Option<u32>,
+    /// Resolution halvings of the coarse steps (1: half resolution; 2: a quarter, then half).
+    pub coarse_halvings: u32,
     /// Upper bound on Gaussians: densification stops growing past it.
     pub max_gaussians: usize,
     /// Random initial Gaussians when the dataset has no sparse points.
@@ -72,6 +81,8 @@ impl Default for TrainConfig {
             densify_until: None,
             densify_interval: None,
             opacity_reset_interval: None,
+            coarse_until: None,
+            coarse_halvings: 1,
             max_gaussians: 6_000_000,
             random_init_count: 100_000,
             background_shell: crate::background_shell::DEFAULT_BACKGROUND_SHELL,
@@ -143,6 +154,9 @@ impl TrainConfig {
         }
         if self.densify.gradient_threshold <= 0.0 {
             return fail("densify.gradient_threshold", "must be positive");
+        }
+        if self.coarse_halvings > MAX_COARSE_HALVINGS {
+            return fail("coarse_halvings", "must be 0..=4");
         }
         if self.max_gaussians == 0 {
             return fail("max_gaussians", "must be at least 1");

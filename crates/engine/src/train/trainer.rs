@@ -144,6 +144,8 @@ pub struct Trainer {
     /// Object renders one by one instead of batched (the reference path).
     separate_object_renders: bool,
     object_buffers: object_step::ObjectBuffers,
+    /// The training resolution of the last step ([`TrainSchedule::resolution_divisor_at`]).
+    resolution_divisor: Option<u32>,
 }
 
 /// Adam groups of 1 to 4 floats per Gaussian (means, scales, rotations, opacities, SH DC), which
@@ -221,7 +223,14 @@ impl Trainer {
             Some(model) => model,
             None => plain_initial_model(scene, &config)?,
         };
-        let views = Views::load(ctx, scene, config.max_resolution, config.eval_split_every)?;
+        let schedule = TrainSchedule::resolve(&config);
+        let views = Views::load(
+            ctx,
+            scene,
+            config.max_resolution,
+            config.eval_split_every,
+            schedule.coarse_halvings,
+        )?;
         let capacity = grown_capacity(ctx, model.len(), config.max_gaussians);
         let [max_width, max_height] = views.max_size();
         let pixels = max_width as u64 * max_height as u64;
@@ -241,7 +250,7 @@ impl Trainer {
             grad_image: ctx.storage_buffer("grad image", pixels * 16)?,
             loss_values: ctx.storage_buffer("loss values", LOSS_SLOTS as u64 * 4)?,
             ctx: ctx.clone(),
-            schedule: TrainSchedule::resolve(&config),
+            schedule,
             config,
             views,
             scene_extent: extent,
@@ -256,6 +265,7 @@ impl Trainer {
             dynamics: None,
             separate_object_renders: false,
             object_buffers: object_step::ObjectBuffers::default(),
+            resolution_divisor: None,
         };
         trainer.rng = ChaCha8Rng::seed_from_u64(trainer.config.seed);
         if let Some(deformation) = trainer.config.deformation.clone() {
@@ -347,9 +357,12 @@ impl Trainer {
         encoder.clear_buffer(&self.loss_values, 0, None);
         let view_time = self.views.train[view_index].time;
         let time = self.training_time(view_time);
-        let output = self.encode_view_render(&mut encoder, view_index, time, &settings, true)?;
+        let divisor = self.schedule.resolution_divisor_at(self.step);
+        self.follow_resolution(divisor);
+        let output =
+            self.encode_view_render(&mut encoder, view_index, divisor, time, &settings, true)?;
         let ctx = &self.ctx;
-        let camera = self.views.train[view_index].camera;
+        let camera = *self.views.train[view_index].at_divisor(divisor).0;
         let count = self.gaussians.count() as u32;
         self.accumulators.encode_accumulate(
             ctx,
@@ -383,14 +396,15 @@ impl Trainer {
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
         view_index: usize,
+        divisor: u32,
         time: f32,
         settings: &RenderSettings,
         backward: bool,
     ) -> Result<RenderOutput, TrainError> {
         self.encode_deform_for_step(encoder, time)?;
         let ctx = &self.ctx;
-        let view = &self.views.train[view_index];
-        let camera = view.camera;
+        let (camera, target) = self.views.train[view_index].at_divisor(divisor);
+        let camera = *camera;
         let scene = dynamics::render_view(&self.gaussians, &self.dynamics);
         let output = self
             .renderer
@@ -404,7 +418,7 @@ impl Trainer {
             &LossImages {
                 rendered: output.image(),
                 rendered_index: 0,
-                target: &view.target,
+                target,
                 target_mask: None,
                 width: camera.width,
                 height: camera.height,
@@ -426,6 +440,20 @@ impl Trainer {
             &mut self.grads,
         )?;
         Ok(output)
+    }
+
+    /// Before the first step at a new training resolution: a finer one needs about
+    /// `(old / new)^2` times the tile intersections, so the capacity grows by that at once
+    /// instead of overflowing until the next sync notices.
+    fn follow_resolution(&mut self, divisor: u32) {
+        if let Some(previous) = self.resolution_divisor
+            && divisor < previous
+        {
+            let finer = (previous / divisor.max(1)) as f64;
+            self.renderer
+                .grow_intersection_capacity(&self.ctx, finer * finer);
+        }
+        self.resolution_divisor = Some(divisor);
     }
 
     /// Adam over every parameter group, except SH bands above `sh_degree`: until the degree
@@ -703,6 +731,7 @@ impl Trainer {
                 let _output = self.encode_view_render(
                     &mut encoder,
                     view_index,
+                    1,
                     time,
                     &settings,
                     with_backward,

@@ -2,6 +2,8 @@
 //! target images, resident on the GPU in the renderer's image layout (`vec4<f32>` per pixel).
 
 use crate::camera::{CameraError, RenderCamera};
+use image::Rgb32FImage;
+use image::imageops::FilterType;
 use segsplat_gpu::GpuContext;
 use segsplat_scene::{FrameSplit, Scene, SceneError, load_frame_rgb};
 
@@ -32,6 +34,31 @@ pub struct View {
     pub target: wgpu::Buffer,
     /// RGB, row-major; kept for held-out views only (evaluation), empty otherwise.
     pub target_rgb: Vec<[f32; 3]>,
+    /// The view at half, quarter, ... resolution for the coarse steps of training
+    /// ([`crate::train::TrainSchedule::resolution_divisor_at`]): entry `k` is `2^(k+1)` times
+    /// smaller each way. Training views only; empty when the schedule has no coarse steps.
+    pub coarse: Vec<CoarseView>,
+}
+
+/// A training view at reduced resolution: its camera ([`RenderCamera::downscaled`]) and the target
+/// image filtered down to it.
+pub struct CoarseView {
+    pub divisor: u32,
+    pub camera: RenderCamera,
+    pub target: wgpu::Buffer,
+}
+
+impl View {
+    /// The camera and target to train on at `divisor` (1: full resolution; a divisor the view has
+    /// no coarse image for falls back to full resolution).
+    pub fn at_divisor(&self, divisor: u32) -> (&RenderCamera, &wgpu::Buffer) {
+        self.coarse
+            .iter()
+            .find(|coarse| coarse.divisor == divisor)
+            .map_or((&self.camera, &self.target), |coarse| {
+                (&coarse.camera, &coarse.target)
+            })
+    }
 }
 
 pub struct Views {
@@ -53,11 +80,14 @@ pub fn is_held_out(scene: &Scene, frame_index: usize, split_every: u32) -> bool 
 }
 
 impl Views {
+    /// Loads every frame at `max_resolution`; training views also get `coarse_halvings` coarse
+    /// images ([`View::coarse`]).
     pub fn load(
         ctx: &GpuContext,
         scene: &Scene,
         max_resolution: Option<u32>,
         split_every: u32,
+        coarse_halvings: u32,
     ) -> Result<Self, ViewsError> {
         let mut views = Views {
             train: Vec::new(),
@@ -76,15 +106,15 @@ impl Views {
                     camera: [camera.width, camera.height],
                 });
             }
-            let pixels: Vec<[f32; 4]> = image.pixels().map(|p| [p[0], p[1], p[2], 1.0]).collect();
-            let target = wgpu::util::DeviceExt::create_buffer_init(
-                &ctx.device,
-                &wgpu::util::BufferInitDescriptor {
-                    label: Some("target image"),
-                    contents: bytemuck::cast_slice(&pixels),
-                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-                },
-            );
+            let pixels = rgba_pixels(&image);
+            let target = upload_target(ctx, &pixels);
+            let coarse = if held_out {
+                Vec::new()
+            } else {
+                (1..=coarse_halvings)
+                    .map(|halvings| coarse_view(ctx, &camera, &image, 1 << halvings))
+                    .collect()
+            };
             let view = View {
                 frame_index,
                 name: frame.name.clone(),
@@ -96,6 +126,7 @@ impl Views {
                 } else {
                     Vec::new()
                 },
+                coarse,
             };
             if held_out {
                 views.test.push(view);
@@ -117,5 +148,38 @@ impl Views {
             .fold([1, 1], |[w, h], v| {
                 [w.max(v.camera.width), h.max(v.camera.height)]
             })
+    }
+}
+
+fn rgba_pixels(image: &Rgb32FImage) -> Vec<[f32; 4]> {
+    image.pixels().map(|p| [p[0], p[1], p[2], 1.0]).collect()
+}
+
+fn upload_target(ctx: &GpuContext, pixels: &[[f32; 4]]) -> wgpu::Buffer {
+    wgpu::util::DeviceExt::create_buffer_init(
+        &ctx.device,
+        &wgpu::util::BufferInitDescriptor {
+            label: Some("target image"),
+            contents: bytemuck::cast_slice(pixels),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        },
+    )
+}
+
+/// `image` filtered down to `camera` made `divisor` times smaller. The triangle filter widens
+/// with the reduction, so each coarse pixel averages the block it covers (no aliasing, and no
+/// ringing that would ask the splats for colours outside 0..1).
+fn coarse_view(
+    ctx: &GpuContext,
+    camera: &RenderCamera,
+    image: &Rgb32FImage,
+    divisor: u32,
+) -> CoarseView {
+    let camera = camera.downscaled(divisor);
+    let reduced = image::imageops::resize(image, camera.width, camera.height, FilterType::Triangle);
+    CoarseView {
+        divisor,
+        camera,
+        target: upload_target(ctx, &rgba_pixels(&reduced)),
     }
 }
