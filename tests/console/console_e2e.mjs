@@ -42,6 +42,17 @@ async function api(method, route, body) {
   return { status: response.status, body: await response.json().catch(() => null) };
 }
 
+// Uploads an archive straight to the API (not through the page), as a client would.
+async function uploadArchive(file, name) {
+  const query = name === undefined ? "" : `?name=${encodeURIComponent(name)}`;
+  const response = await fetch(`${base}/v1/scenes${query}`, {
+    method: "POST",
+    headers: { Authorization: `Bearer ${token}`, "Content-Type": "application/zip" },
+    body: readFileSync(file),
+  });
+  return { status: response.status, body: await response.json().catch(() => null) };
+}
+
 async function shot(page, name) {
   await page.screenshot({ path: path.join(shots, `${name}.png`), fullPage: false });
 }
@@ -132,12 +143,8 @@ async function main() {
     });
     const refusal = page.locator("#upload-error");
     await refusal.filter({ hasText: /Upload refused: 4\d\d / }).waitFor();
-    const direct = await fetch(`${base}/v1/scenes`, {
-      method: "POST",
-      headers: { Authorization: `Bearer ${token}`, "Content-Type": "application/zip" },
-      body: readFileSync(env("SEGSPLAT_BAD_UPLOAD")),
-    });
-    const directMessage = (await direct.json()).error.message;
+    const direct = await uploadArchive(env("SEGSPLAT_BAD_UPLOAD"));
+    const directMessage = direct.body.error.message;
     assert.ok((await refusal.textContent()).includes(directMessage), `the server's message is shown as it is: ${directMessage}`);
     await shot(page, "02-bad-upload");
 
@@ -310,11 +317,7 @@ async function main() {
     step("dynamic");
     // Trained through the API with a shortened schedule (the form offers the common options
     // only); the console then moves it in time.
-    const moving = await fetch(`${base}/v1/scenes?name=moving`, {
-      method: "POST",
-      headers: { Authorization: `Bearer ${token}`, "Content-Type": "application/zip" },
-      body: readFileSync(env("SEGSPLAT_DYNAMIC_ZIP")),
-    }).then((response) => response.json());
+    const moving = (await uploadArchive(env("SEGSPLAT_DYNAMIC_ZIP"), "moving")).body;
     const dynamicJob = await api("POST", `/v1/scenes/${moving.id}/jobs`, {
       kind: "segment_then_splat",
       config: {

@@ -11,6 +11,7 @@ use axum::http::{HeaderValue, header};
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 
+use super::auth::TokenCheck;
 use super::error::ApiError;
 use super::extract::UrlPath;
 use super::state::AppState;
@@ -89,7 +90,8 @@ pub struct ConsoleSettings {
 pub async fn settings(State(state): State<AppState>) -> Json<ConsoleSettings> {
     let config = &state.core.config;
     Json(ConsoleSettings {
-        auth_required: !config.auth.tokens.is_empty() || !config.auth.token.is_empty(),
+        // The rule the API's own token check follows, so the two never disagree.
+        auth_required: TokenCheck::from_config(&config.auth).enabled(),
         grafana_url: config.console.grafana_url.clone(),
         version: env!("CARGO_PKG_VERSION"),
     })
