@@ -156,7 +156,10 @@ impl TrainConfig {
             return fail("densify.gradient_threshold", "must be positive");
         }
         if self.coarse_halvings > MAX_COARSE_HALVINGS {
-            return fail("coarse_halvings", "must be 0..=4");
+            return fail(
+                "coarse_halvings",
+                &format!("must be 0..={MAX_COARSE_HALVINGS}"),
+            );
         }
         if self.max_gaussians == 0 {
             return fail("max_gaussians", "must be at least 1");

@@ -220,7 +220,6 @@ impl TrainSchedule {
         crate::schedule::sh_degree_at(step, self.sh_degree_interval, self.max_sh_degree)
     }
 
-    /// The steps after which densification runs.
     /// How many times smaller each way the training views render at `step` (steps done so far,
     /// as [`Self::sh_degree_at`]): `2^coarse_halvings` in the first coarse stage, 1 from
     /// `coarse_until` on.
@@ -232,6 +231,7 @@ impl TrainSchedule {
         1 << (self.coarse_halvings - stage.min(self.coarse_halvings - 1))
     }
 
+    /// The steps after which densification runs.
     pub fn densify_steps(&self) -> impl Iterator<Item = u32> + '_ {
         (1..=self.steps).filter(|&step| self.densifies_at(step))
     }

@@ -362,7 +362,8 @@ impl Trainer {
         let output =
             self.encode_view_render(&mut encoder, view_index, divisor, time, &settings, true)?;
         let ctx = &self.ctx;
-        let camera = *self.views.train[view_index].at_divisor(divisor).0;
+        // The camera this step rendered through (the coarse one in coarse steps).
+        let camera = output.camera;
         let count = self.gaussians.count() as u32;
         self.accumulators.encode_accumulate(
             ctx,
