@@ -302,3 +302,74 @@ fn object_batch_rejects_a_filtered_base_and_no_slots() {
             .is_err()
     );
 }
+
+/// Per-level id maps for `camera`: vertical bands of ids 0..4 whose edges move with the level, so
+/// every slot's IoU lands somewhere between 0 and 1 and the three maps differ.
+fn band_masks(camera: &RenderCamera) -> [Vec<u32>; 3] {
+    let (width, height) = (camera.width as usize, camera.height as usize);
+    std::array::from_fn(|level| {
+        (0..width * height)
+            .map(|pixel| (((pixel % width) * (level + 2) + pixel / width) / 16 % 5) as u32)
+            .collect()
+    })
+}
+
+#[test]
+fn mask_iou_counts_match_the_overlap_of_the_read_back_renders() {
+    use segsplat_engine::train::mask_iou::MaskIouCounts;
+    use segsplat_engine::train::object_loss::rendered_mask_iou;
+    let Some(ctx) = context() else { return };
+    let case = Case::new(5, 400, 72, 40);
+    let masks = band_masks(&case.camera);
+    let ids: Vec<wgpu::Buffer> = masks
+        .iter()
+        .map(|ids| {
+            ctx.device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("ids"),
+                    contents: bytemuck::cast_slice(ids),
+                    usage: wgpu::BufferUsages::STORAGE,
+                })
+        })
+        .collect();
+    let ids = [&ids[0], &ids[1], &ids[2]];
+    let mut renderer = Renderer::new(&ctx).unwrap();
+    let gaussians = GpuGaussians::upload(&ctx, &case.model, case.model.len()).unwrap();
+    // Pairs 0 and 1 are another view's: they must keep their counts; the batch's are cleared of
+    // stale values first.
+    let first_pair = 2;
+    let counts = MaskIouCounts::new(&ctx, first_pair + case.slots.len()).unwrap();
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    let base = renderer
+        .forward(
+            &ctx,
+            &mut encoder,
+            &gaussians,
+            &case.camera,
+            &full_settings(),
+        )
+        .unwrap();
+    let batch = renderer
+        .forward_objects(&ctx, &mut encoder, &gaussians, &base, &case.slots)
+        .unwrap();
+    counts.encode_batch(&ctx, &mut encoder, &batch, ids, first_pair);
+    counts.encode_clear(&mut encoder, first_pair, case.slots.len());
+    counts.encode_batch(&ctx, &mut encoder, &batch, ids, first_pair);
+    ctx.queue.submit([encoder.finish()]);
+    assert!(!renderer.sync_capacity(&ctx).unwrap().overflowed);
+    let images = batch.read_images(&ctx).unwrap();
+    let ious = counts.read_ious(&ctx).unwrap();
+    assert_eq!(ious.len(), first_pair + case.slots.len());
+    assert_eq!(&ious[..first_pair], &[0.0, 0.0]);
+    let mut between = 0;
+    for ((slot, image), iou) in case.slots.iter().zip(&images).zip(&ious[first_pair..]) {
+        let alpha = image.iter().map(|pixel| pixel[3]);
+        let expected = rendered_mask_iou(alpha, &masks[slot.level.index()], slot.id);
+        assert!(
+            (iou - expected).abs() < 1e-6,
+            "{slot:?}: GPU IoU {iou}, CPU {expected}"
+        );
+        between += usize::from(*iou > 0.0 && *iou < 1.0);
+    }
+    assert!(between >= 3, "IoUs {ious:?} should not all be 0 or 1");
+}

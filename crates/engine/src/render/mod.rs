@@ -39,7 +39,8 @@ mod uniforms;
 mod workspace;
 
 pub use kernels::RasterVariant;
-pub use object_batch::{ObjectBatchError, ObjectBatchOutput, ObjectSlot};
+pub use object_batch::{ObjectBatchError, ObjectBatchOutput, ObjectSlot, slot_table};
+pub(crate) use renderer::RENDER_ATTEMPTS;
 pub use renderer::{CapacityReport, RenderError, RenderOutput, Renderer};
 pub use uniforms::RenderUniforms;
 pub use workspace::GRAD_STRIDE;

@@ -200,17 +200,7 @@ impl Renderer {
     ) {
         let count = base.gaussian_count;
         let shared = base.workspace();
-        let table: Vec<[u32; 2]> = slots
-            .iter()
-            .map(|slot| [slot.level.index() as u32, slot.id])
-            .collect();
-        let slot_table = ctx
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("object slots"),
-                contents: bytemuck::cast_slice(&table),
-                usage: wgpu::BufferUsages::STORAGE,
-            });
+        let slot_table = slot_table(ctx, slots);
         let per_gaussian = workgroups_2d(
             workgroups_for(count, 256),
             ctx.limits.max_compute_workgroups_per_dimension,
@@ -323,6 +313,20 @@ impl Renderer {
         self.encode_projection_backward(ctx, encoder, gaussians, shared, count as u32, grads);
         Ok(())
     }
+}
+
+/// The slots as the kernels read them: `array<vec2<u32>>` of (level index, id).
+pub fn slot_table(ctx: &GpuContext, slots: &[ObjectSlot]) -> wgpu::Buffer {
+    let table: Vec<[u32; 2]> = slots
+        .iter()
+        .map(|slot| [slot.level.index() as u32, slot.id])
+        .collect();
+    ctx.device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("object slots"),
+            contents: bytemuck::cast_slice(&table),
+            usage: wgpu::BufferUsages::STORAGE,
+        })
 }
 
 fn check_batch(

@@ -63,7 +63,7 @@ const GROWTH_FACTOR: f64 = 1.5;
 const INITIAL_INTERSECTIONS_PER_GAUSSIAN: usize = 8;
 const MIN_INTERSECTION_CAPACITY: u32 = 1 << 16;
 /// Renders [`Renderer::render_checked`] tries before giving up.
-const RENDER_ATTEMPTS: usize = 3;
+pub(crate) const RENDER_ATTEMPTS: usize = 3;
 
 /// A finished forward pass: the image and the state backward needs. Dropping it returns its
 /// buffers to the renderer's pool.

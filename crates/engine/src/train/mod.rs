@@ -2,6 +2,7 @@
 
 pub mod config;
 pub mod densify_stats;
+pub mod mask_iou;
 pub mod object_loss;
 pub mod schedule;
 pub mod trainer;

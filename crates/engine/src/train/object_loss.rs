@@ -179,7 +179,8 @@ pub fn sample_objects<R: Rng>(
         .collect()
 }
 
-/// IoU of `alpha > 0.5` with `ids == object_id`.
+/// IoU of `alpha > 0.5` with `ids == object_id`: the CPU reference of the partial-mask filter's GPU
+/// counts (`mask_iou`).
 pub fn rendered_mask_iou(alpha: impl Iterator<Item = f32>, ids: &[u32], object_id: u32) -> f32 {
     let (mut intersection, mut union) = (0u64, 0u64);
     for (a, &id) in alpha.zip(ids) {

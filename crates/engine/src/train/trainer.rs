@@ -137,6 +137,8 @@ pub struct Trainer {
     prune_guard: Option<Box<dyn PruneGuard + Send>>,
     object_targets: Option<ObjectTargets>,
     skipped_pairs: BTreeSet<SkippedPair>,
+    /// Wall time spent in the partial-mask filter (a one-off of the job, not a step).
+    partial_filter_seconds: f64,
     started: Instant,
     steps_at_start: u32,
     /// The deformation field of a dynamic scene.
@@ -260,6 +262,7 @@ impl Trainer {
             prune_guard: None,
             object_targets: None,
             skipped_pairs: BTreeSet::new(),
+            partial_filter_seconds: 0.0,
             started: Instant::now(),
             steps_at_start: 0,
             dynamics: None,

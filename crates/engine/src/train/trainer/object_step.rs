@@ -56,6 +56,11 @@ impl Trainer {
         Ok(())
     }
 
+    /// Wall seconds the partial-mask filter has taken so far (inside [`Self::run`]'s time).
+    pub fn partial_filter_seconds(&self) -> f64 {
+        self.partial_filter_seconds
+    }
+
     /// (object, view) pairs the partial-mask filter has left out so far, sorted.
     pub fn skipped_pairs(&self) -> Vec<SkippedPair> {
         self.skipped_pairs.iter().copied().collect()

@@ -2,14 +2,18 @@
 //! near the end of training, batched per view on that view's full render.
 
 use super::{TrainError, Trainer};
-use crate::render::ObjectSlot;
-use crate::train::object_loss::{ObjectTargets, SkippedPair, rendered_mask_iou};
+use crate::render::{ObjectSlot, RENDER_ATTEMPTS, RenderError};
+use crate::train::mask_iou::MaskIouCounts;
+use crate::train::object_loss::{ObjectTargets, SkippedPair};
 use crate::{ObjectFilter, RenderSettings};
+use segsplat_gpu::GpuContext;
 use segsplat_scene::Level;
 
-/// Object renders per batch (and submission) while filtering partial masks: bounds the batch's
-/// images (slots x pixels) and tile keys.
-const PARTIAL_FILTER_BATCH: usize = 16;
+/// Most object renders per batch while filtering partial masks.
+const PARTIAL_FILTER_MAX_BATCH: usize = 64;
+
+/// The batch's images may fill at most this share of one storage binding.
+const BATCH_IMAGE_SHARE_OF_BINDING: u64 = 2;
 
 impl Trainer {
     /// Whether the partial-mask filter runs after `step`.
@@ -23,72 +27,100 @@ impl Trainer {
     /// Renders every (object, view) pair alone and leaves out those whose rendered mask
     /// (alpha > 0.5) has IoU below the threshold with the 2D mask: that mask shows the object
     /// only in part (occluded or cut), and fitting it would carve the object. Runs once, at the
-    /// configured point of training; its read-backs are the one CPU round trip it costs.
+    /// configured point of training. The overlaps are counted on the GPU; a view whose renders
+    /// overflowed the intersection buffers is rendered again with the grown capacity, and the
+    /// counts of every pair come back in one read-back at the end.
     pub(super) fn filter_partial_masks(&mut self, sh_degree: u32) -> Result<(), TrainError> {
         let (Some(config), Some(targets)) = (&self.config.object_loss, &self.object_targets) else {
             return Ok(());
         };
+        let started = std::time::Instant::now();
         let threshold = config.partial_iou_threshold;
         let pairs = collect_pairs(targets);
-        let mut newly_skipped = Vec::new();
+        let counts = MaskIouCounts::new(&self.ctx, pairs.len())?;
+        // A pending report of the training steps' renders is not the filter's.
+        self.renderer.sync_capacity(&self.ctx)?;
         let full = RenderSettings {
             filter: ObjectFilter::All,
             background: [0.0; 3],
             sh_degree,
         };
-        // Dynamic scenes: the geometry is deformed to each view's time before its renders.
-        let mut deformed_time = None;
+        let mut first_pair = 0;
+        let mut rerendered_views = 0;
         for view_pairs in pairs.chunk_by(|a, b| a.train_view == b.train_view) {
             let view = &self.views.train[view_pairs[0].train_view];
-            let camera = view.camera;
-            let mut encoder = self.new_encoder("partial mask filter");
-            if self.dynamics.is_some() && deformed_time != Some(view.time) {
-                super::dynamics::deform_to(
-                    &self.ctx,
-                    self.step,
-                    &mut self.dynamics,
-                    &self.gaussians,
-                    &mut encoder,
-                    view.time,
-                )?;
-                deformed_time = Some(view.time);
-            }
-            let scene = super::dynamics::render_view(&self.gaussians, &self.dynamics);
-            let base = self
-                .renderer
-                .forward(&self.ctx, &mut encoder, scene, &camera, &full)?;
-            let mut pending = Some(encoder);
-            for batch_pairs in view_pairs.chunks(PARTIAL_FILTER_BATCH) {
-                let mut encoder = match pending.take() {
-                    Some(encoder) => encoder,
-                    None => self.new_encoder("partial mask filter"),
-                };
-                let slots: Vec<ObjectSlot> = batch_pairs
-                    .iter()
-                    .map(|pair| ObjectSlot {
-                        level: pair.level,
-                        id: pair.object_id,
-                    })
-                    .collect();
-                let batch =
+            let ids = targets.views[view_pairs[0].train_view].ids.each_ref();
+            let batch_size = batch_size(&self.ctx, view.camera.pixel_count());
+            let mut attempt = 0;
+            loop {
+                let mut encoder = self.new_encoder("partial mask filter");
+                counts.encode_clear(&mut encoder, first_pair, view_pairs.len());
+                // Dynamic scenes: the geometry is deformed to the view's time first.
+                if self.dynamics.is_some() {
+                    super::dynamics::deform_to(
+                        &self.ctx,
+                        self.step,
+                        &mut self.dynamics,
+                        &self.gaussians,
+                        &mut encoder,
+                        view.time,
+                    )?;
+                }
+                let scene = super::dynamics::render_view(&self.gaussians, &self.dynamics);
+                let base =
                     self.renderer
-                        .forward_objects(&self.ctx, &mut encoder, scene, &base, &slots)?;
+                        .forward(&self.ctx, &mut encoder, scene, &view.camera, &full)?;
+                for (index, batch_pairs) in view_pairs.chunks(batch_size).enumerate() {
+                    let slots: Vec<ObjectSlot> = batch_pairs
+                        .iter()
+                        .map(|pair| ObjectSlot {
+                            level: pair.level,
+                            id: pair.object_id,
+                        })
+                        .collect();
+                    let batch = self.renderer.forward_objects(
+                        &self.ctx,
+                        &mut encoder,
+                        scene,
+                        &base,
+                        &slots,
+                    )?;
+                    counts.encode_batch(
+                        &self.ctx,
+                        &mut encoder,
+                        &batch,
+                        ids,
+                        first_pair + index * batch_size,
+                    );
+                }
+                drop(base);
                 self.ctx.queue.submit([encoder.finish()]);
-                let images = batch.read_images(&self.ctx)?;
-                for (pair, image) in batch_pairs.iter().zip(&images) {
-                    let ids = &targets.views[pair.train_view].ids_cpu[pair.level.index()];
-                    let alpha = image.iter().take(ids.len()).map(|pixel| pixel[3]);
-                    if rendered_mask_iou(alpha, ids, pair.object_id) < threshold {
-                        newly_skipped.push(*pair);
-                    }
+                if !self.renderer.sync_capacity(&self.ctx)?.overflowed {
+                    break;
+                }
+                attempt += 1;
+                rerendered_views += 1;
+                if attempt == RENDER_ATTEMPTS {
+                    return Err(RenderError::CapacityNotConverging { attempts: attempt }.into());
                 }
             }
+            first_pair += view_pairs.len();
         }
+        let ious = counts.read_ious(&self.ctx)?;
+        let newly_skipped: Vec<SkippedPair> = pairs
+            .iter()
+            .zip(&ious)
+            .filter(|(_, iou)| **iou < threshold)
+            .map(|(pair, _)| *pair)
+            .collect();
         tracing::info!(
             checked = pairs.len(),
             skipped = newly_skipped.len(),
+            rerendered_views,
+            seconds = started.elapsed().as_secs_f64(),
             "partial-mask filter"
         );
+        self.partial_filter_seconds += started.elapsed().as_secs_f64();
         self.skipped_pairs.extend(newly_skipped);
         Ok(())
     }
@@ -118,4 +150,12 @@ fn collect_pairs(targets: &ObjectTargets) -> Vec<SkippedPair> {
             })
         })
         .collect()
+}
+
+/// Object renders per batch for images of `pixels` pixels: as many as fit the share of one
+/// storage binding, within [1, PARTIAL_FILTER_MAX_BATCH].
+fn batch_size(ctx: &GpuContext, pixels: usize) -> usize {
+    let budget = ctx.limits.max_storage_buffer_binding_size / BATCH_IMAGE_SHARE_OF_BINDING;
+    let slot_bytes = (pixels as u64 * 16).max(1);
+    ((budget / slot_bytes) as usize).clamp(1, PARTIAL_FILTER_MAX_BATCH)
 }
