@@ -11,4 +11,4 @@ pub mod views;
 pub use config::TrainConfig;
 pub use object_loss::{ObjectLossConfig, ObjectTargets, SkippedPair};
 pub use schedule::TrainSchedule;
-pub use trainer::{EvalReport, TrainError, TrainProgress, Trainer, TrainerMeta};
+pub use trainer::{EvalReport, PartialFilterCost, TrainError, TrainProgress, Trainer, TrainerMeta};

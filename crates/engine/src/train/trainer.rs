@@ -137,8 +137,8 @@ pub struct Trainer {
     prune_guard: Option<Box<dyn PruneGuard + Send>>,
     object_targets: Option<ObjectTargets>,
     skipped_pairs: BTreeSet<SkippedPair>,
-    /// Wall time spent in the partial-mask filter (a one-off of the job, not a step).
-    partial_filter_seconds: f64,
+    /// What the partial-mask filter has cost (a one-off of the job, not a step).
+    partial_filter_cost: PartialFilterCost,
     started: Instant,
     steps_at_start: u32,
     /// The deformation field of a dynamic scene.
@@ -148,6 +148,14 @@ pub struct Trainer {
     object_buffers: object_step::ObjectBuffers,
     /// The training resolution of the last step ([`TrainSchedule::resolution_divisor_at`]).
     resolution_divisor: Option<u32>,
+}
+
+/// Wall time and kernel dispatches the partial-mask filter has taken, inside [`Trainer::run`]'s
+/// time and the context's dispatch count.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PartialFilterCost {
+    pub seconds: f64,
+    pub dispatches: u64,
 }
 
 /// Adam groups of 1 to 4 floats per Gaussian (means, scales, rotations, opacities, SH DC), which
@@ -262,7 +270,7 @@ impl Trainer {
             prune_guard: None,
             object_targets: None,
             skipped_pairs: BTreeSet::new(),
-            partial_filter_seconds: 0.0,
+            partial_filter_cost: PartialFilterCost::default(),
             started: Instant::now(),
             steps_at_start: 0,
             dynamics: None,

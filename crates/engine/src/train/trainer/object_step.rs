@@ -56,9 +56,9 @@ impl Trainer {
         Ok(())
     }
 
-    /// Wall seconds the partial-mask filter has taken so far (inside [`Self::run`]'s time).
-    pub fn partial_filter_seconds(&self) -> f64 {
-        self.partial_filter_seconds
+    /// What the partial-mask filter has cost so far.
+    pub fn partial_filter_cost(&self) -> super::PartialFilterCost {
+        self.partial_filter_cost
     }
 
     /// (object, view) pairs the partial-mask filter has left out so far, sorted.

@@ -35,6 +35,7 @@ impl Trainer {
             return Ok(());
         };
         let started = std::time::Instant::now();
+        let dispatches_before = self.ctx.dispatch_count();
         let threshold = config.partial_iou_threshold;
         let pairs = collect_pairs(targets);
         let counts = MaskIouCounts::new(&self.ctx, pairs.len())?;
@@ -47,12 +48,16 @@ impl Trainer {
         };
         let mut first_pair = 0;
         let mut rerendered_views = 0;
+        // Halved for the rest of the filter whenever a batch needs more tile intersections than
+        // one storage binding holds.
+        let mut intersection_bound = PARTIAL_FILTER_MAX_BATCH;
         for view_pairs in pairs.chunk_by(|a, b| a.train_view == b.train_view) {
             let view = &self.views.train[view_pairs[0].train_view];
             let ids = targets.views[view_pairs[0].train_view].ids.each_ref();
-            let batch_size = batch_size(&self.ctx, view.camera.pixel_count());
-            let mut attempt = 0;
+            let mut overflows = 0;
             loop {
+                let batch_size =
+                    memory_batch_size(&self.ctx, view.camera.pixel_count()).min(intersection_bound);
                 let mut encoder = self.new_encoder("partial mask filter");
                 counts.encode_clear(&mut encoder, first_pair, view_pairs.len());
                 // Dynamic scenes: the geometry is deformed to the view's time first.
@@ -95,14 +100,22 @@ impl Trainer {
                 }
                 drop(base);
                 self.ctx.queue.submit([encoder.finish()]);
-                if !self.renderer.sync_capacity(&self.ctx)?.overflowed {
-                    break;
+                match self.renderer.sync_capacity(&self.ctx) {
+                    Ok(report) if !report.overflowed => break,
+                    // The capacity has grown to fit: render the view again.
+                    Ok(_) => {
+                        overflows += 1;
+                        if overflows == RENDER_ATTEMPTS {
+                            let attempts = overflows;
+                            return Err(RenderError::CapacityNotConverging { attempts }.into());
+                        }
+                    }
+                    Err(RenderError::IntersectionsExceedAdapter { .. }) if batch_size > 1 => {
+                        intersection_bound = batch_size / 2;
+                    }
+                    Err(error) => return Err(error.into()),
                 }
-                attempt += 1;
                 rerendered_views += 1;
-                if attempt == RENDER_ATTEMPTS {
-                    return Err(RenderError::CapacityNotConverging { attempts: attempt }.into());
-                }
             }
             first_pair += view_pairs.len();
         }
@@ -120,7 +133,8 @@ impl Trainer {
             seconds = started.elapsed().as_secs_f64(),
             "partial-mask filter"
         );
-        self.partial_filter_seconds += started.elapsed().as_secs_f64();
+        self.partial_filter_cost.seconds += started.elapsed().as_secs_f64();
+        self.partial_filter_cost.dispatches += self.ctx.dispatch_count() - dispatches_before;
         self.skipped_pairs.extend(newly_skipped);
         Ok(())
     }
@@ -153,8 +167,9 @@ fn collect_pairs(targets: &ObjectTargets) -> Vec<SkippedPair> {
 }
 
 /// Object renders per batch for images of `pixels` pixels: as many as fit the share of one
-/// storage binding, within [1, PARTIAL_FILTER_MAX_BATCH].
-fn batch_size(ctx: &GpuContext, pixels: usize) -> usize {
+/// storage binding, within [1, PARTIAL_FILTER_MAX_BATCH] (their tile intersections may still
+/// need fewer: the filter halves the batch when they pass the adapter's limit).
+fn memory_batch_size(ctx: &GpuContext, pixels: usize) -> usize {
     let budget = ctx.limits.max_storage_buffer_binding_size / BATCH_IMAGE_SHARE_OF_BINDING;
     let slot_bytes = (pixels as u64 * 16).max(1);
     ((budget / slot_bytes) as usize).clamp(1, PARTIAL_FILTER_MAX_BATCH)
