@@ -356,57 +356,156 @@ fn identical_images_have_zero_loss_and_gradient() {
     assert!(worst < 1e-6, "gradient {worst}");
 }
 
+/// An object loss's inputs and its CPU reference: the render is `image` where `in_render` holds
+/// and black elsewhere, the mask holds object 7 where `in_mask` holds.
+struct ObjectCase {
+    rendered: Vec<Rgb>,
+    ids: Vec<u32>,
+    cpu: f64,
+    cpu_grad: Vec<Rgb>,
+}
+
+const OBJECT: u32 = 7;
+
+impl ObjectCase {
+    fn new(
+        image: &[Rgb],
+        target: &[Rgb],
+        (width, height): (usize, usize),
+        in_render: impl Fn(usize) -> bool,
+        in_mask: impl Fn(usize) -> bool,
+    ) -> Self {
+        let rendered: Vec<Rgb> = image
+            .iter()
+            .enumerate()
+            .map(|(p, v)| if in_render(p) { *v } else { [0.0; 3] })
+            .collect();
+        let ids: Vec<u32> = (0..width * height)
+            .map(|p| if in_mask(p) { OBJECT } else { 1 })
+            .collect();
+        let masked_target: Vec<Rgb> = target
+            .iter()
+            .zip(&ids)
+            .map(|(t, &id)| if id == OBJECT { *t } else { [0.0; 3] })
+            .collect();
+        let (cpu, cpu_grad) = cpu_loss(&rendered, &masked_target, width, height);
+        Self {
+            rendered,
+            ids,
+            cpu,
+            cpu_grad,
+        }
+    }
+
+    /// The GPU's object loss into `slot`, after a full loss of `image` has left every
+    /// intermediate buffer holding another image's values, as the object losses of a step find
+    /// them: a pass that read a cell its predecessor skipped would read those.
+    #[allow(clippy::too_many_arguments)]
+    fn gpu(
+        &self,
+        ctx: &GpuContext,
+        loss: &mut RenderLoss,
+        image: &[Rgb],
+        target: &[Rgb],
+        (width, height): (usize, usize),
+        weight: f32,
+        slot: u32,
+    ) -> GpuLoss {
+        gpu_loss(ctx, loss, image, target, None, width, height, 1.0, 0);
+        gpu_loss(
+            ctx,
+            loss,
+            &self.rendered,
+            target,
+            Some((&self.ids, OBJECT)),
+            width,
+            height,
+            weight,
+            slot,
+        )
+    }
+}
+
+/// Whether pixel `p` of a `width`-wide image lies within `r` of (cx, cy).
+fn in_disc(width: usize, (cx, cy): (f64, f64), r: f64) -> impl Fn(usize) -> bool {
+    move |p| {
+        let (x, y) = ((p % width) as f64 - cx, (p / width) as f64 - cy);
+        x * x + y * y < r * r
+    }
+}
+
 #[test]
-fn gpu_object_loss_skipping_empty_tiles_matches_cpu_reference() {
+fn gpu_object_loss_skipping_empty_cells_matches_cpu_reference() {
     let Some(ctx) = gpu_context() else { return };
     let mut loss = RenderLoss::new(ctx).unwrap();
     let mut rng = seeded_rng(9);
-    // 11 x 8 loss tiles (the last column and row partial): the rendered object sits top left,
-    // its mask bottom right, so most tiles are beyond every pass's reach of content and are
-    // skipped, some only by the later passes.
-    let (width, height) = (170, 121);
-    let (image, target) = test_images(&mut rng, width, height);
-    let near = |p: usize, cx: f64, cy: f64, r: f64| {
-        let (x, y) = ((p % width) as f64 - cx, (p / width) as f64 - cy);
-        x * x + y * y < r * r
-    };
-    let rendered: Vec<Rgb> = image
-        .iter()
-        .enumerate()
-        .map(|(p, v)| {
-            if near(p, 20.0, 18.0, 9.0) {
-                *v
-            } else {
-                [0.0; 3]
-            }
-        })
-        .collect();
-    let ids: Vec<u32> = (0..width * height)
-        .map(|p| if near(p, 140.0, 95.0, 12.0) { 7 } else { 1 })
-        .collect();
-    let masked_target: Vec<Rgb> = target
-        .iter()
-        .zip(&ids)
-        .map(|(t, &id)| if id == 7 { *t } else { [0.0; 3] })
-        .collect();
-    let (cpu, cpu_grad) = cpu_loss(&rendered, &masked_target, width, height);
-    // A full loss first leaves every intermediate buffer holding another image's values, as
-    // the object losses of a step find them: a pass that read a tile its predecessor skipped
-    // would read those.
-    gpu_loss(ctx, &mut loss, &image, &target, None, width, height, 1.0, 0);
-    let gpu = gpu_loss(
-        ctx,
-        &mut loss,
-        &rendered,
+    // 22 x 16 skip cells (the last column and row partial): the rendered object sits top left,
+    // its mask bottom right, so most cells are beyond every pass's reach of content and are
+    // skipped, some only by the first passes.
+    let size = (170, 121);
+    let (image, target) = test_images(&mut rng, size.0, size.1);
+    let case = ObjectCase::new(
+        &image,
         &target,
-        Some((&ids, 7)),
-        width,
-        height,
-        0.5,
-        3,
+        size,
+        in_disc(size.0, (20.0, 18.0), 9.0),
+        in_disc(size.0, (140.0, 95.0), 12.0),
     );
-    assert_matches_cpu(&gpu, 3, 0.5, cpu, &cpu_grad, "sparse masked 170x121");
+    let gpu = case.gpu(ctx, &mut loss, &image, &target, size, 0.5, 3);
+    assert_matches_cpu(
+        &gpu,
+        3,
+        0.5,
+        case.cpu,
+        &case.cpu_grad,
+        "sparse masked 170x121",
+    );
     // Far from both objects the gradient is written, and exactly zero.
-    let far = 60 * width + 90;
+    let far = 60 * size.0 + 90;
     assert_eq!(gpu.grad[far], [0.0; 4]);
+}
+
+#[test]
+fn gpu_object_loss_skipping_matches_cpu_reference_on_random_small_objects() {
+    let Some(ctx) = gpu_context() else { return };
+    let mut loss = RenderLoss::new(ctx).unwrap();
+    // Small objects at random places, some at the image's edges, in images whose sides are not
+    // multiples of the skip cells: every cell boundary a run's reach can cross.
+    for seed in 0..6 {
+        let mut rng = seeded_rng(100 + seed);
+        let size: (usize, usize) = (rng.random_range(40..150), rng.random_range(30..110));
+        let (image, target) = test_images(&mut rng, size.0, size.1);
+        let disc = |rng: &mut rand_chacha::ChaCha8Rng| {
+            let centre = (
+                rng.random_range(0.0..size.0 as f64),
+                rng.random_range(0.0..size.1 as f64),
+            );
+            in_disc(size.0, centre, rng.random_range(1.0..7.0))
+        };
+        let (in_render, in_mask) = (disc(&mut rng), disc(&mut rng));
+        let case = ObjectCase::new(&image, &target, size, in_render, in_mask);
+        let gpu = case.gpu(ctx, &mut loss, &image, &target, size, 1.0, 1);
+        let label = format!("seed {seed}, {}x{}", size.0, size.1);
+        assert_matches_cpu(&gpu, 1, 1.0, case.cpu, &case.cpu_grad, &label);
+        // The passes' reaches are the least that keep the gradient exact: it is non-zero (on
+        // the CPU, in f64) exactly where the GPU computed it, out to the last pixel of its
+        // support, whose tiny values the tolerance above could not tell from zero.
+        let mut support = 0;
+        for (pixel, (gpu_pixel, cpu_pixel)) in gpu.grad.iter().zip(&case.cpu_grad).enumerate() {
+            let cpu_nonzero = cpu_pixel.iter().any(|g| *g != 0.0);
+            let gpu_nonzero = gpu_pixel[..3].iter().any(|g| *g != 0.0);
+            support += usize::from(cpu_nonzero);
+            assert_eq!(
+                gpu_nonzero,
+                cpu_nonzero,
+                "{label}: pixel ({}, {}) GPU {gpu_pixel:?} CPU {cpu_pixel:?}",
+                pixel % size.0,
+                pixel / size.0
+            );
+        }
+        assert!(
+            support > 0 && support < size.0 * size.1,
+            "{label}: support {support}"
+        );
+    }
 }

@@ -10,8 +10,9 @@
 //! `target * (object_ids[p] == object_id)`.
 //! An object's render and its mask usually cover a small part of the image, and where both are
 //! zero over the SSIM window's reach the loss and its gradient are exactly zero: object losses first
-//! mark the 16x16 tiles with content and each tile's distance to it (two small passes), and the
-//! four passes skip the tiles beyond their reach (`loss_skip.wgsl`), writing zero gradients there.
+//! mark the 8x8 cells with content and each cell's distance to it (two small passes), and the
+//! four passes skip the cells beyond their reach (`loss_skip.wgsl`: one cell for the first two
+//! passes, two for the last two), writing zero gradients there.
 //!
 //! Outputs, for one call: `weight * L` written to one slot of a small loss-values buffer (so a
 //! training step records several losses without reading any back; the caller sums slots when it
@@ -39,6 +40,10 @@ pub const SSIM_WINDOW_SIGMA: f64 = 1.5;
 const LOSS_TILE: u32 = 16;
 /// Pixels each per-pixel invocation filters (prepended as `LOSS_RUN`).
 const LOSS_RUN: u32 = 8;
+/// Side of the squares object losses skip or compute (prepended as `SKIP_CELL`): a run's.
+const SKIP_CELL: u32 = LOSS_RUN;
+/// Skip cells per loss tile, an upper bound per tile for the cells' buffers.
+const CELLS_PER_TILE: u64 = (LOSS_TILE / SKIP_CELL) as u64 * (LOSS_TILE / SKIP_CELL) as u64;
 /// Invocations of a per-pixel workgroup, each writing one loss partial sum.
 const PER_PIXEL_INVOCATIONS: u32 = LOSS_TILE * LOSS_TILE / LOSS_RUN;
 /// Bytes per pixel of the scratch images: four vec4 of filtered moments, three of partials.
@@ -101,7 +106,11 @@ fn loss_constants_wgsl() -> String {
         taps = taps.join(", "),
         c1 = SSIM_C1,
         c2 = SSIM_C2,
-        tiles = wgsl_u32_constants(&[("LOSS_TILE", LOSS_TILE), ("LOSS_RUN", LOSS_RUN)]),
+        tiles = wgsl_u32_constants(&[
+            ("LOSS_TILE", LOSS_TILE),
+            ("LOSS_RUN", LOSS_RUN),
+            ("SKIP_CELL", SKIP_CELL),
+        ]),
         l1 = L1_WEIGHT,
         dssim = DSSIM_WEIGHT,
     )
@@ -168,7 +177,7 @@ struct LossScratch {
     ssim_partials: wgpu::Buffer,
     row_partials: wgpu::Buffer,
     loss_partials: wgpu::Buffer,
-    /// Per tile: content flag, then distance in tiles to content (object losses).
+    /// Per skip cell: content flag, then distance in cells to content (object losses).
     tile_content: wgpu::Buffer,
     tile_distance: wgpu::Buffer,
 }
@@ -181,8 +190,8 @@ pub struct RenderLoss {
     partials_horizontal: Kernel,
     gradient: Kernel,
     reduce: Kernel,
-    /// Object losses: which tiles hold content and how far each tile is from it, so the passes
-    /// skip tiles whose loss and gradient are exactly zero.
+    /// Object losses: which cells hold content and how far each cell is from it, so the passes
+    /// skip cells whose loss and gradient are exactly zero.
     tile_content: Kernel,
     tile_distance: Kernel,
     /// Bound as the object ids when no mask is given.
@@ -292,8 +301,8 @@ impl RenderLoss {
                 "loss partial sums",
                 tiles * u64::from(PER_PIXEL_INVOCATIONS) * 4,
             )?,
-            tile_content: storage("loss tile content", tiles * 4)?,
-            tile_distance: storage("loss tile distance", tiles * 4)?,
+            tile_content: storage("loss cell content", tiles * CELLS_PER_TILE * 4)?,
+            tile_distance: storage("loss cell distance", tiles * CELLS_PER_TILE * 4)?,
         });
         Ok(())
     }
@@ -364,9 +373,9 @@ impl RenderLoss {
                 ctx,
                 &[&params, &scratch.tile_content, &scratch.tile_distance],
             );
-            let tiles = groups[0] * groups[1];
+            let cells = width.div_ceil(SKIP_CELL) * height.div_ceil(SKIP_CELL);
             self.tile_distance
-                .dispatch(encoder, &bind, [tiles.div_ceil(64), 1, 1]);
+                .dispatch(encoder, &bind, [cells.div_ceil(64), 1, 1]);
         }
 
         let bind = self.moments_horizontal.bind(

@@ -32,7 +32,7 @@ fn loss_gradient(@builtin(global_invocation_id) id: vec3<u32>) {
     if !inside(x, y) {
         return;
     }
-    if !tile_in_reach(x, y, SKIP_REACH) {
+    if !cell_in_reach(x, y, REACH_GRADIENT) {
         // Beyond the reach of content the gradient is exactly zero (the images and all the
         // moments around are zero; sign(0) = 0).
         for (var k = 0; k < i32(LOSS_RUN) && y + k < i32(params.height); k++) {
@@ -40,7 +40,7 @@ fn loss_gradient(@builtin(global_invocation_id) id: vec3<u32>) {
         }
         return;
     }
-    let run = filter_partials_run(x, y, vec2<i32>(0, 1), y, i32(params.height));
+    let run = filter_partials_run(x, y, vec2<i32>(0, 1), y, i32(params.height), REACH_ROW_PARTIALS);
     store_gradient(x, y, run.s0);
     store_gradient(x, y + 1, run.s1);
     store_gradient(x, y + 2, run.s2);

@@ -46,7 +46,7 @@ fn filter_moments_horizontal(
     let start = horizontal_run(workgroup, local);
     let x = start.x;
     let y = start.y;
-    if !inside(x, y) || !tile_in_reach(x, y, SKIP_REACH) {
+    if !inside(x, y) || !cell_in_reach(x, y, REACH_ROW_MOMENTS) {
         return;
     }
     var m0 = no_moments();

@@ -28,10 +28,10 @@ fn filter_partials_horizontal(
     let start = horizontal_run(workgroup, local);
     let x = start.x;
     let y = start.y;
-    if !inside(x, y) || !tile_in_reach(x, y, SKIP_REACH) {
+    if !inside(x, y) || !cell_in_reach(x, y, REACH_ROW_PARTIALS) {
         return;
     }
-    let run = filter_partials_run(x, y, vec2<i32>(1, 0), x, i32(params.width));
+    let run = filter_partials_run(x, y, vec2<i32>(1, 0), x, i32(params.width), REACH_SSIM);
     store_partials(x, y, run.s0);
     store_partials(x + 1, y, run.s1);
     store_partials(x + 2, y, run.s2);

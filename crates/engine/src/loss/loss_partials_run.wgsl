@@ -31,9 +31,17 @@ struct PartialsRun {
 }
 
 // `extent` is the image's size along `step` (width or height), `along` the run's first
-// coordinate on that axis. Inputs the previous pass skipped read as zero (loss_skip.wgsl).
-fn filter_partials_run(x: i32, y: i32, step: vec2<i32>, along: i32, extent: i32) -> PartialsRun {
-    let reach = run_reach(x, y, step, along, extent);
+// coordinate on that axis, `input_reach` the reach of the pass that wrote the inputs. Inputs
+// that pass skipped read as zero (loss_skip.wgsl).
+fn filter_partials_run(
+    x: i32,
+    y: i32,
+    step: vec2<i32>,
+    along: i32,
+    extent: i32,
+    input_reach: u32,
+) -> PartialsRun {
+    let reach = run_reach(x, y, step, along, extent, input_reach);
     var run = PartialsRun(
         no_partials(), no_partials(), no_partials(), no_partials(),
         no_partials(), no_partials(), no_partials(), no_partials(),

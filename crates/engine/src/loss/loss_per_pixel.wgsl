@@ -79,10 +79,10 @@ fn ssim_per_pixel(
     let x = i32(id.x);
     let y = i32(id.y * LOSS_RUN);
     var run_loss = 0.0;
-    // A skipped tile's loss is exactly zero.
-    if inside(x, y) && tile_in_reach(x, y, SKIP_REACH) {
+    // A skipped cell's loss is exactly zero.
+    if inside(x, y) && cell_in_reach(x, y, REACH_SSIM) {
         // Row moments the first pass skipped are zero (loss_skip.wgsl).
-        let reach = run_reach(x, y, vec2<i32>(0, 1), y, i32(params.height));
+        let reach = run_reach(x, y, vec2<i32>(0, 1), y, i32(params.height), REACH_ROW_MOMENTS);
         var m0 = no_packed_moments();
         var m1 = no_packed_moments();
         var m2 = no_packed_moments();
