@@ -108,8 +108,8 @@ pub struct ViewObjectMasks {
     pub ids: [wgpu::Buffer; 3],
     /// Per level: the objects present, sorted.
     pub present: [Vec<u32>; 3],
-    /// Per level: the CPU ids, for partial-mask IoUs.
-    pub ids_cpu: [Vec<u32>; 3],
+    /// Per level: the pixels of the id map (the trainer checks them against the view's).
+    pub pixel_counts: [usize; 3],
 }
 
 /// The object masks of every training view, in the trainer's training-view order.
@@ -137,7 +137,7 @@ impl ObjectTargets {
                 ViewObjectMasks {
                     ids,
                     present,
-                    ids_cpu: levels,
+                    pixel_counts: std::array::from_fn(|level| levels[level].len()),
                 }
             })
             .collect();

@@ -41,7 +41,7 @@ impl Trainer {
         for (view, (masks, train_view)) in targets.views.iter().zip(&self.views.train).enumerate() {
             let pixels = train_view.camera.pixel_count();
             for level in Level::ALL {
-                let given = masks.ids_cpu[level.index()].len();
+                let given = masks.pixel_counts[level.index()];
                 if given != pixels {
                     return Err(TrainError::ObjectTargets(ObjectTargetsError::PixelCount {
                         view,
