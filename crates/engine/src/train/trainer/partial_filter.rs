@@ -51,17 +51,18 @@ impl Trainer {
         // Halved for the rest of the filter whenever a batch needs more tile intersections than
         // one storage binding holds.
         let mut intersection_bound = PARTIAL_FILTER_MAX_BATCH;
+        // Dynamic scenes: the time the geometry is deformed to (it stays so across submissions).
+        let mut deformed_time = None;
         for view_pairs in pairs.chunk_by(|a, b| a.train_view == b.train_view) {
             let view = &self.views.train[view_pairs[0].train_view];
             let ids = targets.views[view_pairs[0].train_view].ids.each_ref();
+            let memory_batch = memory_batch_size(&self.ctx, view.camera.pixel_count());
             let mut overflows = 0;
             loop {
-                let batch_size =
-                    memory_batch_size(&self.ctx, view.camera.pixel_count()).min(intersection_bound);
+                let batch_size = memory_batch.min(intersection_bound);
                 let mut encoder = self.new_encoder("partial mask filter");
                 counts.encode_clear(&mut encoder, first_pair, view_pairs.len());
-                // Dynamic scenes: the geometry is deformed to the view's time first.
-                if self.dynamics.is_some() {
+                if self.dynamics.is_some() && deformed_time != Some(view.time) {
                     super::dynamics::deform_to(
                         &self.ctx,
                         self.step,
@@ -70,6 +71,7 @@ impl Trainer {
                         &mut encoder,
                         view.time,
                     )?;
+                    deformed_time = Some(view.time);
                 }
                 let scene = super::dynamics::render_view(&self.gaussians, &self.dynamics);
                 let base =
