@@ -394,14 +394,17 @@ async fn a_restart_on_the_same_data_dir_resumes_queued_jobs() {
     second.shutdown().await;
 }
 
-#[tokio::test]
-async fn shutdown_hands_running_jobs_back_and_the_next_run_resumes_from_the_checkpoint() {
-    let dir = tempfile::tempdir().unwrap();
-    let first_handler = StepsHandler::new();
-    let first = start_with(dir.path(), 1, &first_handler).await;
-    let scene_id = first.upload_test_scene().await;
-    let steps = 40;
-    let job_id = first
+/// Runs a `steps`-step job on a service in `dir` until it reports `step`, then shuts the service
+/// down (the job is handed back); returns the job and the handler that ran it.
+async fn shut_down_past_step(
+    dir: &std::path::Path,
+    steps: u64,
+    step: u64,
+) -> (String, StepsHandler) {
+    let handler = StepsHandler::new();
+    let service = start_with(dir, 1, &handler).await;
+    let scene_id = service.upload_test_scene().await;
+    let job_id = service
         .create_job(
             &scene_id,
             STEPS_KIND,
@@ -410,14 +413,22 @@ async fn shutdown_hands_running_jobs_back_and_the_next_run_resumes_from_the_chec
         .await;
     let started = std::time::Instant::now();
     loop {
-        let job = first.job(&job_id).await;
-        if job["progress"]["step"].as_u64().unwrap_or(0) >= 3 {
+        let job = service.job(&job_id).await;
+        if job["progress"]["step"].as_u64().unwrap_or(0) >= step {
             break;
         }
         assert!(started.elapsed() < WAIT, "no progress: {job}");
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
-    first.shutdown().await;
+    service.shutdown().await;
+    (job_id, handler)
+}
+
+#[tokio::test]
+async fn shutdown_hands_running_jobs_back_and_the_next_run_resumes_from_the_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    let steps = 40;
+    let (job_id, first_handler) = shut_down_past_step(dir.path(), steps, 3).await;
 
     let database = Database::connect(&test_config(dir.path())).await.unwrap();
     let job = database
@@ -441,6 +452,52 @@ async fn shutdown_hands_running_jobs_back_and_the_next_run_resumes_from_the_chec
         done_before + done_after,
         steps,
         "resumed from the checkpoint, no step twice"
+    );
+    second.shutdown().await;
+}
+
+/// A worker killed in the middle of an upload can leave a torn newest checkpoint behind (s3rver
+/// keeps short uploads): the next attempt says so, resumes from the generation before it, and
+/// redoes only the steps in between.
+#[tokio::test]
+async fn a_torn_newest_checkpoint_costs_its_steps_not_the_job() {
+    let dir = tempfile::tempdir().unwrap();
+    let steps = 30;
+    let (job_id, first_handler) = shut_down_past_step(dir.path(), steps, 4).await;
+    let done_before = first_handler.stats.steps_executed.load(Ordering::SeqCst);
+
+    // The handler checkpoints every step: the newest two generations are kept, older ones go.
+    let checkpoints = dir.path().join(format!("blobs/jobs/{job_id}/checkpoints"));
+    let mut generations = common::files_under(&checkpoints);
+    generations.sort();
+    assert_eq!(generations.len(), 2, "{generations:?}");
+    let newest = checkpoints.join(&generations[1]);
+    let bytes = std::fs::read(&newest).unwrap();
+    std::fs::write(&newest, &bytes[..3]).unwrap();
+
+    let second_handler = StepsHandler::new();
+    let second = start_with(dir.path(), 1, &second_handler).await;
+    let job = second.wait_for_state(&job_id, "succeeded", WAIT).await;
+    assert_eq!(job["attempts"], 1, "{job}");
+    let done_after = second_handler.stats.steps_executed.load(Ordering::SeqCst);
+    assert_eq!(
+        done_before + done_after,
+        steps + 1,
+        "resumed from the generation before the torn one: one step redone"
+    );
+    let (status, events) = second.get_bytes(&format!("/v1/jobs/{job_id}/events")).await;
+    assert_eq!(status, 200);
+    let warnings: Vec<serde_json::Value> = parse_sse(&String::from_utf8_lossy(&events))
+        .into_iter()
+        .filter(|(name, _)| name == "warning")
+        .map(|(_, data)| data["payload"].clone())
+        .collect();
+    assert_eq!(warnings.len(), 1, "{warnings:?}");
+    assert_eq!(warnings[0]["stage"], "resume");
+    let message = warnings[0]["message"].as_str().unwrap_or_default();
+    assert!(
+        message.contains("unusable") && message.contains("3 bytes"),
+        "{message}"
     );
     second.shutdown().await;
 }

@@ -119,9 +119,10 @@ async fn reconstruct_job_trains_and_stores_artifacts() {
     // A succeeded job's checkpoint goes (jobs.keep_final_checkpoint is off), just after the
     // state is recorded.
     let started = std::time::Instant::now();
-    while blobs
-        .exists(&format!("jobs/{job_id}/checkpoints/train"))
+    while !blobs
+        .list_prefix(&format!("jobs/{job_id}/checkpoints/"))
         .unwrap()
+        .is_empty()
     {
         assert!(started.elapsed().as_secs() < 10, "final checkpoint kept");
         tokio::time::sleep(std::time::Duration::from_millis(20)).await;

@@ -88,8 +88,13 @@ impl JobHandler for StepsHandler {
                 ctx.scene_dir.join("sparse").is_dir(),
                 "scene files are reachable"
             );
-            let resume_from = match ctx.load_checkpoint("step") {
-                Ok(Some(bytes)) => u64::from_le_bytes(bytes.try_into().unwrap_or([0; 8])),
+            let decode_step = |bytes: &[u8]| {
+                <[u8; 8]>::try_from(bytes)
+                    .map(u64::from_le_bytes)
+                    .map_err(|_| format!("{} bytes, not 8", bytes.len()))
+            };
+            let resume_from = match ctx.load_checkpoint("step", decode_step) {
+                Ok(Some(step)) => step,
                 Ok(None) => 0,
                 Err(error) => return Err(JobFailure::Retryable(error.to_string())),
             };

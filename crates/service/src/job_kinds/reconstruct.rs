@@ -9,12 +9,12 @@ use futures::future::BoxFuture;
 use serde::{Deserialize, Serialize};
 
 use super::training::{
-    fatal, report_evaluation, retryable, store_outputs, train_failure, train_with_checkpoints,
+    fatal, load_resume_point, report_evaluation, store_outputs, train_failure,
+    train_with_checkpoints,
 };
 use crate::jobs::{JobContext, JobFailure, JobHandler};
-use segsplat_engine::checkpoint::Checkpoint;
 use segsplat_engine::deform::{DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE};
-use segsplat_engine::train::{TrainConfig, Trainer, TrainerMeta};
+use segsplat_engine::train::{TrainConfig, Trainer};
 use segsplat_gpu::GpuContext;
 use segsplat_method::scene_files::ReconstructMetrics;
 use segsplat_scene::{LoadOptions, Scene, load_scene};
@@ -88,18 +88,8 @@ fn run_blocking(ctx: &JobContext) -> Result<(), JobFailure> {
     if config.deformation_from_scene && scene.is_dynamic() && config.train.deformation.is_none() {
         config.train.deformation = Some(Default::default());
     }
-    let mut trainer = match ctx.load_checkpoint(CHECKPOINT_NAME).map_err(retryable)? {
-        Some(bytes) => {
-            let checkpoint = Checkpoint::<TrainerMeta>::from_bytes(&bytes).map_err(retryable)?;
-            tracing::info!(step = checkpoint.meta.step, "resuming from checkpoint");
-            if let Err(error) = ctx
-                .progress
-                .resumed_blocking("train", u64::from(checkpoint.meta.step))
-            {
-                tracing::warn!(%error, "cannot record the resume");
-            }
-            Trainer::resume(&gpu, &scene, &checkpoint).map_err(train_failure)?
-        }
+    let mut trainer = match load_resume_point(ctx, CHECKPOINT_NAME)? {
+        Some(checkpoint) => Trainer::resume(&gpu, &scene, &checkpoint).map_err(train_failure)?,
         None => Trainer::new(&gpu, &scene, config.train.clone(), None).map_err(train_failure)?,
     };
     let train_seconds =

@@ -17,7 +17,7 @@ use futures::future::BoxFuture;
 use serde::{Deserialize, Serialize};
 
 use crate::job_kinds::training::{
-    fatal, report, report_evaluation, retryable, store_outputs, train_failure,
+    fatal, load_resume_point, report, report_evaluation, retryable, store_outputs, train_failure,
     train_with_checkpoints,
 };
 use crate::jobs::{JobContext, JobFailure, JobHandler, Progress};
@@ -219,18 +219,8 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
         background_shell: config.train.background_shell,
         ..SegmentedTrainingOptions::default()
     };
-    let mut trainer = match ctx.load_checkpoint(CHECKPOINT_NAME).map_err(retryable)? {
-        Some(bytes) => {
-            let checkpoint = Checkpoint::<TrainerMeta>::from_bytes(&bytes).map_err(retryable)?;
-            tracing::info!(step = checkpoint.meta.step, "resuming from checkpoint");
-            if let Err(error) = ctx
-                .progress
-                .resumed_blocking("train", u64::from(checkpoint.meta.step))
-            {
-                tracing::warn!(%error, "cannot record the resume");
-            }
-            resume_segmented(&gpu, &scene, &checkpoint, &masks, &options)?
-        }
+    let mut trainer = match load_resume_point(ctx, CHECKPOINT_NAME)? {
+        Some(checkpoint) => resume_segmented(&gpu, &scene, &checkpoint, &masks, &options)?,
         None => {
             segmented_trainer_from_view_masks(&gpu, &scene, config.train.clone(), &masks, &options)
                 .map_err(fatal)?

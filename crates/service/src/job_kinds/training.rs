@@ -3,8 +3,9 @@
 
 use crate::jobs::{JobContext, JobFailure, Progress};
 use segsplat_engine::GaussianModel;
+use segsplat_engine::checkpoint::Checkpoint;
 use segsplat_engine::model::ModelError;
-use segsplat_engine::train::{EvalReport, TrainError, TrainProgress, Trainer};
+use segsplat_engine::train::{EvalReport, TrainError, TrainProgress, Trainer, TrainerMeta};
 use segsplat_method::cameras::CAMERAS_FILE;
 use segsplat_method::scene_files::write_scene_files;
 use segsplat_method::scene_files::{LABELS_FILE, SCENE_FILE};
@@ -75,6 +76,29 @@ fn report_training(ctx: &JobContext, progress: &TrainProgress) {
         progress.total_steps as u64,
         &metrics,
     );
+}
+
+/// The newest trainer checkpoint this job saved that still decodes, recorded as a `resumed`
+/// event; `None` when the job starts from the beginning.
+pub fn load_resume_point(
+    ctx: &JobContext,
+    name: &str,
+) -> Result<Option<Checkpoint<TrainerMeta>>, JobFailure> {
+    let checkpoint = ctx
+        .load_checkpoint(name, |bytes| {
+            Checkpoint::<TrainerMeta>::from_bytes(bytes).map_err(|error| error.to_string())
+        })
+        .map_err(retryable)?;
+    if let Some(checkpoint) = &checkpoint {
+        tracing::info!(step = checkpoint.meta.step, "resuming from checkpoint");
+        if let Err(error) = ctx
+            .progress
+            .resumed_blocking("train", u64::from(checkpoint.meta.step))
+        {
+            tracing::warn!(%error, "cannot record the resume");
+        }
+    }
+    Ok(checkpoint)
 }
 
 fn save_checkpoint(ctx: &JobContext, name: &str, trainer: &Trainer) -> Result<(), JobFailure> {

@@ -13,7 +13,7 @@ mod scene_cache;
 mod temp_sweep;
 mod worker;
 
-pub use context::{JobContext, job_output_prefix};
+pub use context::{JobContext, job_checkpoints_prefix, job_output_prefix};
 pub use events::JobEventBus;
 pub use handler::{HandlerRegistry, JobFailure, JobHandler};
 pub use identity::{ProcessIdentity, host_name};

@@ -133,6 +133,22 @@ impl ProgressReporter {
         tokio::runtime::Handle::current().block_on(self.warn(stage, message))
     }
 
+    /// [`Self::warn`] without waiting for it, callable from async and blocking code alike; the
+    /// event lands shortly after. For warnings raised where the caller cannot block (a handler
+    /// running on the runtime itself).
+    pub fn warn_detached(&self, stage: &str, message: &str) {
+        let Ok(runtime) = tokio::runtime::Handle::try_current() else {
+            return;
+        };
+        let reporter = self.clone();
+        let (stage, message) = (stage.to_string(), message.to_string());
+        runtime.spawn(async move {
+            if let Err(error) = reporter.warn(&stage, &message).await {
+                tracing::warn!(%error, "warning event not recorded");
+            }
+        });
+    }
+
     /// Notes in the job's row that this lease holder saved a checkpoint, so a lease expiry
     /// after it counts as progress rather than an attempt. Fire and forget, callable from async
     /// and blocking code alike: the note is an optimisation of retry accounting, and a lost one

@@ -327,7 +327,7 @@ impl Worker {
     /// training job can be hundreds of MB.
     async fn delete_checkpoints(&self, job_id: &str) {
         let blobs = self.shared.blobs.clone();
-        let prefix = format!("jobs/{job_id}/checkpoints");
+        let prefix = super::job_checkpoints_prefix(job_id);
         let deleted = tokio::task::spawn_blocking(move || blobs.delete_prefix(&prefix)).await;
         match deleted {
             Ok(Ok(_)) => {}
