@@ -12,8 +12,8 @@ mod gpu_support;
 use gpu_support::{gpu_context, new_encoder, seeded_rng, storage_buffer, submit};
 use rand::Rng;
 use segsplat_engine::loss::{
-    DSSIM_WEIGHT, L1_WEIGHT, LossImages, LossOutputs, ObjectMask, RenderLoss, SSIM_C1, SSIM_C2,
-    ssim_window,
+    DSSIM_WEIGHT, L1_WEIGHT, LossImages, LossOutputs, MAX_BATCH_SLOTS, ObjectLossImages,
+    ObjectLossSlot, ObjectMask, RenderLoss, SSIM_C1, SSIM_C2, ssim_window,
 };
 use segsplat_gpu::GpuContext;
 
@@ -508,4 +508,145 @@ fn gpu_object_loss_skipping_matches_cpu_reference_on_random_small_objects() {
             "{label}: support {support}"
         );
     }
+}
+
+/// A step's object losses run as one batch: each slot its own render, mask (one of three id
+/// maps) and scratch images. More slots than one set of dispatches holds, so the batch is split;
+/// some slots' objects are absent from their map or their render is empty. Each slot's loss and
+/// gradient must match its own CPU reference, non-zero exactly where the reference is, and
+/// nothing outside the batch's loss values and gradient images may be written.
+#[test]
+fn gpu_object_loss_batch_matches_cpu_reference_per_slot() {
+    let Some(ctx) = gpu_context() else { return };
+    let mut loss = RenderLoss::new(ctx).unwrap();
+    let mut rng = seeded_rng(11);
+    let (width, height) = (37, 29);
+    let pixels = width * height;
+    let (image, target) = test_images(&mut rng, width, height);
+    // Three id maps, each a few overlapping discs with ids 1..=4 on background 0.
+    let id_maps: Vec<Vec<u32>> = (0..3)
+        .map(|_| {
+            let mut ids = vec![0u32; pixels];
+            for id in 1..=4u32 {
+                let centre = (
+                    rng.random_range(0.0..width as f64),
+                    rng.random_range(0.0..height as f64),
+                );
+                let inside = in_disc(width, centre, rng.random_range(2.0..8.0));
+                for (pixel, value) in ids.iter_mut().enumerate() {
+                    if inside(pixel) {
+                        *value = id;
+                    }
+                }
+            }
+            ids
+        })
+        .collect();
+    let slot_count = MAX_BATCH_SLOTS as usize + 6;
+    let slots: Vec<ObjectLossSlot> = (0..slot_count)
+        .map(|slot| ObjectLossSlot {
+            id_map: (slot % 3) as u32,
+            // Ids 1..=4 are in the maps (or hidden by later discs); 5 never is.
+            object_id: 1 + (slot / 3 % 5) as u32,
+        })
+        .collect();
+    // Each slot's render: the image over a random disc, or nothing at all.
+    let renders: Vec<Vec<Rgb>> = (0..slot_count)
+        .map(|slot| {
+            let centre = (
+                rng.random_range(0.0..width as f64),
+                rng.random_range(0.0..height as f64),
+            );
+            let inside = in_disc(width, centre, rng.random_range(1.0..9.0));
+            (0..pixels)
+                .map(|p| {
+                    if slot % 7 != 3 && inside(p) {
+                        image[p]
+                    } else {
+                        [0.0; 3]
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    // Image 0 of the rendered and gradient buffers and loss slots 0..2 are not the batch's.
+    let (first_image, first_loss) = (1u32, 2u32);
+    let mut rendered = to_vec4(&image, 0.5);
+    for render in &renders {
+        rendered.extend(to_vec4(render, 0.5));
+    }
+    let rendered_buffer = storage_buffer(ctx, "rendered", &rendered);
+    let target_buffer = storage_buffer(ctx, "target", &to_vec4(&target, 1.0));
+    let map_buffers: Vec<wgpu::Buffer> = id_maps
+        .iter()
+        .map(|ids| storage_buffer(ctx, "ids", ids))
+        .collect();
+    let map_refs: Vec<&wgpu::Buffer> = map_buffers.iter().collect();
+    let grad_buffer = storage_buffer(ctx, "grad", &vec![[9.0f32; 4]; pixels * (slot_count + 1)]);
+    let loss_buffer = storage_buffer(ctx, "loss values", &vec![-1.0f32; slot_count + 4]);
+    // A full loss first leaves every scratch buffer holding another image's values.
+    gpu_loss(ctx, &mut loss, &image, &target, None, width, height, 1.0, 0);
+    let weight = 0.75;
+    let mut encoder = new_encoder(ctx);
+    loss.encode_objects(
+        ctx,
+        &mut encoder,
+        &ObjectLossImages {
+            rendered: &rendered_buffer,
+            rendered_index: first_image,
+            target: &target_buffer,
+            id_maps: &map_refs,
+            slots: &slots,
+            width: width as u32,
+            height: height as u32,
+        },
+        weight,
+        &LossOutputs {
+            rendered_grad: &grad_buffer,
+            grad_index: first_image,
+            loss_values: &loss_buffer,
+            loss_slot: first_loss,
+        },
+    )
+    .unwrap();
+    submit(ctx, encoder);
+    let loss_values: Vec<f32> = ctx.read_vec(&loss_buffer).unwrap();
+    let grads: Vec<[f32; 4]> = ctx.read_vec(&grad_buffer).unwrap();
+    assert!(
+        grads[..pixels].iter().all(|g| *g == [9.0; 4]),
+        "image 0 written"
+    );
+    for index in (0..first_loss as usize).chain(first_loss as usize + slot_count..loss_values.len())
+    {
+        assert_eq!(loss_values[index], -1.0, "loss value {index} written");
+    }
+    let mut empty_slots = 0;
+    for (slot, object) in slots.iter().enumerate() {
+        let ids = &id_maps[object.id_map as usize];
+        let masked_target: Vec<Rgb> = target
+            .iter()
+            .zip(ids)
+            .map(|(t, &id)| if id == object.object_id { *t } else { [0.0; 3] })
+            .collect();
+        let (cpu, cpu_grad) = cpu_loss(&renders[slot], &masked_target, width, height);
+        let start = (1 + slot) * pixels;
+        let gpu = GpuLoss {
+            loss_values: vec![loss_values[first_loss as usize + slot]],
+            grad: grads[start..start + pixels].to_vec(),
+        };
+        let label = format!("slot {slot} ({object:?})");
+        assert_matches_cpu(&gpu, 0, f64::from(weight), cpu, &cpu_grad, &label);
+        for (pixel, (gpu_pixel, cpu_pixel)) in gpu.grad.iter().zip(&cpu_grad).enumerate() {
+            assert_eq!(
+                gpu_pixel[..3].iter().any(|g| *g != 0.0),
+                cpu_pixel.iter().any(|g| *g != 0.0),
+                "{label}: pixel {pixel} GPU {gpu_pixel:?} CPU {cpu_pixel:?}"
+            );
+        }
+        empty_slots += usize::from(cpu == 0.0);
+    }
+    assert!(
+        empty_slots > 0 && empty_slots < slot_count,
+        "some slots, not all, have neither render nor mask: {empty_slots}"
+    );
 }

@@ -268,3 +268,65 @@ fn bench_starts_from_a_trained_ply() {
         "{missing:?}"
     );
 }
+
+/// `bench --object-loss` times the object-loss run and a plain run on the same Gaussians in
+/// turns (so a change in the machine's speed falls on both) and reports their step-time ratio,
+/// with the partial-mask filter timed apart.
+#[test]
+fn bench_times_the_object_loss_against_plain_steps_in_one_invocation() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().expect("temp dir");
+    let scene = dir.path().join("scene");
+    let scene = scene.to_str().expect("utf-8 path");
+    let written = segsplat(&[
+        "synthetic-scene",
+        scene,
+        "--frames",
+        "8",
+        "--width",
+        "40",
+        "--height",
+        "30",
+    ]);
+    assert!(written.status.success(), "{written:?}");
+    // 60 steps: two whole turns of 25 and a short one on each side.
+    let output = segsplat(&[
+        "bench",
+        scene,
+        "--steps",
+        "60",
+        "--max-resolution",
+        "40",
+        "--no-densify",
+        "--object-loss",
+        "--objects-per-level",
+        "1",
+        "--timing-repeats",
+        "1",
+        "--json",
+    ]);
+    assert!(output.status.success(), "{output:?}");
+    let report: serde_json::Value =
+        serde_json::from_slice(&output.stdout).expect("bench prints one JSON object");
+    assert_eq!(report["steps"], 60, "{report}");
+    assert_eq!(report["object_loss"]["masks"], "user", "{report}");
+    let plain = &report["plain_baseline"];
+    assert_eq!(
+        plain["gaussians_start"], report["gaussians_start"],
+        "{report}"
+    );
+    let number = |value: &serde_json::Value| value.as_f64().unwrap_or(f64::NAN);
+    assert!(number(&plain["steps_per_sec"]) > 0.0, "{report}");
+    assert!(number(&report["steps_per_sec"]) > 0.0, "{report}");
+    let ratio = number(&plain["step_time_ratio"]);
+    let with_filter = number(&plain["step_time_ratio_with_filter"]);
+    assert!(ratio > 0.0 && ratio <= with_filter, "{report}");
+    assert!(number(&plain["partial_filter_seconds"]) > 0.0, "{report}");
+    // The object slots add their renders' and their batched loss's dispatches to a step.
+    assert!(
+        number(&report["dispatches_per_step"]) > number(&plain["dispatches_per_step"]),
+        "{report}"
+    );
+}

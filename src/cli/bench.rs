@@ -266,7 +266,8 @@ struct BenchReport {
     peak_resident_mib: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     object_loss: Option<ObjectLossReport>,
-    /// With `--object-loss`: the same Gaussians trained without the object loss, first.
+    /// With `--object-loss`: the same Gaussians trained without the object loss, in turns with
+    /// the object-loss run.
     #[serde(skip_serializing_if = "Option::is_none")]
     plain_baseline: Option<PlainBaselineReport>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -300,27 +301,71 @@ struct PlainBaselineReport {
 
 /// Trains `steps` on `trainer`, returning its progress and the dispatches it recorded per step,
 /// the partial-mask filter's left out (a stage of the job, reported apart).
-fn run_counting_dispatches(
-    ctx: &GpuContext,
-    trainer: &mut Trainer,
-) -> anyhow::Result<(segsplat_engine::train::TrainProgress, f64)> {
-    let before = ctx.dispatch_count();
-    let filter_before = trainer.partial_filter_cost().dispatches;
-    let progress = trainer.run(|_| true)?;
-    let filter = trainer.partial_filter_cost().dispatches - filter_before;
-    let dispatches = ctx.dispatch_count() - before - filter;
-    let per_step = dispatches as f64 / f64::from(progress.step.max(1));
-    Ok((progress, per_step))
+/// Steps of one trainer between turns when two are timed together.
+const INTERLEAVED_STEPS: u32 = 25;
+
+/// One trainer's timed training loop.
+#[derive(Debug, Default, Clone, Copy)]
+struct TimedRun {
+    steps: u32,
+    seconds: f64,
+    /// Kernel dispatches per step, the partial-mask filter's left out.
+    dispatches_per_step: f64,
+}
+
+impl TimedRun {
+    fn steps_per_sec(&self) -> f64 {
+        f64::from(self.steps) / self.seconds.max(f64::MIN_POSITIVE)
+    }
+}
+
+/// Trains each of `trainers` to its last step, timing each. With more than one they take turns
+/// of [`INTERLEAVED_STEPS`] steps, each turn waited for to its end, so a change in the machine's
+/// speed (other processes, a shared host) falls on every trainer alike instead of on whichever
+/// ran in those seconds: the step-time ratio of `--object-loss` comes from this.
+fn timed_runs(ctx: &GpuContext, trainers: &mut [&mut Trainer]) -> anyhow::Result<Vec<TimedRun>> {
+    let turn = if trainers.len() > 1 {
+        INTERLEAVED_STEPS
+    } else {
+        u32::MAX
+    };
+    let mut runs = vec![TimedRun::default(); trainers.len()];
+    let mut dispatches = vec![0u64; trainers.len()];
+    while trainers
+        .iter()
+        .any(|trainer| trainer.step() < trainer.config().steps)
+    {
+        for ((trainer, run), dispatched) in trainers.iter_mut().zip(&mut runs).zip(&mut dispatches)
+        {
+            let first_step = trainer.step();
+            if first_step >= trainer.config().steps {
+                continue;
+            }
+            let before = ctx.dispatch_count();
+            let filter_before = trainer.partial_filter_cost().dispatches;
+            let started = std::time::Instant::now();
+            // Ends on a read-back, so the turn's GPU work is done when the clock stops.
+            let progress = trainer.run_until(first_step.saturating_add(turn), |_| true)?;
+            run.seconds += started.elapsed().as_secs_f64();
+            run.steps += progress.step - first_step;
+            let filter = trainer.partial_filter_cost().dispatches - filter_before;
+            *dispatched += ctx.dispatch_count() - before - filter;
+        }
+    }
+    for (run, dispatched) in runs.iter_mut().zip(dispatches) {
+        run.dispatches_per_step = dispatched as f64 / f64::from(run.steps.max(1));
+    }
+    Ok(runs)
 }
 
 /// The plain half of `--object-loss`: `config` without the object loss, from `model`.
-fn plain_baseline(
+fn plain_trainer(
     ctx: &GpuContext,
     scene: &Scene,
     config: &TrainConfig,
     model: GaussianModel,
     timing_repeats: u32,
-) -> anyhow::Result<(usize, f64, f64, f64)> {
+) -> anyhow::Result<Trainer> {
     // At the object run's resolution throughout: without the object loss the schedule would
     // otherwise start coarse, and the ratio would compare steps of different sizes.
     let config = TrainConfig {
@@ -329,12 +374,9 @@ fn plain_baseline(
         ..config.clone()
     };
     let mut trainer = Trainer::new(ctx, scene, config, Some(model))?;
-    let gaussians = trainer.gaussian_count();
     // The same warm-up as the timed run gets, so neither pays first-use costs in its loop.
     trainer.time_passes(timing_repeats)?;
-    let (progress, dispatches) = run_counting_dispatches(ctx, &mut trainer)?;
-    let eval = trainer.evaluate()?;
-    Ok((gaussians, progress.steps_per_sec, dispatches, eval.psnr))
+    Ok(trainer)
 }
 
 /// `--profile-kernels`: GPU time per training step by kernel, averaged over `steps`.
@@ -492,37 +534,45 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         None
     };
     let (mut trainer, object_loss) = bench_trainer(&ctx, &scene, config.clone(), initial, &args)?;
-    let plain = if object_loss.is_some() {
-        Some(plain_baseline(
+    let mut plain = match object_loss {
+        Some(_) => Some(plain_trainer(
             &ctx,
             &scene,
             &config,
             trainer.model()?,
             args.timing_repeats,
-        )?)
-    } else {
-        None
+        )?),
+        None => None,
     };
     let gaussians_start = trainer.gaussian_count();
     let (forward_ms_start, backward_ms_start) = trainer.time_passes(args.timing_repeats)?;
-    let (progress, dispatches_per_step) = run_counting_dispatches(&ctx, &mut trainer)?;
+    let (run, plain_run) = match plain.as_mut() {
+        Some(plain) => match timed_runs(&ctx, &mut [&mut trainer, plain])?[..] {
+            [run, plain_run] => (run, Some(plain_run)),
+            _ => anyhow::bail!("two timed runs expected"),
+        },
+        None => (timed_runs(&ctx, &mut [&mut trainer])?[0], None),
+    };
     let filter = trainer.partial_filter_cost();
     let partial_filter_seconds = filter.seconds;
-    let plain_baseline = plain.map(|(gaussians_start, steps_per_sec, dispatches, psnr)| {
-        let with_filter = steps_per_sec / progress.steps_per_sec;
-        let step_share = (progress.elapsed_secs - partial_filter_seconds) / progress.elapsed_secs;
-        PlainBaselineReport {
-            gaussians_start,
-            steps_per_sec,
-            dispatches_per_step: dispatches,
-            psnr,
-            step_time_ratio: with_filter * step_share,
-            step_time_ratio_with_filter: with_filter,
-            partial_filter_seconds,
-            partial_filter_dispatches: filter.dispatches,
-            dispatch_ratio: dispatches_per_step / dispatches.max(1.0),
+    let plain_baseline = match (plain.take(), plain_run) {
+        (Some(mut plain), Some(plain_run)) => {
+            let with_filter = plain_run.steps_per_sec() / run.steps_per_sec();
+            let step_share = (run.seconds - partial_filter_seconds) / run.seconds;
+            Some(PlainBaselineReport {
+                gaussians_start,
+                steps_per_sec: plain_run.steps_per_sec(),
+                dispatches_per_step: plain_run.dispatches_per_step,
+                psnr: plain.evaluate()?.psnr,
+                step_time_ratio: with_filter * step_share,
+                step_time_ratio_with_filter: with_filter,
+                partial_filter_seconds,
+                partial_filter_dispatches: filter.dispatches,
+                dispatch_ratio: run.dispatches_per_step / plain_run.dispatches_per_step.max(1.0),
+            })
         }
-    });
+        _ => None,
+    };
     let (forward_ms_end, backward_ms_end) = trainer.time_passes(args.timing_repeats)?;
     let field_timing = trainer.time_deformation(args.timing_repeats)?;
     let eval = trainer.evaluate()?;
@@ -543,12 +593,12 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
                 field,
                 parameters,
                 training_times: times.len(),
-                steps_per_sec: progress.steps_per_sec,
-                train_seconds: progress.elapsed_secs,
+                steps_per_sec: run.steps_per_sec(),
+                train_seconds: run.seconds,
                 static_steps_per_sec,
                 static_train_seconds,
                 static_psnr,
-                step_time_ratio: static_steps_per_sec / progress.steps_per_sec,
+                step_time_ratio: static_steps_per_sec / run.steps_per_sec(),
                 field_forward_ms,
                 field_backward_ms,
             })
@@ -563,16 +613,16 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         image_height,
         train_views: trainer.views().train.len(),
         test_views: trainer.views().test.len(),
-        steps: progress.step,
+        steps: trainer.step(),
         gaussians_start,
-        gaussians_end: progress.gaussians,
+        gaussians_end: trainer.gaussian_count(),
         forward_ms_start,
         forward_ms_end,
         backward_ms_start,
         backward_ms_end,
-        steps_per_sec: progress.steps_per_sec,
-        dispatches_per_step,
-        train_seconds: progress.elapsed_secs,
+        steps_per_sec: run.steps_per_sec(),
+        dispatches_per_step: run.dispatches_per_step,
+        train_seconds: run.seconds,
         psnr: eval.psnr,
         ssim: eval.ssim,
         peak_resident_mib: super::peak_resident_mib(),

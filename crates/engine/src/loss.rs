@@ -6,15 +6,19 @@
 //! then SSIM and its partials per pixel; filter the partials horizontally; vertically, then the
 //! gradient) cost O(window) per pixel, not O(window^2).
 //!
-//! The same kernels give the Segment-then-Splat object loss: with an [`ObjectMask`] the target is
-//! `target * (object_ids[p] == object_id)`.
+//! The same kernels give the Segment-then-Splat object loss: with an object mask the target is
+//! `target * (object_ids[p] == object_id)`. A step's object losses run as one batch
+//! ([`RenderLoss::encode_objects`]): one set of dispatches for all of them, each slot with its own
+//! render, mask and scratch images.
 //! An object's render and its mask usually cover a small part of the image, and where both are
 //! zero over the SSIM window's reach the loss and its gradient are exactly zero: object losses first
-//! mark the 8x8 cells with content and each cell's distance to it (two small passes), and the
-//! four passes skip the cells beyond their reach (`loss_skip.wgsl`: one cell for the first two
-//! passes, two for the last two), writing zero gradients there.
+//! mark each slot's 8x8 cells with content, then each cell's distance to it and two work lists
+//! of the 16x16 tiles with a cell within reach (two small passes); the four passes run one
+//! workgroup per listed (slot, tile), by indirect dispatch, and skip the cells beyond their reach
+//! (`loss_skip.wgsl`: one cell for the first two passes, two for the last two). Their gradient
+//! images are zeroed first, so what is skipped reads as zero.
 //!
-//! Outputs, for one call: `weight * L` written to one slot of a small loss-values buffer (so a
+//! Outputs, for each loss: `weight * L` written to one slot of a small loss-values buffer (so a
 //! training step records several losses without reading any back; the caller sums slots when it
 //! reads them), and `weight * dL/d(rendered)` written over (not added to) a gradient image: every
 //! render has its own gradient image, so the trainer sums losses by rendering separately.
@@ -49,6 +53,19 @@ const PER_PIXEL_INVOCATIONS: u32 = LOSS_TILE * LOSS_TILE / LOSS_RUN;
 /// Bytes per pixel of the scratch images: four vec4 of filtered moments, three of partials.
 const ROW_MOMENTS_BYTES_PER_PIXEL: u64 = 64;
 const PARTIALS_BYTES_PER_PIXEL: u64 = 48;
+/// Most object losses one set of dispatches computes (the kernels' per-slot table is this long,
+/// prepended as `MAX_BATCH_SLOTS`); a larger batch runs in several.
+pub const MAX_BATCH_SLOTS: u32 = 64;
+/// Object-id maps one batch reads at most: one per level.
+pub const MAX_ID_MAPS: usize = 3;
+/// Scratch memory a batch of object losses may hold (each slot keeps its own intermediate
+/// images); a batch needing more runs in several sets of dispatches.
+const BATCH_SCRATCH_BUDGET_BYTES: u64 = 512 << 20;
+/// The two work lists' indirect dispatch arguments before the list pass counts them.
+const EMPTY_WORK_COUNTS: [u32; 6] = [0, 1, 1, 0, 1, 1];
+/// Byte offsets of the near and far lists' dispatch arguments.
+const NEAR_ARGUMENTS: u64 = 0;
+const FAR_ARGUMENTS: u64 = 12;
 
 const LOSS_COMMON: &str = include_str!("loss/loss_common.wgsl");
 const LOSS_INPUTS: &str = include_str!("loss/loss_inputs.wgsl");
@@ -60,7 +77,8 @@ const LOSS_GRADIENT: &str = include_str!("loss/loss_gradient.wgsl");
 const LOSS_REDUCE: &str = include_str!("loss/loss_reduce.wgsl");
 const LOSS_SKIP: &str = include_str!("loss/loss_skip.wgsl");
 const LOSS_CONTENT: &str = include_str!("loss/loss_content.wgsl");
-const LOSS_DISTANCE: &str = include_str!("loss/loss_distance.wgsl");
+const LOSS_WORK: &str = include_str!("loss/loss_work.wgsl");
+const LOSS_WORK_LISTS: &str = include_str!("loss/loss_work_lists.wgsl");
 
 #[derive(Debug, thiserror::Error)]
 pub enum LossError {
@@ -68,6 +86,14 @@ pub enum LossError {
     Gpu(#[from] GpuError),
     #[error("render loss needs a non-empty image, got {width}x{height}")]
     EmptyImage { width: u32, height: u32 },
+    #[error("a batch of object losses reads at most {MAX_ID_MAPS} id maps, got {0}")]
+    TooManyIdMaps(usize),
+    #[error("object loss slot {slot} reads id map {id_map}, but the batch has {maps}")]
+    UnknownIdMap {
+        slot: usize,
+        id_map: u32,
+        maps: usize,
+    },
     #[error(
         "render loss: {what} holds {actual_bytes} bytes but a {width}x{height} image needs {needed_bytes}"
     )]
@@ -110,6 +136,7 @@ fn loss_constants_wgsl() -> String {
             ("LOSS_TILE", LOSS_TILE),
             ("LOSS_RUN", LOSS_RUN),
             ("SKIP_CELL", SKIP_CELL),
+            ("MAX_BATCH_SLOTS", MAX_BATCH_SLOTS),
         ]),
         l1 = L1_WEIGHT,
         dssim = DSSIM_WEIGHT,
@@ -138,7 +165,30 @@ pub struct LossImages<'a> {
     pub height: u32,
 }
 
-/// Where one loss writes.
+/// One object loss of a batch: the target masked to the pixels of `id_maps[id_map]` equal to
+/// `object_id`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ObjectLossSlot {
+    pub id_map: u32,
+    pub object_id: u32,
+}
+
+/// A batch of object losses over one target image: slot `s` compares rendered image
+/// `rendered_index + s` with the target masked to its object.
+#[derive(Debug, Clone, Copy)]
+pub struct ObjectLossImages<'a> {
+    pub rendered: &'a wgpu::Buffer,
+    pub rendered_index: u32,
+    pub target: &'a wgpu::Buffer,
+    /// One u32 object id per pixel each, row-major; at most [`MAX_ID_MAPS`].
+    pub id_maps: &'a [&'a wgpu::Buffer],
+    pub slots: &'a [ObjectLossSlot],
+    pub width: u32,
+    pub height: u32,
+}
+
+/// Where one loss writes; for a batch, where its first slot writes (slot `s` writes gradient
+/// image `grad_index + s` and loss value `loss_slot + s`).
 #[derive(Debug, Clone, Copy)]
 pub struct LossOutputs<'a> {
     /// Its `grad_index`-th image of `width * height` pixels is overwritten with
@@ -157,29 +207,38 @@ struct LossParams {
     width: u32,
     height: u32,
     use_mask: u32,
-    object_id: u32,
+    slot_count: u32,
     weight: f32,
     inv_value_count: f32,
-    loss_slot: u32,
+    first_loss_slot: u32,
+    first_rendered: u32,
+    first_grad: u32,
     partial_count: u32,
-    rendered_base: u32,
-    grad_base: u32,
-    padding: [u32; 2],
+    tiles_x: u32,
+    padding: u32,
+    /// Per slot: (id map, object id, 0, 0).
+    slots: [[u32; 4]; MAX_BATCH_SLOTS as usize],
 }
 
-/// Intermediate images for one image size; grown, never shrunk.
+/// Intermediate images for up to `slot_capacity` losses of one image size; grown, never shrunk.
 #[derive(Debug)]
 struct LossScratch {
+    /// Per slot.
     pixel_capacity: u64,
-    /// Workgroups of the per-pixel kernel, one loss partial sum each.
+    /// Per slot: workgroups of the per-pixel kernel, one loss partial sum per invocation each.
     tile_capacity: u64,
+    slot_capacity: u64,
     row_moments: wgpu::Buffer,
     ssim_partials: wgpu::Buffer,
     row_partials: wgpu::Buffer,
     loss_partials: wgpu::Buffer,
-    /// Per skip cell: content flag, then distance in cells to content (object losses).
+    /// Per slot and skip cell: content flag, then distance in cells to content (object losses).
     tile_content: wgpu::Buffer,
     tile_distance: wgpu::Buffer,
+    /// (slot, tile) pairs within reach 1 and 2 of content, and their dispatch arguments.
+    near_items: wgpu::Buffer,
+    far_items: wgpu::Buffer,
+    work_counts: wgpu::Buffer,
 }
 
 /// Fused L1 + D-SSIM loss, forward and backward (see the module doc).
@@ -190,13 +249,37 @@ pub struct RenderLoss {
     partials_horizontal: Kernel,
     gradient: Kernel,
     reduce: Kernel,
-    /// Object losses: which cells hold content and how far each cell is from it, so the passes
-    /// skip cells whose loss and gradient are exactly zero.
+    /// Object losses: which cells hold content, how far each cell is from it and which tiles
+    /// the passes must compute, so they skip what is exactly zero.
     tile_content: Kernel,
-    tile_distance: Kernel,
-    /// Bound as the object ids when no mask is given.
+    work_lists: Kernel,
+    /// Bound as the object ids and the work lists of a loss without a mask.
     no_mask: wgpu::Buffer,
+    /// [`EMPTY_WORK_COUNTS`], copied over the dispatch arguments before each batch.
+    empty_work_counts: wgpu::Buffer,
     scratch: Option<LossScratch>,
+}
+
+/// A batch's slots, checked, in the kernels' table layout.
+fn slot_table(images: &ObjectLossImages<'_>) -> Result<Vec<[u32; 4]>, LossError> {
+    if images.id_maps.len() > MAX_ID_MAPS {
+        return Err(LossError::TooManyIdMaps(images.id_maps.len()));
+    }
+    images
+        .slots
+        .iter()
+        .enumerate()
+        .map(|(slot, object)| {
+            if object.id_map as usize >= images.id_maps.len() {
+                return Err(LossError::UnknownIdMap {
+                    slot,
+                    id_map: object.id_map,
+                    maps: images.id_maps.len(),
+                });
+            }
+            Ok([object.id_map, object.object_id, 0, 0])
+        })
+        .collect()
 }
 
 impl RenderLoss {
@@ -205,12 +288,23 @@ impl RenderLoss {
         let kernel = |label, sources: &[&str], entry| {
             validated(ctx, label, || Kernel::new(ctx, label, sources, entry, &[]))
         };
-        let with_inputs = |source| {
+        let pass = |source| {
             [
                 constants.as_str(),
                 LOSS_COMMON,
                 LOSS_SKIP,
+                LOSS_WORK,
                 LOSS_INPUTS,
+                source,
+            ]
+        };
+        let partials_pass = |source| {
+            [
+                constants.as_str(),
+                LOSS_COMMON,
+                LOSS_SKIP,
+                LOSS_WORK,
+                LOSS_PARTIALS_RUN,
                 source,
             ]
         };
@@ -218,23 +312,13 @@ impl RenderLoss {
         Ok(Self {
             moments_horizontal: kernel(
                 "loss_moments_horizontal",
-                &with_inputs(LOSS_MOMENTS_HORIZONTAL),
+                &pass(LOSS_MOMENTS_HORIZONTAL),
                 "filter_moments_horizontal",
             )?,
-            per_pixel: kernel(
-                "loss_per_pixel",
-                &with_inputs(LOSS_PER_PIXEL),
-                "ssim_per_pixel",
-            )?,
+            per_pixel: kernel("loss_per_pixel", &pass(LOSS_PER_PIXEL), "ssim_per_pixel")?,
             partials_horizontal: kernel(
                 "loss_partials_horizontal",
-                &[
-                    constants.as_str(),
-                    LOSS_COMMON,
-                    LOSS_SKIP,
-                    LOSS_PARTIALS_RUN,
-                    LOSS_PARTIALS_HORIZONTAL,
-                ],
+                &partials_pass(LOSS_PARTIALS_HORIZONTAL),
                 "filter_partials_horizontal",
             )?,
             gradient: kernel(
@@ -243,6 +327,7 @@ impl RenderLoss {
                     constants.as_str(),
                     LOSS_COMMON,
                     LOSS_SKIP,
+                    LOSS_WORK,
                     LOSS_INPUTS,
                     LOSS_PARTIALS_RUN,
                     LOSS_GRADIENT,
@@ -255,10 +340,10 @@ impl RenderLoss {
                 &[constants.as_str(), LOSS_COMMON, LOSS_INPUTS, LOSS_CONTENT],
                 "loss_tile_content",
             )?,
-            tile_distance: kernel(
-                "loss_tile_distance",
-                &[constants.as_str(), LOSS_COMMON, LOSS_SKIP, LOSS_DISTANCE],
-                "loss_tile_distance",
+            work_lists: kernel(
+                "loss_work_lists",
+                &[constants.as_str(), LOSS_COMMON, LOSS_SKIP, LOSS_WORK_LISTS],
+                "loss_work_lists",
             )?,
             no_mask: ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("loss no mask"),
@@ -266,45 +351,93 @@ impl RenderLoss {
                 usage: wgpu::BufferUsages::STORAGE,
                 mapped_at_creation: false,
             }),
+            empty_work_counts: ctx
+                .device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("loss empty work counts"),
+                    contents: bytemuck::cast_slice(&EMPTY_WORK_COUNTS),
+                    usage: wgpu::BufferUsages::COPY_SRC,
+                }),
             scratch: None,
         })
     }
 
-    /// Allocates intermediates for a `width x height` image (kept for smaller ones), failing when
-    /// they would exceed the adapter's storage binding limit.
+    /// Allocates intermediates for one `width x height` loss (kept for smaller ones), failing
+    /// when they would exceed the adapter's storage binding limit.
     pub fn reserve(&mut self, ctx: &GpuContext, width: u32, height: u32) -> Result<(), LossError> {
+        self.reserve_slots(ctx, width, height, 1)
+    }
+
+    /// Allocates intermediates for `slots` losses of `width x height` at once.
+    fn reserve_slots(
+        &mut self,
+        ctx: &GpuContext,
+        width: u32,
+        height: u32,
+        slots: u32,
+    ) -> Result<(), LossError> {
         let pixels = u64::from(width) * u64::from(height);
         if pixels == 0 {
             return Err(LossError::EmptyImage { width, height });
         }
         let tiles = u64::from(width.div_ceil(LOSS_TILE)) * u64::from(height.div_ceil(LOSS_TILE));
+        let slots = u64::from(slots.max(1));
         if self.scratch.as_ref().is_some_and(|scratch| {
-            scratch.pixel_capacity >= pixels && scratch.tile_capacity >= tiles
+            scratch.pixel_capacity >= pixels
+                && scratch.tile_capacity >= tiles
+                && scratch.slot_capacity >= slots
         }) {
             return Ok(());
         }
-        let (pixels, tiles) = match &self.scratch {
+        let (pixels, tiles, slots) = match &self.scratch {
             Some(scratch) => (
                 pixels.max(scratch.pixel_capacity),
                 tiles.max(scratch.tile_capacity),
+                slots.max(scratch.slot_capacity),
             ),
-            None => (pixels, tiles),
+            None => (pixels, tiles, slots),
         };
         let storage = |label, size| ctx.storage_buffer(label, size);
+        let images = pixels * slots;
+        let cells = tiles * CELLS_PER_TILE * slots;
         self.scratch = Some(LossScratch {
             pixel_capacity: pixels,
             tile_capacity: tiles,
-            row_moments: storage("loss row moments", pixels * ROW_MOMENTS_BYTES_PER_PIXEL)?,
-            ssim_partials: storage("loss ssim partials", pixels * PARTIALS_BYTES_PER_PIXEL)?,
-            row_partials: storage("loss row partials", pixels * PARTIALS_BYTES_PER_PIXEL)?,
+            slot_capacity: slots,
+            row_moments: storage("loss row moments", images * ROW_MOMENTS_BYTES_PER_PIXEL)?,
+            ssim_partials: storage("loss ssim partials", images * PARTIALS_BYTES_PER_PIXEL)?,
+            row_partials: storage("loss row partials", images * PARTIALS_BYTES_PER_PIXEL)?,
             loss_partials: storage(
                 "loss partial sums",
-                tiles * u64::from(PER_PIXEL_INVOCATIONS) * 4,
+                tiles * slots * u64::from(PER_PIXEL_INVOCATIONS) * 4,
             )?,
-            tile_content: storage("loss cell content", tiles * CELLS_PER_TILE * 4)?,
-            tile_distance: storage("loss cell distance", tiles * CELLS_PER_TILE * 4)?,
+            tile_content: storage("loss cell content", cells * 4)?,
+            tile_distance: storage("loss cell distance", cells * 4)?,
+            near_items: storage("loss near work items", tiles * slots * 8)?,
+            far_items: storage("loss far work items", tiles * slots * 8)?,
+            work_counts: ctx.storage_buffer_with_usage(
+                "loss work counts",
+                std::mem::size_of_val(&EMPTY_WORK_COUNTS) as u64,
+                wgpu::BufferUsages::INDIRECT,
+            )?,
         });
         Ok(())
+    }
+
+    /// How many object losses of `pixels` and `tiles` one set of dispatches computes: as many
+    /// as the adapter's binding limit, the scratch budget, the kernels' slot table and the
+    /// dispatch size allow (at least one).
+    fn slots_per_dispatch(ctx: &GpuContext, pixels: u64, tiles: u64) -> u64 {
+        let binding =
+            ctx.limits.max_storage_buffer_binding_size / (pixels * ROW_MOMENTS_BYTES_PER_PIXEL);
+        let budget = BATCH_SCRATCH_BUDGET_BYTES
+            / (pixels * (ROW_MOMENTS_BYTES_PER_PIXEL + 2 * PARTIALS_BYTES_PER_PIXEL));
+        let items = u64::from(ctx.limits.max_compute_workgroups_per_dimension) / tiles;
+        binding
+            .min(budget)
+            .min(items)
+            .min(u64::from(MAX_BATCH_SLOTS))
+            .max(1)
     }
 
     /// Records the loss of `images` scaled by `weight`: `weight * L` to
@@ -318,161 +451,401 @@ impl RenderLoss {
         weight: f32,
         outputs: &LossOutputs<'_>,
     ) -> Result<(), LossError> {
-        let LossImages {
-            rendered,
-            target,
-            target_mask,
-            width,
-            height,
-            ..
-        } = *images;
-        check_sizes(images, outputs)?;
+        if let Some(mask) = images.target_mask {
+            let id_maps = [mask.object_ids];
+            let slots = [ObjectLossSlot {
+                id_map: 0,
+                object_id: mask.object_id,
+            }];
+            let batch = ObjectLossImages {
+                rendered: images.rendered,
+                rendered_index: images.rendered_index,
+                target: images.target,
+                id_maps: &id_maps,
+                slots: &slots,
+                width: images.width,
+                height: images.height,
+            };
+            return self.encode_objects(ctx, encoder, &batch, weight, outputs);
+        }
+        check_sizes(images, 1, outputs)?;
+        let (width, height) = (images.width, images.height);
         self.reserve(ctx, width, height)?;
         let Some(scratch) = self.scratch.as_ref() else {
             return Err(LossError::EmptyImage { width, height });
         };
-        let groups = [width.div_ceil(LOSS_TILE), height.div_ceil(LOSS_TILE), 1];
-        let params = LossParams {
+        let params = LossDispatch {
             width,
             height,
-            use_mask: u32::from(target_mask.is_some()),
-            object_id: target_mask.map_or(0, |mask| mask.object_id),
+            use_mask: false,
             weight,
-            inv_value_count: (1.0 / (f64::from(width) * f64::from(height) * 3.0)) as f32,
-            loss_slot: outputs.loss_slot,
-            partial_count: groups[0] * groups[1] * PER_PIXEL_INVOCATIONS,
-            rendered_base: images.rendered_index * width * height,
-            grad_base: outputs.grad_index * width * height,
-            padding: [0; 2],
+            first_rendered: images.rendered_index,
+            first_grad: outputs.grad_index,
+            first_loss_slot: outputs.loss_slot,
+            slots: &[],
+        }
+        .uniform_buffer(ctx);
+        let maps = [&self.no_mask; MAX_ID_MAPS];
+        let bindings = PassBindings {
+            params: &params,
+            rendered: images.rendered,
+            target: images.target,
+            id_maps: maps,
+            near_items: &self.no_mask,
+            far_items: &self.no_mask,
+            rendered_grad: outputs.rendered_grad,
+            loss_values: outputs.loss_values,
         };
-        // A buffer per call (not queue.write_buffer on a shared one) so several losses recorded
-        // before one submit each keep their own parameters.
-        let params = ctx
-            .device
+        let tiles = [width.div_ceil(LOSS_TILE), height.div_ceil(LOSS_TILE), 1];
+        self.encode_passes(
+            ctx,
+            encoder,
+            scratch,
+            &bindings,
+            1,
+            &|kernel, encoder, bind, _| kernel.dispatch(encoder, bind, tiles),
+        );
+        Ok(())
+    }
+
+    /// Records a batch of object losses scaled by `weight` (see [`ObjectLossImages`] and
+    /// [`LossOutputs`]): one set of dispatches for as many slots as fit at once.
+    pub fn encode_objects(
+        &mut self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        images: &ObjectLossImages<'_>,
+        weight: f32,
+        outputs: &LossOutputs<'_>,
+    ) -> Result<(), LossError> {
+        let (width, height) = (images.width, images.height);
+        let single = LossImages {
+            rendered: images.rendered,
+            rendered_index: images.rendered_index,
+            target: images.target,
+            target_mask: None,
+            width,
+            height,
+        };
+        check_sizes(&single, images.slots.len() as u32, outputs)?;
+        for map in images.id_maps {
+            check_buffer(
+                "target object ids",
+                map,
+                u64::from(width) * u64::from(height) * 4,
+                width,
+                height,
+            )?;
+        }
+        let table = slot_table(images)?;
+        if table.is_empty() {
+            return Ok(());
+        }
+        let pixels = u64::from(width) * u64::from(height);
+        let tiles = u64::from(width.div_ceil(LOSS_TILE)) * u64::from(height.div_ceil(LOSS_TILE));
+        let per_dispatch = Self::slots_per_dispatch(ctx, pixels, tiles) as usize;
+        self.reserve_slots(ctx, width, height, table.len().min(per_dispatch) as u32)?;
+        let Some(scratch) = self.scratch.as_ref() else {
+            return Err(LossError::EmptyImage { width, height });
+        };
+        let first_map = images.id_maps[0];
+        let maps: [&wgpu::Buffer; MAX_ID_MAPS] =
+            std::array::from_fn(|index| images.id_maps.get(index).copied().unwrap_or(first_map));
+        let tiles_xy = [width.div_ceil(LOSS_TILE), height.div_ceil(LOSS_TILE)];
+        for (chunk_index, chunk) in table.chunks(per_dispatch).enumerate() {
+            let first = (chunk_index * per_dispatch) as u32;
+            let count = chunk.len() as u32;
+            let params = LossDispatch {
+                width,
+                height,
+                use_mask: true,
+                weight,
+                first_rendered: images.rendered_index + first,
+                first_grad: outputs.grad_index + first,
+                first_loss_slot: outputs.loss_slot + first,
+                slots: chunk,
+            }
+            .uniform_buffer(ctx);
+            let bindings = PassBindings {
+                params: &params,
+                rendered: images.rendered,
+                target: images.target,
+                id_maps: maps,
+                near_items: &scratch.near_items,
+                far_items: &scratch.far_items,
+                rendered_grad: outputs.rendered_grad,
+                loss_values: outputs.loss_values,
+            };
+            self.encode_work_lists(ctx, encoder, scratch, &bindings, tiles_xy, count);
+            encoder.clear_buffer(
+                &scratch.loss_partials,
+                0,
+                Some(tiles * u64::from(count) * u64::from(PER_PIXEL_INVOCATIONS) * 4),
+            );
+            encoder.clear_buffer(
+                outputs.rendered_grad,
+                u64::from(outputs.grad_index + first) * pixels * 16,
+                Some(u64::from(count) * pixels * 16),
+            );
+            self.encode_passes(
+                ctx,
+                encoder,
+                scratch,
+                &bindings,
+                count,
+                &|kernel, encoder, bind, far| {
+                    let offset = if far { FAR_ARGUMENTS } else { NEAR_ARGUMENTS };
+                    kernel.dispatch_indirect(encoder, bind, &scratch.work_counts, offset)
+                },
+            );
+        }
+        Ok(())
+    }
+
+    /// Object losses: marks each slot's cells with content, then their distances to it and the
+    /// work lists of the four passes.
+    fn encode_work_lists(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        scratch: &LossScratch,
+        bindings: &PassBindings<'_>,
+        [tiles_x, tiles_y]: [u32; 2],
+        slots: u32,
+    ) {
+        encoder.clear_buffer(&scratch.tile_content, 0, None);
+        let bind = self
+            .tile_content
+            .bind(ctx, &with_inputs(bindings, &[&scratch.tile_content]));
+        self.tile_content
+            .dispatch(encoder, &bind, [tiles_x, tiles_y, slots]);
+        encoder.copy_buffer_to_buffer(
+            &self.empty_work_counts,
+            0,
+            &scratch.work_counts,
+            0,
+            std::mem::size_of_val(&EMPTY_WORK_COUNTS) as u64,
+        );
+        let bind = self.work_lists.bind(
+            ctx,
+            &[
+                bindings.params,
+                &scratch.tile_content,
+                &scratch.tile_distance,
+                &scratch.work_counts,
+                &scratch.near_items,
+                &scratch.far_items,
+            ],
+        );
+        self.work_lists
+            .dispatch(encoder, &bind, [(tiles_x * tiles_y).div_ceil(64), slots, 1]);
+    }
+
+    /// The four SSIM passes and the reduction; `dispatch` launches a pass over every tile or
+    /// over its work list (`far`: the last two passes' list).
+    fn encode_passes(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        scratch: &LossScratch,
+        bindings: &PassBindings<'_>,
+        slots: u32,
+        dispatch: &dyn Fn(&Kernel, &mut wgpu::CommandEncoder, &wgpu::BindGroup, bool),
+    ) {
+        let bind = self.moments_horizontal.bind(
+            ctx,
+            &with_inputs(
+                bindings,
+                &[
+                    &scratch.row_moments,
+                    &scratch.tile_distance,
+                    bindings.near_items,
+                ],
+            ),
+        );
+        dispatch(&self.moments_horizontal, encoder, &bind, false);
+        let bind = self.per_pixel.bind(
+            ctx,
+            &with_inputs(
+                bindings,
+                &[
+                    &scratch.row_moments,
+                    &scratch.ssim_partials,
+                    &scratch.loss_partials,
+                    &scratch.tile_distance,
+                    bindings.near_items,
+                ],
+            ),
+        );
+        dispatch(&self.per_pixel, encoder, &bind, false);
+        let bind = self.partials_horizontal.bind(
+            ctx,
+            &[
+                bindings.params,
+                &scratch.ssim_partials,
+                &scratch.row_partials,
+                &scratch.tile_distance,
+                bindings.far_items,
+            ],
+        );
+        dispatch(&self.partials_horizontal, encoder, &bind, true);
+        let bind = self.gradient.bind(
+            ctx,
+            &with_inputs(
+                bindings,
+                &[
+                    &scratch.row_partials,
+                    bindings.rendered_grad,
+                    &scratch.tile_distance,
+                    bindings.far_items,
+                ],
+            ),
+        );
+        dispatch(&self.gradient, encoder, &bind, true);
+        let bind = self.reduce.bind(
+            ctx,
+            &[
+                bindings.params,
+                &scratch.loss_partials,
+                bindings.loss_values,
+            ],
+        );
+        self.reduce.dispatch(encoder, &bind, [slots, 1, 1]);
+    }
+}
+
+/// A pass's bindings: the inputs every pass that reads the images binds first (`loss_common.wgsl`,
+/// `loss_inputs.wgsl`), then its own.
+fn with_inputs<'b>(bindings: &PassBindings<'b>, own: &[&'b wgpu::Buffer]) -> Vec<&'b wgpu::Buffer> {
+    let [map_0, map_1, map_2] = bindings.id_maps;
+    [
+        bindings.params,
+        bindings.rendered,
+        bindings.target,
+        map_0,
+        map_1,
+        map_2,
+    ]
+    .iter()
+    .chain(own)
+    .copied()
+    .collect()
+}
+
+/// The buffers one set of loss dispatches binds, besides its scratch.
+struct PassBindings<'a> {
+    params: &'a wgpu::Buffer,
+    rendered: &'a wgpu::Buffer,
+    target: &'a wgpu::Buffer,
+    id_maps: [&'a wgpu::Buffer; MAX_ID_MAPS],
+    near_items: &'a wgpu::Buffer,
+    far_items: &'a wgpu::Buffer,
+    rendered_grad: &'a wgpu::Buffer,
+    loss_values: &'a wgpu::Buffer,
+}
+
+/// What one set of loss dispatches computes, as its uniform block says it.
+struct LossDispatch<'a> {
+    width: u32,
+    height: u32,
+    use_mask: bool,
+    weight: f32,
+    first_rendered: u32,
+    first_grad: u32,
+    first_loss_slot: u32,
+    /// The object slots' table rows (empty for an unmasked loss: one slot).
+    slots: &'a [[u32; 4]],
+}
+
+impl LossDispatch<'_> {
+    /// A buffer per set of dispatches (not queue.write_buffer on a shared one), so several
+    /// losses recorded before one submit each keep their own parameters.
+    fn uniform_buffer(&self, ctx: &GpuContext) -> wgpu::Buffer {
+        let tiles_x = self.width.div_ceil(LOSS_TILE);
+        let tiles = tiles_x * self.height.div_ceil(LOSS_TILE);
+        let mut slots = [[0u32; 4]; MAX_BATCH_SLOTS as usize];
+        for (row, slot) in slots.iter_mut().zip(self.slots) {
+            *row = *slot;
+        }
+        let params = LossParams {
+            width: self.width,
+            height: self.height,
+            use_mask: u32::from(self.use_mask),
+            slot_count: self.slots.len().max(1) as u32,
+            weight: self.weight,
+            inv_value_count: (1.0 / (f64::from(self.width) * f64::from(self.height) * 3.0)) as f32,
+            first_loss_slot: self.first_loss_slot,
+            first_rendered: self.first_rendered,
+            first_grad: self.first_grad,
+            partial_count: tiles * PER_PIXEL_INVOCATIONS,
+            tiles_x,
+            padding: 0,
+            slots,
+        };
+        ctx.device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("loss params"),
                 contents: bytemuck::bytes_of(&params),
                 usage: wgpu::BufferUsages::UNIFORM,
-            });
-        let object_ids = target_mask.map_or(&self.no_mask, |mask| mask.object_ids);
-        let inputs = [&params, rendered, target, object_ids];
-        if target_mask.is_some() {
-            encoder.clear_buffer(&scratch.tile_content, 0, None);
-            let bind = self.tile_content.bind(
-                ctx,
-                &[
-                    inputs[0],
-                    inputs[1],
-                    inputs[2],
-                    inputs[3],
-                    &scratch.tile_content,
-                ],
-            );
-            self.tile_content.dispatch(encoder, &bind, groups);
-            let bind = self.tile_distance.bind(
-                ctx,
-                &[&params, &scratch.tile_content, &scratch.tile_distance],
-            );
-            let cells = width.div_ceil(SKIP_CELL) * height.div_ceil(SKIP_CELL);
-            self.tile_distance
-                .dispatch(encoder, &bind, [cells.div_ceil(64), 1, 1]);
-        }
-
-        let bind = self.moments_horizontal.bind(
-            ctx,
-            &[
-                inputs[0],
-                inputs[1],
-                inputs[2],
-                inputs[3],
-                &scratch.row_moments,
-                &scratch.tile_distance,
-            ],
-        );
-        self.moments_horizontal.dispatch(encoder, &bind, groups);
-        let bind = self.per_pixel.bind(
-            ctx,
-            &[
-                inputs[0],
-                inputs[1],
-                inputs[2],
-                inputs[3],
-                &scratch.row_moments,
-                &scratch.ssim_partials,
-                &scratch.loss_partials,
-                &scratch.tile_distance,
-            ],
-        );
-        self.per_pixel.dispatch(encoder, &bind, groups);
-        let bind = self.partials_horizontal.bind(
-            ctx,
-            &[
-                &params,
-                &scratch.ssim_partials,
-                &scratch.row_partials,
-                &scratch.tile_distance,
-            ],
-        );
-        self.partials_horizontal.dispatch(encoder, &bind, groups);
-        let bind = self.gradient.bind(
-            ctx,
-            &[
-                inputs[0],
-                inputs[1],
-                inputs[2],
-                inputs[3],
-                &scratch.row_partials,
-                outputs.rendered_grad,
-                &scratch.tile_distance,
-            ],
-        );
-        self.gradient.dispatch(encoder, &bind, groups);
-        let bind = self
-            .reduce
-            .bind(ctx, &[&params, &scratch.loss_partials, outputs.loss_values]);
-        self.reduce.dispatch(encoder, &bind, [1, 1, 1]);
-        Ok(())
+            })
     }
 }
 
-/// Rejects buffers too small for the image, which the kernels would otherwise read as zeros.
-fn check_sizes(images: &LossImages<'_>, outputs: &LossOutputs<'_>) -> Result<(), LossError> {
+/// Rejects buffers too small for `slots` losses of the image, which the kernels would otherwise
+/// read as zeros.
+fn check_sizes(
+    images: &LossImages<'_>,
+    slots: u32,
+    outputs: &LossOutputs<'_>,
+) -> Result<(), LossError> {
     let (width, height) = (images.width, images.height);
     let pixels = u64::from(width) * u64::from(height);
     if pixels == 0 {
         return Err(LossError::EmptyImage { width, height });
     }
+    let slots = u64::from(slots);
     let mut required = vec![
         (
             "rendered image",
             images.rendered,
-            (u64::from(images.rendered_index) + 1) * pixels * 16,
+            (u64::from(images.rendered_index) + slots) * pixels * 16,
         ),
         ("target image", images.target, pixels * 16),
         (
             "rendered gradient",
             outputs.rendered_grad,
-            (u64::from(outputs.grad_index) + 1) * pixels * 16,
+            (u64::from(outputs.grad_index) + slots) * pixels * 16,
         ),
         (
             "loss values",
             outputs.loss_values,
-            (u64::from(outputs.loss_slot) + 1) * 4,
+            (u64::from(outputs.loss_slot) + slots) * 4,
         ),
     ];
     if let Some(mask) = images.target_mask {
         required.push(("target object ids", mask.object_ids, pixels * 4));
     }
     for (what, buffer, needed_bytes) in required {
-        if buffer.size() < needed_bytes {
-            return Err(LossError::BufferTooSmall {
-                what,
-                actual_bytes: buffer.size(),
-                needed_bytes,
-                width,
-                height,
-            });
-        }
+        check_buffer(what, buffer, needed_bytes, width, height)?;
+    }
+    Ok(())
+}
+
+fn check_buffer(
+    what: &'static str,
+    buffer: &wgpu::Buffer,
+    needed_bytes: u64,
+    width: u32,
+    height: u32,
+) -> Result<(), LossError> {
+    if buffer.size() < needed_bytes {
+        return Err(LossError::BufferTooSmall {
+            what,
+            actual_bytes: buffer.size(),
+            needed_bytes,
+            width,
+            height,
+        });
     }
     Ok(())
 }

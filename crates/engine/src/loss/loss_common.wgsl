@@ -18,26 +18,29 @@ const WINDOW_RADIUS: i32 = 5;
 // Inputs a run reads: its pixels and the window's reach on both sides.
 const RUN_INPUTS: i32 = i32(LOSS_RUN) + 2 * WINDOW_RADIUS;
 
+// One dispatch computes one unmasked loss (the full render's: every workgroup the tile at its id)
+// or a batch of object losses (`use_mask`: each slot's target masked to its object, each
+// workgroup one (slot, tile) of a work list). Slot s of a dispatch compares rendered image
+// `first_rendered + s` with its masked target, keeps its intermediates in image s of the scratch
+// buffers, and writes gradient image `first_grad + s` and loss value `first_loss_slot + s`.
 struct LossParams {
     width: u32,
     height: u32,
-    // 1 when the target is masked to pixels whose object id equals `object_id`.
     use_mask: u32,
-    object_id: u32,
-    // Scales the loss value and its gradient.
+    slot_count: u32,
+    // Scales the loss values and their gradients.
     weight: f32,
     // 1 / (width * height * 3).
     inv_value_count: f32,
-    // Index written in the loss-values buffer.
-    loss_slot: u32,
-    // Workgroups of the per-pixel loss kernel (one partial sum each).
+    first_loss_slot: u32,
+    first_rendered: u32,
+    first_grad: u32,
+    // Loss partial sums per slot: per-pixel workgroups (tiles) times their invocations.
     partial_count: u32,
-    // First pixel of the rendered image in `rendered`, and of the gradient in `rendered_grad`:
-    // a batch of object renders is one buffer of images back to back.
-    rendered_base: u32,
-    grad_base: u32,
+    tiles_x: u32,
     padding0: u32,
-    padding1: u32,
+    // Per slot: x = which object-id map its mask reads (loss_inputs.wgsl), y = its object id.
+    slots: array<vec4<u32>, MAX_BATCH_SLOTS>,
 }
 
 @group(0) @binding(0) var<uniform> params: LossParams;
@@ -53,22 +56,45 @@ fn tap_weight(tap: i32) -> f32 {
     return window_weights[tap];
 }
 
+// The slot this invocation computes (0 for an unmasked loss); the kernels set it first.
+var<private> slot: u32;
+
 fn pixel_index(x: i32, y: i32) -> u32 {
     return u32(y) * params.width + u32(x);
+}
+
+fn pixel_count() -> u32 {
+    return params.width * params.height;
+}
+
+// Where `pixel` of this invocation's slot lies in a scratch buffer holding one image per slot.
+fn slot_pixel(pixel: u32) -> u32 {
+    return slot * pixel_count() + pixel;
+}
+
+// The skip cells (SKIP_CELL x SKIP_CELL) across and down the image.
+fn cell_grid() -> vec2<u32> {
+    return (vec2<u32>(params.width, params.height) + SKIP_CELL - 1u) / SKIP_CELL;
 }
 
 fn inside(x: i32, y: i32) -> bool {
     return x >= 0 && y >= 0 && x < i32(params.width) && y < i32(params.height);
 }
 
-// The run (its first pixel) an invocation of a horizontal pass filters. Neighbouring lanes take
-// neighbouring rows at the same x, as the vertical passes' lanes take neighbouring columns:
-// then a run's loop bounds and edge tests are the same in every lane of a SIMD group, which a
-// CPU adapter runs far faster than lanes spread along the row (lavapipe, figurine at 256 px:
-// the two horizontal passes went from ~20 ms to ~6-8 ms a step each).
-fn horizontal_run(workgroup: vec3<u32>, local: vec3<u32>) -> vec2<i32> {
-    let origin = workgroup.xy * LOSS_TILE;
+// The run (its first pixel) an invocation of a horizontal pass filters in `tile`. Neighbouring
+// lanes take neighbouring rows at the same x, as the vertical passes' lanes take neighbouring
+// columns: then a run's loop bounds and edge tests are the same in every lane of a SIMD group,
+// which a CPU adapter runs far faster than lanes spread along the row (lavapipe, figurine at
+// 256 px: the two horizontal passes went from ~20 ms to ~6-8 ms a step each).
+fn horizontal_run(tile: vec2<u32>, local: vec3<u32>) -> vec2<i32> {
+    let origin = tile * LOSS_TILE;
     return vec2<i32>(origin + vec2<u32>(local.y * LOSS_RUN, local.x));
+}
+
+// The run (its first pixel) an invocation of a vertical pass filters in `tile`.
+fn vertical_run(tile: vec2<u32>, local: vec3<u32>) -> vec2<i32> {
+    let origin = tile * LOSS_TILE;
+    return vec2<i32>(origin + vec2<u32>(local.x, local.y * LOSS_RUN));
 }
 
 const_assert LOSS_RUN == 8u;

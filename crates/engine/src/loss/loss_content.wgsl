@@ -1,11 +1,11 @@
-// Object losses only: whether each SKIP_CELL square holds content, i.e. any pixel whose rendered
-// or (masked) target colour is non-zero. One workgroup per LOSS_TILE square. An object's render
-// and mask usually cover a small part of the image, and where both are zero over the whole SSIM
-// reach the loss and its gradient are exactly zero (loss_skip.wgsl).
+// Object losses only: whether each SKIP_CELL square of each slot holds content, i.e. any pixel
+// whose rendered or (masked) target colour is non-zero. One workgroup per LOSS_TILE square and
+// slot (z). An object's render and mask usually cover a small part of the image, and where both
+// are zero over the whole SSIM reach the loss and its gradient are exactly zero (loss_skip.wgsl).
 
 // Zeroed before the pass; a row with content marks its cells. No workgroup memory or barriers:
 // a CPU adapter pays for a barrier in every workgroup.
-@group(0) @binding(4) var<storage, read_write> tile_content: array<atomic<u32>>;
+@group(0) @binding(6) var<storage, read_write> tile_content: array<atomic<u32>>;
 
 const CELLS_PER_TILE: u32 = LOSS_TILE / SKIP_CELL;
 
@@ -17,11 +17,12 @@ fn loss_tile_content(
     @builtin(workgroup_id) workgroup: vec3<u32>,
     @builtin(local_invocation_index) row: u32,
 ) {
+    slot = workgroup.z;
     let y = i32(workgroup.y * LOSS_TILE + row);
     if y >= i32(params.height) {
         return;
     }
-    let cells_x = (params.width + SKIP_CELL - 1u) / SKIP_CELL;
+    let cells = cell_grid();
     let cell_y = u32(y) / SKIP_CELL;
     for (var part = 0u; part < CELLS_PER_TILE; part++) {
         let cell_x = workgroup.x * CELLS_PER_TILE + part;
@@ -30,7 +31,7 @@ fn loss_tile_content(
         for (var x = start; x < end; x++) {
             let pixel = pixel_index(x, y);
             if any(rendered_rgb(pixel) != vec3<f32>(0.0)) || any(target_rgb(pixel) != vec3<f32>(0.0)) {
-                atomicStore(&tile_content[cell_y * cells_x + cell_x], 1u);
+                atomicStore(&tile_content[slot * cells.x * cells.y + cell_y * cells.x + cell_x], 1u);
                 break;
             }
         }

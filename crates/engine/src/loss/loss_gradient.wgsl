@@ -1,15 +1,18 @@
 // Pass 4 of 4: vertical filtering of the SSIM partials, then the gradient of the weighted loss
 // with respect to the rendered image:
 //   dL/dr = weight / N * (0.8 * sign(r - t) - 0.2 * (G*d_mu + 2 r G*d_rr + t G*d_rt)).
-// Overwrites `rendered_grad` (w = 0). Each invocation filters a run of LOSS_RUN pixels of a
-// column (loss_partials_run.wgsl).
+// Overwrites `rendered_grad` (w = 0) where the gradient can be non-zero: everywhere for an
+// unmasked loss; for object losses, which zero their gradient images first, the cells within
+// reach of content. Each invocation filters a run of LOSS_RUN pixels of a column
+// (loss_partials_run.wgsl).
 
-@group(0) @binding(4) var<storage, read> row_partials: array<vec4<f32>>;
-@group(0) @binding(5) var<storage, read_write> rendered_grad: array<vec4<f32>>;
-@group(0) @binding(6) var<storage, read> tile_distance: array<u32>;
+@group(0) @binding(6) var<storage, read> row_partials: array<vec4<f32>>;
+@group(0) @binding(7) var<storage, read_write> rendered_grad: array<vec4<f32>>;
+@group(0) @binding(8) var<storage, read> tile_distance: array<u32>;
+@group(0) @binding(9) var<storage, read> work_items: array<vec2<u32>>;
 
 fn partials_input(pixel: u32) -> Partials {
-    let base = pixel * 3u;
+    let base = slot_pixel(pixel) * 3u;
     return Partials(row_partials[base], row_partials[base + 1u], row_partials[base + 2u]);
 }
 
@@ -20,24 +23,22 @@ fn store_gradient(x: i32, y: i32, sum: Partials) {
         let t = target_rgb(pixel);
         let dssim_dr = sum.d_mu.xyz + 2.0 * r * sum.d_rr.xyz + t * sum.d_rt.xyz;
         let grad = L1_WEIGHT * sign(r - t) - DSSIM_WEIGHT * dssim_dr;
-        rendered_grad[params.grad_base + pixel] =
+        rendered_grad[(params.first_grad + slot) * pixel_count() + pixel] =
             vec4<f32>(params.weight * params.inv_value_count * grad, 0.0);
     }
 }
 
 @compute @workgroup_size(LOSS_TILE, LOSS_TILE / LOSS_RUN)
-fn loss_gradient(@builtin(global_invocation_id) id: vec3<u32>) {
-    let x = i32(id.x);
-    let y = i32(id.y * LOSS_RUN);
-    if !inside(x, y) {
-        return;
-    }
-    if !cell_in_reach(x, y, REACH_GRADIENT) {
-        // Beyond the reach of content the gradient is exactly zero (the images and all the
-        // moments around are zero; sign(0) = 0).
-        for (var k = 0; k < i32(LOSS_RUN) && y + k < i32(params.height); k++) {
-            rendered_grad[params.grad_base + pixel_index(x, y + k)] = vec4<f32>(0.0);
-        }
+fn loss_gradient(
+    @builtin(workgroup_id) workgroup: vec3<u32>,
+    @builtin(local_invocation_id) local: vec3<u32>,
+) {
+    let start = vertical_run(enter_tile(workgroup), local);
+    let x = start.x;
+    let y = start.y;
+    // Beyond the reach of content the gradient is exactly zero (the images and all the moments
+    // around are zero; sign(0) = 0), and already written.
+    if !inside(x, y) || !cell_in_reach(x, y, REACH_GRADIENT) {
         return;
     }
     let run = filter_partials_run(x, y, vec2<i32>(0, 1), y, i32(params.height), REACH_ROW_PARTIALS);

@@ -3,8 +3,9 @@
 // (r.xyz, t.x) (t.yz, rr.xy) (rr.z, tt.xyz) (rt.xyz, 0). Each invocation filters a run of
 // LOSS_RUN pixels of a row.
 
-@group(0) @binding(4) var<storage, read_write> row_moments: array<vec4<f32>>;
-@group(0) @binding(5) var<storage, read> tile_distance: array<u32>;
+@group(0) @binding(6) var<storage, read_write> row_moments: array<vec4<f32>>;
+@group(0) @binding(7) var<storage, read> tile_distance: array<u32>;
+@group(0) @binding(8) var<storage, read> work_items: array<vec2<u32>>;
 
 struct Moments {
     r: vec3<f32>,
@@ -30,7 +31,7 @@ fn add_moments(m: Moments, weight: f32, r: vec3<f32>, t: vec3<f32>) -> Moments {
 
 fn store_moments(x: i32, y: i32, m: Moments) {
     if x < i32(params.width) {
-        let base = pixel_index(x, y) * 4u;
+        let base = slot_pixel(pixel_index(x, y)) * 4u;
         row_moments[base] = vec4<f32>(m.r, m.t.x);
         row_moments[base + 1u] = vec4<f32>(m.t.yz, m.rr.xy);
         row_moments[base + 2u] = vec4<f32>(m.rr.z, m.tt);
@@ -43,7 +44,7 @@ fn filter_moments_horizontal(
     @builtin(workgroup_id) workgroup: vec3<u32>,
     @builtin(local_invocation_id) local: vec3<u32>,
 ) {
-    let start = horizontal_run(workgroup, local);
+    let start = horizontal_run(enter_tile(workgroup), local);
     let x = start.x;
     let y = start.y;
     if !inside(x, y) || !cell_in_reach(x, y, REACH_ROW_MOMENTS) {

@@ -5,15 +5,16 @@
 @group(0) @binding(1) var<storage, read> ssim_partials: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read_write> row_partials: array<vec4<f32>>;
 @group(0) @binding(3) var<storage, read> tile_distance: array<u32>;
+@group(0) @binding(4) var<storage, read> work_items: array<vec2<u32>>;
 
 fn partials_input(pixel: u32) -> Partials {
-    let base = pixel * 3u;
+    let base = slot_pixel(pixel) * 3u;
     return Partials(ssim_partials[base], ssim_partials[base + 1u], ssim_partials[base + 2u]);
 }
 
 fn store_partials(x: i32, y: i32, sum: Partials) {
     if x < i32(params.width) {
-        let base = pixel_index(x, y) * 3u;
+        let base = slot_pixel(pixel_index(x, y)) * 3u;
         row_partials[base] = sum.d_mu;
         row_partials[base + 1u] = sum.d_rr;
         row_partials[base + 2u] = sum.d_rt;
@@ -25,7 +26,7 @@ fn filter_partials_horizontal(
     @builtin(workgroup_id) workgroup: vec3<u32>,
     @builtin(local_invocation_id) local: vec3<u32>,
 ) {
-    let start = horizontal_run(workgroup, local);
+    let start = horizontal_run(enter_tile(workgroup), local);
     let x = start.x;
     let y = start.y;
     if !inside(x, y) || !cell_in_reach(x, y, REACH_ROW_PARTIALS) {

@@ -7,10 +7,12 @@
 // order). Each invocation filters a run of LOSS_RUN pixels of a column. No workgroup memory or
 // barriers: a CPU adapter pays a barrier in every workgroup, and an object loss skips most.
 
-@group(0) @binding(4) var<storage, read> row_moments: array<vec4<f32>>;
-@group(0) @binding(5) var<storage, read_write> ssim_partials: array<vec4<f32>>;
-@group(0) @binding(6) var<storage, read_write> loss_partials: array<f32>;
-@group(0) @binding(7) var<storage, read> tile_distance: array<u32>;
+@group(0) @binding(6) var<storage, read> row_moments: array<vec4<f32>>;
+@group(0) @binding(7) var<storage, read_write> ssim_partials: array<vec4<f32>>;
+// Per slot `partial_count` sums, zeroed before an object loss (its unlisted tiles add nothing).
+@group(0) @binding(8) var<storage, read_write> loss_partials: array<f32>;
+@group(0) @binding(9) var<storage, read> tile_distance: array<u32>;
+@group(0) @binding(10) var<storage, read> work_items: array<vec2<u32>>;
 
 const INVOCATIONS: u32 = LOSS_TILE * LOSS_TILE / LOSS_RUN;
 
@@ -60,7 +62,7 @@ fn ssim_pixel(x: i32, y: i32, m: PackedMoments) -> f32 {
     let d_rr = -ssim / den_var;
     let d_rt = 2.0 * num_mean / den;
     let pixel = pixel_index(x, y);
-    let base = pixel * 3u;
+    let base = slot_pixel(pixel) * 3u;
     ssim_partials[base] = vec4<f32>(d_mu, 0.0);
     ssim_partials[base + 1u] = vec4<f32>(d_rr, 0.0);
     ssim_partials[base + 2u] = vec4<f32>(d_rt, 0.0);
@@ -71,13 +73,14 @@ fn ssim_pixel(x: i32, y: i32, m: PackedMoments) -> f32 {
 
 @compute @workgroup_size(LOSS_TILE, LOSS_TILE / LOSS_RUN)
 fn ssim_per_pixel(
-    @builtin(global_invocation_id) id: vec3<u32>,
     @builtin(workgroup_id) workgroup: vec3<u32>,
-    @builtin(num_workgroups) workgroups: vec3<u32>,
+    @builtin(local_invocation_id) local: vec3<u32>,
     @builtin(local_invocation_index) thread: u32,
 ) {
-    let x = i32(id.x);
-    let y = i32(id.y * LOSS_RUN);
+    let tile = enter_tile(workgroup);
+    let start = vertical_run(tile, local);
+    let x = start.x;
+    let y = start.y;
     var run_loss = 0.0;
     // A skipped cell's loss is exactly zero.
     if inside(x, y) && cell_in_reach(x, y, REACH_SSIM) {
@@ -94,7 +97,7 @@ fn ssim_per_pixel(
         for (var j = 0; j < RUN_INPUTS; j++) {
             let sy = y + j - WINDOW_RADIUS;
             if sy >= 0 && sy < i32(params.height) && input_computed(reach, sy) {
-                let base = pixel_index(x, sy) * 4u;
+                let base = slot_pixel(pixel_index(x, sy)) * 4u;
                 let row = PackedMoments(
                     row_moments[base],
                     row_moments[base + 1u],
@@ -116,5 +119,6 @@ fn ssim_per_pixel(
         run_loss += ssim_pixel(x, y + 4, m4) + ssim_pixel(x, y + 5, m5)
             + ssim_pixel(x, y + 6, m6) + ssim_pixel(x, y + 7, m7);
     }
-    loss_partials[(workgroup.x + workgroup.y * workgroups.x) * INVOCATIONS + thread] = run_loss;
+    let tile_index = tile.y * params.tiles_x + tile.x;
+    loss_partials[slot * params.partial_count + tile_index * INVOCATIONS + thread] = run_loss;
 }

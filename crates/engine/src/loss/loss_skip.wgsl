@@ -1,7 +1,8 @@
-// Which pixels a pass computes (loss_distance.wgsl): all of them for the full render's loss; for
-// an object loss, those in SKIP_CELL x SKIP_CELL cells within the pass's reach of a cell with
-// content (any non-zero rendered or masked target pixel). Expects a `tile_distance` binding (the
-// cells' Chebyshev distances to content).
+// Which pixels a pass computes: all of them for the full render's loss; for an object loss, those
+// in SKIP_CELL x SKIP_CELL cells within the pass's reach of a cell with content (any non-zero
+// rendered or masked target pixel). Expects a `tile_distance` binding (each slot's cells'
+// Chebyshev distances to content, loss_work_lists.wgsl). The work lists leave out the tiles with
+// no cell in a pass's reach; this decides cell by cell within the tiles listed.
 //
 // Each pass's reach is the least that keeps the loss and gradient exact. A cell at distance d >= 1
 // is at least 8 (d - 1) + 1 pixels from every content pixel along one axis, so:
@@ -28,9 +29,9 @@ fn cell_in_reach(x: i32, y: i32, reach: u32) -> bool {
     if params.use_mask == 0u {
         return true;
     }
-    let cells_x = (params.width + SKIP_CELL - 1u) / SKIP_CELL;
-    let cell = u32(y) / SKIP_CELL * cells_x + u32(x) / SKIP_CELL;
-    return tile_distance[cell] <= reach;
+    let cells = cell_grid();
+    let cell = u32(y) / SKIP_CELL * cells.x + u32(x) / SKIP_CELL;
+    return tile_distance[slot * cells.x * cells.y + cell] <= reach;
 }
 
 // Whether the inputs of a run were computed by the pass that wrote them. A run reads RUN_INPUTS

@@ -4,7 +4,7 @@
 //! separate per-object renders they replace stay as the reference (`object_separate.rs`).
 
 use super::{TrainError, Trainer};
-use crate::loss::{LossImages, LossOutputs, ObjectMask};
+use crate::loss::{LossOutputs, ObjectLossImages, ObjectLossSlot};
 use crate::render::{ObjectSlot, RenderOutput};
 use crate::train::object_loss::{ObjectTargets, SkippedPair, sample_objects};
 use segsplat_scene::Level;
@@ -132,30 +132,34 @@ impl Trainer {
         let batch = self
             .renderer
             .forward_objects(&self.ctx, encoder, scene, base, &slots)?;
-        for (index, slot) in (0u32..).zip(&slots) {
-            self.loss.encode(
-                &self.ctx,
-                encoder,
-                &LossImages {
-                    rendered: batch.images(),
-                    rendered_index: index,
-                    target: &view.target,
-                    target_mask: Some(ObjectMask {
-                        object_ids: &masks.ids[slot.level.index()],
-                        object_id: slot.id,
-                    }),
-                    width: camera.width,
-                    height: camera.height,
-                },
-                config.weight,
-                &LossOutputs {
-                    rendered_grad: grad_images,
-                    grad_index: index,
-                    loss_values: &self.loss_values,
-                    loss_slot: 1 + index,
-                },
-            )?;
-        }
+        let id_maps: Vec<&wgpu::Buffer> = masks.ids.iter().collect();
+        let loss_slots: Vec<ObjectLossSlot> = slots
+            .iter()
+            .map(|slot| ObjectLossSlot {
+                id_map: slot.level.index() as u32,
+                object_id: slot.id,
+            })
+            .collect();
+        self.loss.encode_objects(
+            &self.ctx,
+            encoder,
+            &ObjectLossImages {
+                rendered: batch.images(),
+                rendered_index: 0,
+                target: &view.target,
+                id_maps: &id_maps,
+                slots: &loss_slots,
+                width: camera.width,
+                height: camera.height,
+            },
+            config.weight,
+            &LossOutputs {
+                rendered_grad: grad_images,
+                grad_index: 0,
+                loss_values: &self.loss_values,
+                loss_slot: 1,
+            },
+        )?;
         self.renderer.backward_objects(
             &self.ctx,
             encoder,
