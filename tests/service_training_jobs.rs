@@ -101,6 +101,11 @@ async fn reconstruct_job_trains_and_stores_artifacts() {
         job["progress"]["metrics"]["psnr"].as_f64().unwrap() > 10.0,
         "{job}"
     );
+    let worst = job["progress"]["metrics"]["worst_psnr"].as_f64().unwrap();
+    assert!(
+        worst > 5.0 && worst <= job["progress"]["metrics"]["psnr"].as_f64().unwrap(),
+        "the worst held-out view is reported: {job}"
+    );
 
     let blobs = client.service.blobs();
     let prefix = format!("jobs/{job_id}/output");

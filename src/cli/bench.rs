@@ -263,6 +263,8 @@ struct BenchReport {
     train_seconds: f64,
     psnr: f64,
     ssim: f64,
+    /// The worst held-out view's PSNR.
+    worst_psnr: f64,
     peak_resident_mib: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     object_loss: Option<ObjectLossReport>,
@@ -625,6 +627,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         train_seconds: run.seconds,
         psnr: eval.psnr,
         ssim: eval.ssim,
+        worst_psnr: eval.worst_psnr,
         peak_resident_mib: super::peak_resident_mib(),
         object_loss,
         plain_baseline,

@@ -4,6 +4,7 @@ pub mod config;
 pub mod densify_stats;
 pub mod mask_iou;
 pub mod object_loss;
+pub mod random_init;
 pub mod schedule;
 pub mod trainer;
 pub mod views;

@@ -15,7 +15,6 @@ mod partial_filter;
 use std::collections::BTreeSet;
 use std::time::Instant;
 
-use glam::Vec3;
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -25,7 +24,7 @@ use crate::adam::{Adam, AdamBuffers, AdamError, AdamGroup, AdamSettings};
 use crate::background_shell::{append_points, background_shell_points};
 use crate::checkpoint::{Checkpoint, CheckpointError};
 use crate::densify::{self, DensifyPlan, DensifyStats, PruneGuard};
-use crate::init::{gaussians_from_points, random_gaussians};
+use crate::init::gaussians_from_points;
 use crate::loss::{LossError, LossImages, LossOutputs, RenderLoss};
 use crate::model::{
     GaussianModel, GaussianParameterBuffers, GpuGaussianGrads, GpuGaussians, ModelError,
@@ -36,6 +35,7 @@ use crate::schedule::scene_extent;
 use crate::train::config::{ConfigError, TrainConfig};
 use crate::train::densify_stats::DensifyAccumulators;
 use crate::train::object_loss::{MAX_OBJECTS_PER_LEVEL, ObjectTargets, SkippedPair};
+use crate::train::random_init::{camera_centres, has_sparse_points, random_visible_gaussians};
 use crate::train::schedule::{DeformationSchedule, TrainSchedule};
 use crate::train::views::{Views, ViewsError};
 use crate::{ObjectFilter, RenderSettings};
@@ -95,8 +95,15 @@ pub struct TrainProgress {
 #[derive(Debug, Clone, Serialize, Deserialize, Default)]
 pub struct EvalReport {
     pub views: usize,
+    /// Means over the held-out views.
     pub psnr: f64,
     pub ssim: f64,
+    /// The worst held-out view's PSNR (floaters in front of a few cameras show here first), and
+    /// its index among the held-out views (absent in reports written before they were kept).
+    #[serde(default)]
+    pub worst_psnr: f64,
+    #[serde(default)]
+    pub worst_view: usize,
 }
 
 /// What a checkpoint's header records besides the arrays.
@@ -165,13 +172,12 @@ const SMALL_ADAM_GROUPS: usize = 5;
 /// The initial model for a scene: its sparse points, or random points in the cameras' bounds.
 pub fn initial_model(scene: &Scene, config: &TrainConfig) -> Result<GaussianModel, TrainError> {
     let model = match &scene.points {
-        Some(points) if !points.positions.is_empty() => {
+        Some(points) if has_sparse_points(scene) => {
             gaussians_from_points(&points.positions, &points.colors)
         }
         _ => {
-            let (min, max) = random_init_bounds(scene);
             let mut rng = ChaCha8Rng::seed_from_u64(config.seed ^ 0x1417);
-            random_gaussians(config.random_init_count, min, max, &mut rng)
+            random_visible_gaussians(scene, config.random_init_count, &mut rng)
         }
     };
     if model.is_empty() {
@@ -188,10 +194,7 @@ pub fn plain_initial_model(
     config: &TrainConfig,
 ) -> Result<GaussianModel, TrainError> {
     let mut model = initial_model(scene, config)?;
-    let from_points = scene
-        .points
-        .as_ref()
-        .is_some_and(|points| !points.positions.is_empty());
+    let from_points = has_sparse_points(scene);
     if from_points && config.background_shell > 0 {
         let shell = background_shell_points(scene, config.background_shell);
         append_points(&mut model, &shell);
@@ -202,24 +205,6 @@ pub fn plain_initial_model(
 /// Where random initial Gaussians go: Blender / D-NeRF scenes follow the NeRF-synthetic
 /// convention of an object inside [-1.3, 1.3]^3 around the origin (3DGS and Deformable 3DGS
 /// initialise there); other scenes fill the cameras' bounds.
-fn random_init_bounds(scene: &Scene) -> (Vec3, Vec3) {
-    if scene.format == segsplat_scene::SceneFormat::Blender {
-        return (Vec3::splat(-1.3), Vec3::splat(1.3));
-    }
-    let centers = camera_centers(scene);
-    let extent = scene_extent(&centers);
-    let center = centers.iter().copied().sum::<Vec3>() / centers.len().max(1) as f32;
-    (center - Vec3::splat(extent), center + Vec3::splat(extent))
-}
-
-fn camera_centers(scene: &Scene) -> Vec<Vec3> {
-    scene
-        .frames
-        .iter()
-        .map(|f| f.world_from_camera.w_axis.truncate())
-        .collect()
-}
-
 impl Trainer {
     /// Loads the views and uploads `model` (or the scene's initial model).
     pub fn new(
@@ -233,7 +218,10 @@ impl Trainer {
             Some(model) => model,
             None => plain_initial_model(scene, &config)?,
         };
-        let schedule = TrainSchedule::resolve(&config);
+        let mut schedule = TrainSchedule::resolve(&config);
+        if !has_sparse_points(scene) {
+            schedule = schedule.for_random_init();
+        }
         let views = Views::load(
             ctx,
             scene,
@@ -247,7 +235,7 @@ impl Trainer {
         let mut loss = RenderLoss::new(ctx)?;
         loss.reserve(ctx, max_width, max_height)?;
         let train_views = views.train.len();
-        let extent = scene_extent(&camera_centers(scene));
+        let extent = scene_extent(&camera_centres(scene));
         let mut trainer = Self {
             gaussians: GpuGaussians::upload(ctx, &model, capacity)?,
             grads: GpuGaussianGrads::new(ctx, capacity)?,
@@ -634,8 +622,7 @@ impl Trainer {
         if self.schedule.densifies_at(step) {
             let stats = self.accumulators.download(&ctx, count)?;
             let mut config = self.config.densify.clone();
-            if self.schedule.after_first_reset(step) {
-                // After the first opacity reset, also prune oversized splats (3DGS / gsplat).
+            if self.schedule.prunes_oversized_at(step) {
                 config.max_world_scale_fraction.get_or_insert(0.1);
                 config.max_screen_radius_fraction.get_or_insert(0.15);
             }
@@ -810,7 +797,12 @@ impl Trainer {
                     ]
                 })
                 .collect();
-            report.psnr += crate::image_metrics::psnr(&rendered, &view.target_rgb);
+            let psnr = crate::image_metrics::psnr(&rendered, &view.target_rgb);
+            if report.views == 0 || psnr < report.worst_psnr {
+                report.worst_psnr = psnr;
+                report.worst_view = report.views;
+            }
+            report.psnr += psnr;
             report.ssim += crate::image_metrics::ssim(
                 &rendered,
                 &view.target_rgb,

@@ -174,6 +174,7 @@ pub fn report_evaluation(ctx: &JobContext, held_out: &EvalReport, gaussians: usi
         &[
             ("psnr", held_out.psnr),
             ("ssim", held_out.ssim),
+            ("worst_psnr", held_out.worst_psnr),
             ("gaussians", gaussians as f64),
         ],
     );
