@@ -550,15 +550,15 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     let (forward_ms_start, backward_ms_start) = trainer.time_passes(args.timing_repeats)?;
     let (run, plain_run) = match plain.as_mut() {
         Some(plain) => match timed_runs(&ctx, &mut [&mut trainer, plain])?[..] {
-            [run, plain_run] => (run, Some(plain_run)),
+            [run, plain_run] => (run, Some((plain, plain_run))),
             _ => anyhow::bail!("two timed runs expected"),
         },
         None => (timed_runs(&ctx, &mut [&mut trainer])?[0], None),
     };
     let filter = trainer.partial_filter_cost();
     let partial_filter_seconds = filter.seconds;
-    let plain_baseline = match (plain.take(), plain_run) {
-        (Some(mut plain), Some(plain_run)) => {
+    let plain_baseline = match plain_run {
+        Some((plain, plain_run)) => {
             let with_filter = plain_run.steps_per_sec() / run.steps_per_sec();
             let step_share = (run.seconds - partial_filter_seconds) / run.seconds;
             Some(PlainBaselineReport {

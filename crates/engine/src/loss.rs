@@ -468,7 +468,7 @@ impl RenderLoss {
             };
             return self.encode_objects(ctx, encoder, &batch, weight, outputs);
         }
-        check_sizes(images, 1, outputs)?;
+        check_sizes(images, &[], 1, outputs)?;
         let (width, height) = (images.width, images.height);
         self.reserve(ctx, width, height)?;
         let Some(scratch) = self.scratch.as_ref() else {
@@ -527,16 +527,7 @@ impl RenderLoss {
             width,
             height,
         };
-        check_sizes(&single, images.slots.len() as u32, outputs)?;
-        for map in images.id_maps {
-            check_buffer(
-                "target object ids",
-                map,
-                u64::from(width) * u64::from(height) * 4,
-                width,
-                height,
-            )?;
-        }
+        check_sizes(&single, images.id_maps, images.slots.len() as u32, outputs)?;
         let table = slot_table(images)?;
         if table.is_empty() {
             return Ok(());
@@ -795,6 +786,7 @@ impl LossDispatch<'_> {
 /// read as zeros.
 fn check_sizes(
     images: &LossImages<'_>,
+    id_maps: &[&wgpu::Buffer],
     slots: u32,
     outputs: &LossOutputs<'_>,
 ) -> Result<(), LossError> {
@@ -822,30 +814,21 @@ fn check_sizes(
             (u64::from(outputs.loss_slot) + slots) * 4,
         ),
     ];
-    if let Some(mask) = images.target_mask {
-        required.push(("target object ids", mask.object_ids, pixels * 4));
-    }
+    required.extend(
+        id_maps
+            .iter()
+            .map(|map| ("target object ids", *map, pixels * 4)),
+    );
     for (what, buffer, needed_bytes) in required {
-        check_buffer(what, buffer, needed_bytes, width, height)?;
-    }
-    Ok(())
-}
-
-fn check_buffer(
-    what: &'static str,
-    buffer: &wgpu::Buffer,
-    needed_bytes: u64,
-    width: u32,
-    height: u32,
-) -> Result<(), LossError> {
-    if buffer.size() < needed_bytes {
-        return Err(LossError::BufferTooSmall {
-            what,
-            actual_bytes: buffer.size(),
-            needed_bytes,
-            width,
-            height,
-        });
+        if buffer.size() < needed_bytes {
+            return Err(LossError::BufferTooSmall {
+                what,
+                actual_bytes: buffer.size(),
+                needed_bytes,
+                width,
+                height,
+            });
+        }
     }
     Ok(())
 }
