@@ -1,4 +1,4 @@
-//! Batched object renders (`Renderer::forward_objects` / `backward_objects`) against separate
+//! Batched object renders (`Renderer::forward_objects` / `backward_objects_screen`) against separate
 //! per-object renders (`ObjectFilter::Object`, the path before batching): the same images, and
 //! the same gradients summed over the step's renders, on random scenes whose objects overlap and
 //! occlude each other, for every rasterize variant the adapter runs.
@@ -141,8 +141,8 @@ fn separate(ctx: &GpuContext, variant: RasterVariant, case: &Case) -> (Vec<Vec<[
     (images, grads.download(ctx, case.model.len()).unwrap())
 }
 
-/// The same step batched as the trainer records it: the full render and its backward, then the
-/// object slots on top of it.
+/// The same step batched as the trainer records it: the full render and its screen-space
+/// backward, the object slots on top of it, then one projection backward for all.
 fn batched(ctx: &GpuContext, variant: RasterVariant, case: &Case) -> (Vec<Vec<[f32; 4]>>, Grads) {
     let mut renderer = Renderer::with_variant(ctx, variant).unwrap();
     // Room for every slot's intersections: these tests are about batching, not overflow.
@@ -162,7 +162,7 @@ fn batched(ctx: &GpuContext, variant: RasterVariant, case: &Case) -> (Vec<Vec<[f
         )
         .unwrap();
     renderer
-        .backward(ctx, &mut encoder, &gaussians, &base, &full_grad, &mut grads)
+        .backward_screen(ctx, &mut encoder, &base, &full_grad)
         .unwrap();
     let batch = renderer
         .forward_objects(ctx, &mut encoder, &gaussians, &base, &case.slots)
@@ -170,14 +170,10 @@ fn batched(ctx: &GpuContext, variant: RasterVariant, case: &Case) -> (Vec<Vec<[f
     let slot_grads: Vec<[f32; 4]> = case.weights[1..].concat();
     let slot_grads = buffer(ctx, &slot_grads);
     renderer
-        .backward_objects(
-            ctx,
-            &mut encoder,
-            &gaussians,
-            &batch,
-            &slot_grads,
-            &mut grads,
-        )
+        .backward_objects_screen(ctx, &mut encoder, &batch, &slot_grads)
+        .unwrap();
+    renderer
+        .backward_projection(ctx, &mut encoder, &gaussians, &base, &mut grads)
         .unwrap();
     ctx.queue.submit([encoder.finish()]);
     assert!(!renderer.sync_capacity(ctx).unwrap().overflowed);
@@ -249,6 +245,26 @@ fn assert_batched_matches_separate(ctx: &GpuContext, case: &Case) {
             assert!(image.iter().any(|p| p[3] > 0.1), "slot {slot} is drawn");
         }
         assert_gradients_match(&batched_grads, &separate_grads, 1e-4);
+        // Densification's |d mean2d| statistic is the full render's loss alone, as in the
+        // released code (object renders have screen-space points of their own).
+        let full_only = Case {
+            model: case.model.clone(),
+            camera: case.camera,
+            slots: Vec::new(),
+            weights: case.weights[..1].to_vec(),
+        };
+        let (_, full_grads) = separate(ctx, variant, &full_only);
+        for (index, (b, f)) in batched_grads.1.iter().zip(&full_grads.1).enumerate() {
+            for axis in 0..2 {
+                let error = (b[axis] - f[axis]).abs() / f[axis].abs().max(1e-3);
+                assert!(
+                    error <= 1e-4,
+                    "gaussian {index} mean2d_abs[{axis}]: batched {} full render {}",
+                    b[axis],
+                    f[axis]
+                );
+            }
+        }
     }
 }
 

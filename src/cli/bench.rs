@@ -299,6 +299,10 @@ struct PlainBaselineReport {
     partial_filter_dispatches: u64,
     /// Object-loss dispatches per step over plain dispatches per step.
     dispatch_ratio: f64,
+    /// With `--profile-kernels`: the plain trainer's kernels over as many more steps, after its
+    /// timed run, to set beside the object-loss run's `kernel_profile`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    kernel_profile: Option<KernelProfileReport>,
 }
 
 /// Trains `steps` on `trainer`, returning its progress and the dispatches it recorded per step,
@@ -571,6 +575,10 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
                 partial_filter_seconds,
                 partial_filter_dispatches: filter.dispatches,
                 dispatch_ratio: run.dispatches_per_step / plain_run.dispatches_per_step.max(1.0),
+                kernel_profile: match args.profile_kernels {
+                    Some(steps) => Some(profile_kernels(&ctx, plain, steps)?),
+                    None => None,
+                },
             })
         }
         _ => None,

@@ -46,6 +46,10 @@ const LOSS_TILE: u32 = 16;
 const LOSS_RUN: u32 = 8;
 /// Side of the squares object losses skip or compute (prepended as `SKIP_CELL`): a run's.
 const SKIP_CELL: u32 = LOSS_RUN;
+/// Tiles one workgroup of `loss_content.wgsl` scans, side by side (prepended as
+/// `CONTENT_TILES_PER_GROUP`): a CPU adapter pays per workgroup, and one tile's 16 rows are only
+/// two of its 8-lane batches.
+const CONTENT_TILES_PER_GROUP: u32 = 4;
 /// Skip cells per loss tile, an upper bound per tile for the cells' buffers.
 const CELLS_PER_TILE: u64 = (LOSS_TILE / SKIP_CELL) as u64 * (LOSS_TILE / SKIP_CELL) as u64;
 /// Invocations of a per-pixel workgroup, each writing one loss partial sum.
@@ -137,6 +141,7 @@ fn loss_constants_wgsl() -> String {
             ("LOSS_RUN", LOSS_RUN),
             ("SKIP_CELL", SKIP_CELL),
             ("MAX_BATCH_SLOTS", MAX_BATCH_SLOTS),
+            ("CONTENT_TILES_PER_GROUP", CONTENT_TILES_PER_GROUP),
         ]),
         l1 = L1_WEIGHT,
         dssim = DSSIM_WEIGHT,
@@ -608,8 +613,11 @@ impl RenderLoss {
         let bind = self
             .tile_content
             .bind(ctx, &with_inputs(bindings, &[&scratch.tile_content]));
-        self.tile_content
-            .dispatch(encoder, &bind, [tiles_x, tiles_y, slots]);
+        self.tile_content.dispatch(
+            encoder,
+            &bind,
+            [tiles_x.div_ceil(CONTENT_TILES_PER_GROUP), tiles_y, slots],
+        );
         encoder.copy_buffer_to_buffer(
             &self.empty_work_counts,
             0,

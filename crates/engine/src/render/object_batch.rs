@@ -17,9 +17,10 @@
 //! | 7    | rasterize forward, z = slot    | slot s's image at pixels [s P, (s + 1) P)            |
 //!
 //! Each slot costs only its own footprint. The backward is one rasterize backward over all slots
-//! (z = slot) into the full render's screen-space gradient buffer, then one projection and SH
-//! backward: the loss is a sum over slots and all slots share the projected parameters, so
-//! summing the screen-space gradients first is exact (up to float atomics' order).
+//! (z = slot) adding into the full render's screen-space gradients, after the full render's own,
+//! then one projection and SH backward for the full render and every slot together: the loss is
+//! a sum over renders and all of them share the projected parameters, so summing the
+//! screen-space gradients first is exact (up to float atomics' order).
 
 use std::sync::Arc;
 
@@ -29,7 +30,7 @@ use super::renderer::{RenderError, RenderOutput, Renderer};
 use super::uniforms::RenderUniforms;
 use super::workspace::{RenderWorkspace, WorkspacePool};
 use crate::model::GaussianView;
-use crate::{GpuGaussianGrads, ObjectFilter, RenderCamera, RenderSettings};
+use crate::{ObjectFilter, RenderCamera, RenderSettings};
 use segsplat_gpu::kernel::{workgroups_2d, workgroups_for};
 use segsplat_gpu::{GpuContext, GpuError};
 use segsplat_scene::Level;
@@ -144,7 +145,10 @@ impl Renderer {
             background: [0.0; 3],
             sh_degree: base.settings.sh_degree,
         };
-        let uniforms = RenderUniforms::new(&camera, &settings, count, workspace.size.intersections);
+        let mut uniforms =
+            RenderUniforms::new(&camera, &settings, count, workspace.size.intersections);
+        // Object renders do not feed the densification statistic (backward_objects_screen).
+        uniforms.mean2d_abs = 0;
         self.upload_uniforms(ctx, encoder, &workspace, &uniforms);
         encoder.clear_buffer(&workspace.tile_ranges, 0, None);
         if count > 0 {
@@ -255,26 +259,18 @@ impl Renderer {
     }
 
     /// Records the backward of every slot of `batch` given `grad_images` (d loss / d image, slot
-    /// after slot, as [`ObjectBatchOutput::images`]) and ADDS the summed parameter gradients
-    /// into `grads`. Overwrites the full render's screen-space gradients: record that render's
-    /// own backward before this.
-    pub fn backward_objects<'g>(
+    /// after slot, as [`ObjectBatchOutput::images`]), ADDING the slots' screen-space gradients
+    /// to those of the full render it is batched on: record that render's
+    /// [`Renderer::backward_screen`] before this and its [`Renderer::backward_projection`]
+    /// after, once for all of them. The slots add nothing to the |d mean2d| statistic, which
+    /// densification takes from the full render's loss alone (as the released code does).
+    pub fn backward_objects_screen(
         &mut self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
-        gaussians: impl Into<GaussianView<'g>>,
         batch: &ObjectBatchOutput<'_>,
         grad_images: &wgpu::Buffer,
-        grads: &mut GpuGaussianGrads,
     ) -> Result<(), RenderError> {
-        let gaussians: GaussianView<'_> = gaussians.into();
-        let count = batch.gaussian_count as usize;
-        if grads.capacity() < count {
-            return Err(RenderError::GradsTooSmall {
-                count,
-                capacity: grads.capacity(),
-            });
-        }
         let needed = batch.slot_image_bytes() * batch.slots.len() as u64;
         if grad_images.size() < needed {
             return Err(RenderError::GradImageTooSmall {
@@ -283,12 +279,11 @@ impl Renderer {
                 pixels: batch.camera.pixel_count() * batch.slots.len(),
             });
         }
-        if count == 0 {
+        if batch.gaussian_count == 0 {
             return Ok(());
         }
         let shared = batch.base.workspace();
         let workspace = batch.workspace();
-        encoder.clear_buffer(&shared.grad_projected, 0, None);
         let [tiles_x, tiles_y] = batch.camera.tile_grid();
         let k = &self.kernels;
         let rasterize = k.rasterize_backward.bind(
@@ -309,8 +304,6 @@ impl Renderer {
             &rasterize,
             [tiles_x, tiles_y, batch.slots.len() as u32],
         );
-        // Base's uniforms: the same camera and Gaussian count; the background plays no part.
-        self.encode_projection_backward(ctx, encoder, gaussians, shared, count as u32, grads);
         Ok(())
     }
 }

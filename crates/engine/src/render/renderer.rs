@@ -461,6 +461,7 @@ impl Renderer {
     /// Records the backward pass of `output` given `grad_image` (d loss / d image, the image's
     /// layout: `width * height` vec4 of d/d(r, g, b, alpha)). ADDS parameter gradients and the
     /// |d mean2d| statistic into `grads`; zero them once per step, not per render.
+    /// [`Self::backward_screen`] then [`Self::backward_projection`], for a render alone.
     pub fn backward<'g>(
         &mut self,
         ctx: &GpuContext,
@@ -470,14 +471,21 @@ impl Renderer {
         grad_image: &wgpu::Buffer,
         grads: &mut GpuGaussianGrads,
     ) -> Result<(), RenderError> {
-        let gaussians: GaussianView<'_> = gaussians.into();
-        let count = output.gaussian_count as usize;
-        if grads.capacity() < count {
-            return Err(RenderError::GradsTooSmall {
-                count,
-                capacity: grads.capacity(),
-            });
-        }
+        self.backward_screen(ctx, encoder, output, grad_image)?;
+        self.backward_projection(ctx, encoder, gaussians, output, grads)
+    }
+
+    /// The first half of [`Self::backward`]: `output`'s screen-space gradients (per projected
+    /// splat), overwriting those of an earlier backward of it. Object renders batched on
+    /// `output` add theirs on top ([`Self::backward_objects_screen`]) before the one
+    /// [`Self::backward_projection`] that all of them share.
+    pub fn backward_screen(
+        &mut self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        output: &RenderOutput,
+        grad_image: &wgpu::Buffer,
+    ) -> Result<(), RenderError> {
         if grad_image.size() < output.image_bytes() {
             return Err(RenderError::GradImageTooSmall {
                 bytes: grad_image.size(),
@@ -485,12 +493,12 @@ impl Renderer {
                 pixels: output.camera.pixel_count(),
             });
         }
-        if count == 0 {
+        if output.gaussian_count == 0 {
             return Ok(());
         }
         let workspace = output.workspace();
-        let k = &self.kernels;
         encoder.clear_buffer(&workspace.grad_projected, 0, None);
+        let k = &self.kernels;
         let [tiles_x, tiles_y] = output.camera.tile_grid();
         let rasterize = k.rasterize_backward.bind(
             ctx,
@@ -507,13 +515,44 @@ impl Renderer {
         );
         k.rasterize_backward
             .dispatch(encoder, &rasterize, [tiles_x, tiles_y, 1]);
-        self.encode_projection_backward(ctx, encoder, gaussians, workspace, count as u32, grads);
+        Ok(())
+    }
+
+    /// The second half of [`Self::backward`]: the projection's backward from `output`'s
+    /// screen-space gradients (its own and those of any object renders batched on it), ADDING
+    /// into `grads`.
+    pub fn backward_projection<'g>(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        gaussians: impl Into<GaussianView<'g>>,
+        output: &RenderOutput,
+        grads: &mut GpuGaussianGrads,
+    ) -> Result<(), RenderError> {
+        let count = output.gaussian_count as usize;
+        if grads.capacity() < count {
+            return Err(RenderError::GradsTooSmall {
+                count,
+                capacity: grads.capacity(),
+            });
+        }
+        if count == 0 {
+            return Ok(());
+        }
+        self.encode_projection_backward(
+            ctx,
+            encoder,
+            gaussians.into(),
+            output.workspace(),
+            count as u32,
+            grads,
+        );
         Ok(())
     }
 
     /// The backward of the projection (geometry, then colour) from `workspace.grad_projected`,
     /// adding into `grads`. Runs once per set of rasterize backwards that share the projection.
-    pub(super) fn encode_projection_backward(
+    fn encode_projection_backward(
         &self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,

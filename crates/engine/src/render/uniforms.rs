@@ -26,7 +26,10 @@ pub struct RenderUniforms {
     pub intersection_capacity: u32,
     /// [`RenderCamera::jacobian_limit`].
     pub jacobian_limit: [f32; 2],
-    pub padding: [u32; 2],
+    /// 1: the rasterize backward sums `|d loss / d mean2d|` (the densification statistic, fed by
+    /// the full render's loss alone); 0 for object renders, which leave it to the full render.
+    pub mean2d_abs: u32,
+    pub padding: u32,
 }
 
 impl RenderUniforms {
@@ -59,7 +62,8 @@ impl RenderUniforms {
             filter_enabled,
             intersection_capacity,
             jacobian_limit: camera.jacobian_limit(),
-            padding: [0; 2],
+            mean2d_abs: u32::from(matches!(settings.filter, ObjectFilter::All)),
+            padding: 0,
         }
     }
 }
@@ -139,6 +143,10 @@ mod tests {
             (
                 "jacobian_limit",
                 std::mem::offset_of!(RenderUniforms, jacobian_limit),
+            ),
+            (
+                "mean2d_abs",
+                std::mem::offset_of!(RenderUniforms, mean2d_abs),
             ),
             ("padding", std::mem::offset_of!(RenderUniforms, padding)),
         ];

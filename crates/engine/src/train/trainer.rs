@@ -360,6 +360,17 @@ impl Trainer {
         self.follow_resolution(divisor);
         let output =
             self.encode_view_render(&mut encoder, view_index, divisor, time, &settings, true)?;
+        // The object renders reuse the full render's projection and depth order, and add their
+        // screen-space gradients to its own before the one projection backward of the step.
+        self.encode_object_losses(&mut encoder, view_index, sh_degree, &output)?;
+        let scene = dynamics::render_view(&self.gaussians, &self.dynamics);
+        self.renderer.backward_projection(
+            &self.ctx,
+            &mut encoder,
+            scene,
+            &output,
+            &mut self.grads,
+        )?;
         let ctx = &self.ctx;
         // The camera this step rendered through (the coarse one in coarse steps).
         let camera = output.camera;
@@ -372,8 +383,6 @@ impl Trainer {
             count,
             [camera.width, camera.height],
         );
-        // The object renders reuse the full render's projection and depth order.
-        self.encode_object_losses(&mut encoder, view_index, sh_degree, &output)?;
         drop(output);
         self.encode_deform_backward_and_step(&mut encoder, step)?;
         self.encode_adam(&mut encoder, step, count, sh_degree)?;
@@ -390,8 +399,10 @@ impl Trainer {
 
     /// Records what a step renders of training view `view_index` at `time`: the deformation
     /// (dynamic scenes), the full render, and with `backward` its loss (loss slot 0) and the
-    /// loss's gradient added into `self.grads`. [`Self::train_step`] records its step with it
-    /// and [`Self::time_passes`] times it, so the timed passes are the step's.
+    /// loss's screen-space gradients ([`Renderer::backward_screen`]); the caller records the
+    /// projection backward that adds them into `self.grads`, after any object renders have
+    /// added theirs. [`Self::train_step`] records its step with it and [`Self::time_passes`]
+    /// times it, so the timed passes are the step's.
     fn encode_view_render(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
@@ -431,14 +442,8 @@ impl Trainer {
                 loss_slot: 0,
             },
         )?;
-        self.renderer.backward(
-            ctx,
-            encoder,
-            scene,
-            &output,
-            &self.grad_image,
-            &mut self.grads,
-        )?;
+        self.renderer
+            .backward_screen(ctx, encoder, &output, &self.grad_image)?;
         Ok(output)
     }
 
@@ -727,7 +732,7 @@ impl Trainer {
                 if with_backward {
                     self.grads.encode_zero(&mut encoder);
                 }
-                let _output = self.encode_view_render(
+                let output = self.encode_view_render(
                     &mut encoder,
                     view_index,
                     1,
@@ -735,6 +740,16 @@ impl Trainer {
                     &settings,
                     with_backward,
                 )?;
+                if with_backward {
+                    let scene = dynamics::render_view(&self.gaussians, &self.dynamics);
+                    self.renderer.backward_projection(
+                        &ctx,
+                        &mut encoder,
+                        scene,
+                        &output,
+                        &mut self.grads,
+                    )?;
+                }
                 ctx.queue.submit([encoder.finish()]);
                 ctx.wait_idle()?;
                 let secs = started.elapsed().as_secs_f64();

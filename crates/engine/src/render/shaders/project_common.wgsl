@@ -35,7 +35,10 @@ struct RenderUniforms {
     // FRUSTUM_SLACK x the half field of view the Jacobian clamps to (the whole image's, for a
     // band of one): RenderCamera::jacobian_limit.
     jacobian_limit: vec2<f32>,
-    padding: vec2<u32>,
+    // 1 where the rasterize backward also sums |d loss / d mean2d| (the densification statistic,
+    // which the full render's loss alone feeds); 0 for object renders.
+    mean2d_abs: u32,
+    padding: u32,
 }
 
 // Flat invocation index of a 1D workload split over x and y workgroups (see `workgroups_2d`).

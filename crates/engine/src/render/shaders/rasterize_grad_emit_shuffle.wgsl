@@ -43,7 +43,8 @@ fn emit_lane_sums(gaussian: u32, grads: FragmentGrads, contributes: bool, lane: 
     for (var mask = 1u; mask < lanes; mask <<= 1u) {
         total = sum_fragment_grads(total, shuffled(total, mask));
     }
-    for (var slot = lane; slot < GRAD_SLOTS; slot += lanes) {
+    let slots = emitted_grad_slots();
+    for (var slot = lane; slot < slots; slot += lanes) {
         add_grad(gaussian, slot, grad_slot(total, slot));
     }
 }

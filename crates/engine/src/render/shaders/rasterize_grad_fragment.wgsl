@@ -4,6 +4,12 @@
 
 const GRAD_SLOTS: u32 = 11u;
 
+// Slots this render adds: object renders leave out |d loss / d mean2d| (uniforms.mean2d_abs), two
+// atomics fewer per emission.
+fn emitted_grad_slots() -> u32 {
+    return select(GRAD_SLOTS - 2u, GRAD_SLOTS, uniforms.mean2d_abs != 0u);
+}
+
 struct FragmentGrads {
     mean: vec2<f32>,
     conic: vec3<f32>,
@@ -36,8 +42,10 @@ fn add_fragment_grads(gaussian: u32, grads: FragmentGrads) {
     add_grad(gaussian, 6u, grads.colour.y);
     add_grad(gaussian, 7u, grads.colour.z);
     add_grad(gaussian, 8u, grads.opacity);
-    add_grad(gaussian, 9u, grads.mean_abs.x);
-    add_grad(gaussian, 10u, grads.mean_abs.y);
+    if uniforms.mean2d_abs != 0u {
+        add_grad(gaussian, 9u, grads.mean_abs.x);
+        add_grad(gaussian, 10u, grads.mean_abs.y);
+    }
 }
 
 // A contributing fragment's gradients at one pixel. `transmittance` is the transmittance in

@@ -101,8 +101,9 @@ impl Trainer {
     }
 
     /// Records the object renders of one step: this step's object slots, each rendered alone on
-    /// black with its own loss slot, on top of `base` (the step's full render, whose backward is
-    /// already recorded), backward adding into the gradients.
+    /// black with its own loss slot, on top of `base` (the step's full render, whose
+    /// screen-space backward is already recorded), their screen-space gradients added to
+    /// `base`'s for the step's one projection backward.
     pub(super) fn encode_object_losses(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
@@ -160,14 +161,8 @@ impl Trainer {
                 loss_slot: 1,
             },
         )?;
-        self.renderer.backward_objects(
-            &self.ctx,
-            encoder,
-            scene,
-            &batch,
-            grad_images,
-            &mut self.grads,
-        )?;
+        self.renderer
+            .backward_objects_screen(&self.ctx, encoder, &batch, grad_images)?;
         Ok(())
     }
 }
