@@ -363,14 +363,7 @@ impl Trainer {
         // The object renders reuse the full render's projection and depth order, and add their
         // screen-space gradients to its own before the one projection backward of the step.
         self.encode_object_losses(&mut encoder, view_index, sh_degree, &output)?;
-        let scene = dynamics::render_view(&self.gaussians, &self.dynamics);
-        self.renderer.backward_projection(
-            &self.ctx,
-            &mut encoder,
-            scene,
-            &output,
-            &mut self.grads,
-        )?;
+        self.encode_projection_backward(&mut encoder, &output)?;
         let ctx = &self.ctx;
         // The camera this step rendered through (the coarse one in coarse steps).
         let camera = output.camera;
@@ -445,6 +438,20 @@ impl Trainer {
         self.renderer
             .backward_screen(ctx, encoder, &output, &self.grad_image)?;
         Ok(output)
+    }
+
+    /// Records the projection backward of `output` (the view render of
+    /// [`Self::encode_view_render`]), adding its screen-space gradients, and those of any
+    /// object renders batched on it, into `self.grads`.
+    fn encode_projection_backward(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        output: &RenderOutput,
+    ) -> Result<(), TrainError> {
+        let scene = dynamics::render_view(&self.gaussians, &self.dynamics);
+        self.renderer
+            .backward_projection(&self.ctx, encoder, scene, output, &mut self.grads)?;
+        Ok(())
     }
 
     /// Before the first step at a new training resolution: a finer one needs about
@@ -741,14 +748,7 @@ impl Trainer {
                     with_backward,
                 )?;
                 if with_backward {
-                    let scene = dynamics::render_view(&self.gaussians, &self.dynamics);
-                    self.renderer.backward_projection(
-                        &ctx,
-                        &mut encoder,
-                        scene,
-                        &output,
-                        &mut self.grads,
-                    )?;
+                    self.encode_projection_backward(&mut encoder, &output)?;
                 }
                 ctx.queue.submit([encoder.finish()]);
                 ctx.wait_idle()?;
