@@ -11,9 +11,11 @@ mod gpu_support;
 
 use gpu_support::{gpu_context, new_encoder, seeded_rng, storage_buffer, submit};
 use rand::Rng;
+use segsplat_engine::OCCUPANCY_CELL;
 use segsplat_engine::loss::{
-    DSSIM_WEIGHT, L1_WEIGHT, LossImages, LossOutputs, MAX_BATCH_SLOTS, ObjectLossImages,
-    ObjectLossSlot, ObjectMask, RenderLoss, SSIM_C1, SSIM_C2, ssim_window,
+    DSSIM_WEIGHT, L1_WEIGHT, LossImages, LossOutputs, MAX_BATCH_SLOTS, MIXED_CELL,
+    ObjectContentHints, ObjectLossImages, ObjectLossSlot, ObjectMask, RenderLoss, SSIM_C1, SSIM_C2,
+    object_cell_map, ssim_window,
 };
 use segsplat_gpu::GpuContext;
 
@@ -582,71 +584,107 @@ fn gpu_object_loss_batch_matches_cpu_reference_per_slot() {
         .map(|ids| storage_buffer(ctx, "ids", ids))
         .collect();
     let map_refs: Vec<&wgpu::Buffer> = map_buffers.iter().collect();
-    let grad_buffer = storage_buffer(ctx, "grad", &vec![[9.0f32; 4]; pixels * (slot_count + 1)]);
-    let loss_buffer = storage_buffer(ctx, "loss values", &vec![-1.0f32; slot_count + 4]);
-    // A full loss first leaves every scratch buffer holding another image's values.
-    gpu_loss(ctx, &mut loss, &image, &target, None, width, height, 1.0, 0);
-    let weight = 0.75;
-    let mut encoder = new_encoder(ctx);
-    loss.encode_objects(
-        ctx,
-        &mut encoder,
-        &ObjectLossImages {
-            rendered: &rendered_buffer,
-            rendered_index: first_image,
-            target: &target_buffer,
-            id_maps: &map_refs,
-            slots: &slots,
-            width: width as u32,
-            height: height as u32,
-        },
-        weight,
-        &LossOutputs {
-            rendered_grad: &grad_buffer,
-            grad_index: first_image,
-            loss_values: &loss_buffer,
-            loss_slot: first_loss,
-        },
-    )
-    .unwrap();
-    submit(ctx, encoder);
-    let loss_values: Vec<f32> = ctx.read_vec(&loss_buffer).unwrap();
-    let grads: Vec<[f32; 4]> = ctx.read_vec(&grad_buffer).unwrap();
-    assert!(
-        grads[..pixels].iter().all(|g| *g == [9.0; 4]),
-        "image 0 written"
-    );
-    for index in (0..first_loss as usize).chain(first_loss as usize + slot_count..loss_values.len())
-    {
-        assert_eq!(loss_values[index], -1.0, "loss value {index} written");
-    }
-    let mut empty_slots = 0;
-    for (slot, object) in slots.iter().enumerate() {
-        let ids = &id_maps[object.id_map as usize];
-        let masked_target: Vec<Rgb> = target
-            .iter()
-            .zip(ids)
-            .map(|(t, &id)| if id == object.object_id { *t } else { [0.0; 3] })
-            .collect();
-        let (cpu, cpu_grad) = cpu_loss(&renders[slot], &masked_target, width, height);
-        let start = (1 + slot) * pixels;
-        let gpu = GpuLoss {
-            loss_values: vec![loss_values[first_loss as usize + slot]],
-            grad: grads[start..start + pixels].to_vec(),
-        };
-        let label = format!("slot {slot} ({object:?})");
-        assert_matches_cpu(&gpu, 0, f64::from(weight), cpu, &cpu_grad, &label);
-        for (pixel, (gpu_pixel, cpu_pixel)) in gpu.grad.iter().zip(&cpu_grad).enumerate() {
-            assert_eq!(
-                gpu_pixel[..3].iter().any(|g| *g != 0.0),
-                cpu_pixel.iter().any(|g| *g != 0.0),
-                "{label}: pixel {pixel} GPU {gpu_pixel:?} CPU {cpu_pixel:?}"
-            );
+    // The renders' occupancy as a batch of object renders marks it (the full image's, image 0,
+    // not the batch's, all set), and each map's cell map: the content pass reads these instead of
+    // every pixel when given them, with the same losses and gradients.
+    let cells_x = width.div_ceil(OCCUPANCY_CELL as usize);
+    let cells = cells_x * height.div_ceil(OCCUPANCY_CELL as usize);
+    let mut occupancy = vec![1u32; cells];
+    for render in &renders {
+        let mut marks = vec![0u32; cells];
+        for (pixel, rgb) in render.iter().enumerate() {
+            if rgb.iter().any(|c| *c != 0.0) {
+                let (x, y) = (pixel % width, pixel / width);
+                marks[y / OCCUPANCY_CELL as usize * cells_x + x / OCCUPANCY_CELL as usize] = 1;
+            }
         }
-        empty_slots += usize::from(cpu == 0.0);
+        occupancy.extend(marks);
     }
+    let occupancy_buffer = storage_buffer(ctx, "occupancy", &occupancy);
+    let cell_maps: Vec<wgpu::Buffer> = id_maps
+        .iter()
+        .map(|ids| storage_buffer(ctx, "cell map", &object_cell_map(ids, width as u32)))
+        .collect();
+    let cell_map_refs: Vec<&wgpu::Buffer> = cell_maps.iter().collect();
     assert!(
-        empty_slots > 0 && empty_slots < slot_count,
-        "some slots, not all, have neither render nor mask: {empty_slots}"
+        id_maps
+            .iter()
+            .any(|ids| object_cell_map(ids, width as u32).contains(&MIXED_CELL)),
+        "some square holds two objects"
     );
+    for hints in [false, true] {
+        let grad_buffer =
+            storage_buffer(ctx, "grad", &vec![[9.0f32; 4]; pixels * (slot_count + 1)]);
+        let loss_buffer = storage_buffer(ctx, "loss values", &vec![-1.0f32; slot_count + 4]);
+        // A full loss first leaves every scratch buffer holding another image's values.
+        gpu_loss(ctx, &mut loss, &image, &target, None, width, height, 1.0, 0);
+        let weight = 0.75;
+        let mut encoder = new_encoder(ctx);
+        loss.encode_objects(
+            ctx,
+            &mut encoder,
+            &ObjectLossImages {
+                rendered: &rendered_buffer,
+                rendered_index: first_image,
+                target: &target_buffer,
+                id_maps: &map_refs,
+                slots: &slots,
+                width: width as u32,
+                height: height as u32,
+                content: hints.then_some(ObjectContentHints {
+                    occupancy: &occupancy_buffer,
+                    cell_maps: &cell_map_refs,
+                }),
+            },
+            weight,
+            &LossOutputs {
+                rendered_grad: &grad_buffer,
+                grad_index: first_image,
+                loss_values: &loss_buffer,
+                loss_slot: first_loss,
+            },
+        )
+        .unwrap();
+        submit(ctx, encoder);
+        let loss_values: Vec<f32> = ctx.read_vec(&loss_buffer).unwrap();
+        let grads: Vec<[f32; 4]> = ctx.read_vec(&grad_buffer).unwrap();
+        assert!(
+            grads[..pixels].iter().all(|g| *g == [9.0; 4]),
+            "image 0 written"
+        );
+        for index in
+            (0..first_loss as usize).chain(first_loss as usize + slot_count..loss_values.len())
+        {
+            assert_eq!(loss_values[index], -1.0, "loss value {index} written");
+        }
+        let mut empty_slots = 0;
+        for (slot, object) in slots.iter().enumerate() {
+            let ids = &id_maps[object.id_map as usize];
+            let masked_target: Vec<Rgb> = target
+                .iter()
+                .zip(ids)
+                .map(|(t, &id)| if id == object.object_id { *t } else { [0.0; 3] })
+                .collect();
+            let (cpu, cpu_grad) = cpu_loss(&renders[slot], &masked_target, width, height);
+            let start = (1 + slot) * pixels;
+            let gpu = GpuLoss {
+                loss_values: vec![loss_values[first_loss as usize + slot]],
+                grad: grads[start..start + pixels].to_vec(),
+            };
+            let label = format!("slot {slot} ({object:?}), content hints {hints}");
+            assert_matches_cpu(&gpu, 0, f64::from(weight), cpu, &cpu_grad, &label);
+            for (pixel, (gpu_pixel, cpu_pixel)) in gpu.grad.iter().zip(&cpu_grad).enumerate() {
+                assert_eq!(
+                    gpu_pixel[..3].iter().any(|g| *g != 0.0),
+                    cpu_pixel.iter().any(|g| *g != 0.0),
+                    "{label}: pixel {pixel} GPU {gpu_pixel:?} CPU {cpu_pixel:?}"
+                );
+            }
+            empty_slots += usize::from(cpu == 0.0);
+        }
+        assert!(
+            empty_slots > 0 && empty_slots < slot_count,
+            "some slots, not all, have neither render nor mask: {empty_slots}"
+        );
+    }
 }

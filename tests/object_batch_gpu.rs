@@ -8,9 +8,10 @@ use rand_chacha::ChaCha8Rng;
 use segsplat_engine::reference::ReferenceGaussians;
 use segsplat_engine::reference::parameter_name;
 use segsplat_engine::reference::scenes::{random_scene, test_camera};
-use segsplat_engine::render::{ObjectSlot, RasterVariant, Renderer};
+use segsplat_engine::render::{ObjectBatchOutput, ObjectSlot, RasterVariant, Renderer};
 use segsplat_engine::{
-    GaussianModel, GpuGaussianGrads, GpuGaussians, ObjectFilter, RenderCamera, RenderSettings,
+    GaussianModel, GpuGaussianGrads, GpuGaussians, OCCUPANCY_CELL, ObjectFilter, RenderCamera,
+    RenderSettings,
 };
 use segsplat_gpu::GpuContext;
 use segsplat_scene::Level;
@@ -178,7 +179,41 @@ fn batched(ctx: &GpuContext, variant: RasterVariant, case: &Case) -> (Vec<Vec<[f
     ctx.queue.submit([encoder.finish()]);
     assert!(!renderer.sync_capacity(ctx).unwrap().overflowed);
     let images = batch.read_images(ctx).unwrap();
+    assert_occupancy_marks_coloured_squares(ctx, &batch, &images);
     (images, grads.download(ctx, case.model.len()).unwrap())
+}
+
+/// The batch's occupancy: 1 exactly on the squares where some pixel of the slot's image has a
+/// non-zero colour (the object loss skips by it, so a square missed would be a wrong loss).
+fn assert_occupancy_marks_coloured_squares(
+    ctx: &GpuContext,
+    batch: &ObjectBatchOutput<'_>,
+    images: &[Vec<[f32; 4]>],
+) {
+    let (width, height) = (batch.camera.width as usize, batch.camera.height as usize);
+    let cell = OCCUPANCY_CELL as usize;
+    let cells_x = width.div_ceil(cell);
+    let cells = cells_x * height.div_ceil(cell);
+    let marked: Vec<u32> = ctx.read_vec(batch.occupancy()).unwrap();
+    let mut occupied_squares = 0;
+    for (slot, image) in images.iter().enumerate() {
+        let mut expected = vec![0u32; cells];
+        for (pixel, rgba) in image.iter().enumerate() {
+            if rgba[..3].iter().any(|c| *c != 0.0) {
+                expected[pixel / width / cell * cells_x + pixel % width / cell] = 1;
+            }
+        }
+        occupied_squares += expected.iter().filter(|m| **m != 0).count();
+        assert_eq!(
+            marked[slot * cells..(slot + 1) * cells],
+            expected[..],
+            "slot {slot}'s occupancy"
+        );
+    }
+    assert!(
+        occupied_squares > 0 && occupied_squares < cells * images.len(),
+        "some squares occupied, not all: {occupied_squares}"
+    );
 }
 
 /// Largest difference of each Gaussian's parameter gradients, relative to the largest magnitude

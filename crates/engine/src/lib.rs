@@ -28,6 +28,9 @@ use segsplat_scene::Level;
 
 /// Side of a square screen tile in pixels (one rasterisation workgroup per tile).
 pub const TILE_SIZE: u32 = 16;
+/// Side of the squares whose occupancy a batch of object renders marks
+/// ([`render::ObjectBatchOutput::occupancy`]).
+pub const OCCUPANCY_CELL: u32 = 8;
 /// Fragments with alpha below this are skipped.
 pub const ALPHA_MIN: f32 = 1.0 / 255.0;
 /// Per-fragment alpha is clamped to this.

@@ -44,8 +44,12 @@ pub const SSIM_WINDOW_SIGMA: f64 = 1.5;
 const LOSS_TILE: u32 = 16;
 /// Pixels each per-pixel invocation filters (prepended as `LOSS_RUN`).
 const LOSS_RUN: u32 = 8;
-/// Side of the squares object losses skip or compute (prepended as `SKIP_CELL`): a run's.
+/// Side of the squares object losses skip or compute (prepended as `SKIP_CELL`): a run's, and
+/// the squares whose occupancy batched object renders mark.
 const SKIP_CELL: u32 = LOSS_RUN;
+const _: () = assert!(SKIP_CELL == crate::OCCUPANCY_CELL);
+/// In a cell map ([`object_cell_map`]): the square's masked pixels belong to several objects.
+pub const MIXED_CELL: u32 = u32::MAX;
 /// Tiles one workgroup of `loss_content.wgsl` scans, side by side (prepended as
 /// `CONTENT_TILES_PER_GROUP`): a CPU adapter pays per workgroup, and one tile's 16 rows are only
 /// two of its 8-lane batches.
@@ -72,6 +76,7 @@ const NEAR_ARGUMENTS: u64 = 0;
 const FAR_ARGUMENTS: u64 = 12;
 
 const LOSS_COMMON: &str = include_str!("loss/loss_common.wgsl");
+const LOSS_ID_MAPS: &str = include_str!("loss/loss_id_maps.wgsl");
 const LOSS_INPUTS: &str = include_str!("loss/loss_inputs.wgsl");
 const LOSS_MOMENTS_HORIZONTAL: &str = include_str!("loss/loss_moments_horizontal.wgsl");
 const LOSS_PER_PIXEL: &str = include_str!("loss/loss_per_pixel.wgsl");
@@ -81,6 +86,7 @@ const LOSS_GRADIENT: &str = include_str!("loss/loss_gradient.wgsl");
 const LOSS_REDUCE: &str = include_str!("loss/loss_reduce.wgsl");
 const LOSS_SKIP: &str = include_str!("loss/loss_skip.wgsl");
 const LOSS_CONTENT: &str = include_str!("loss/loss_content.wgsl");
+const LOSS_CELL_CONTENT: &str = include_str!("loss/loss_cell_content.wgsl");
 const LOSS_WORK: &str = include_str!("loss/loss_work.wgsl");
 const LOSS_WORK_LISTS: &str = include_str!("loss/loss_work_lists.wgsl");
 
@@ -98,6 +104,8 @@ pub enum LossError {
         id_map: u32,
         maps: usize,
     },
+    #[error("a batch of object losses has {cell_maps} cell maps for {id_maps} id maps")]
+    CellMapCount { cell_maps: usize, id_maps: usize },
     #[error(
         "render loss: {what} holds {actual_bytes} bytes but a {width}x{height} image needs {needed_bytes}"
     )]
@@ -142,6 +150,7 @@ fn loss_constants_wgsl() -> String {
             ("SKIP_CELL", SKIP_CELL),
             ("MAX_BATCH_SLOTS", MAX_BATCH_SLOTS),
             ("CONTENT_TILES_PER_GROUP", CONTENT_TILES_PER_GROUP),
+            ("MIXED_CELL", MIXED_CELL),
         ]),
         l1 = L1_WEIGHT,
         dssim = DSSIM_WEIGHT,
@@ -190,6 +199,44 @@ pub struct ObjectLossImages<'a> {
     pub slots: &'a [ObjectLossSlot],
     pub width: u32,
     pub height: u32,
+    /// Where the renders and masks hold content, when known: then a small pass over squares
+    /// replaces one that reads every pixel of every slot. The losses are the same either way.
+    pub content: Option<ObjectContentHints<'a>>,
+}
+
+/// What a batch of object losses knows of its inputs' content, per [`crate::OCCUPANCY_CELL`]
+/// square (`ceil(width / OCCUPANCY_CELL)` across, `ceil(height / OCCUPANCY_CELL)` down,
+/// row-major).
+#[derive(Debug, Clone, Copy)]
+pub struct ObjectContentHints<'a> {
+    /// Per rendered image, indexed as the rendered buffer's images are: a u32 per square, non-zero
+    /// where some pixel's colour is (`ObjectBatchOutput::occupancy`).
+    pub occupancy: &'a wgpu::Buffer,
+    /// Each id map's [`object_cell_map`], in the order of `id_maps`.
+    pub cell_maps: &'a [&'a wgpu::Buffer],
+}
+
+/// The cell map of an id map `width` pixels wide: per [`crate::OCCUPANCY_CELL`] square,
+/// row-major, 0 where no pixel has an object, the id where every pixel with one has the same,
+/// and [`MIXED_CELL`] where they differ (the loss then reads the square's ids).
+pub fn object_cell_map(ids: &[u32], width: u32) -> Vec<u32> {
+    let width = width.max(1) as usize;
+    let height = ids.len().div_ceil(width);
+    let cell = SKIP_CELL as usize;
+    let cells_x = width.div_ceil(cell);
+    let mut map = vec![0u32; cells_x * height.div_ceil(cell)];
+    for (row, row_ids) in ids.chunks(width).enumerate() {
+        for (x, &id) in row_ids.iter().enumerate() {
+            let square = &mut map[row / cell * cells_x + x / cell];
+            *square = match *square {
+                _ if id == 0 => *square,
+                0 => id,
+                current if current == id => current,
+                _ => MIXED_CELL,
+            };
+        }
+    }
+    map
 }
 
 /// Where one loss writes; for a batch, where its first slot writes (slot `s` writes gradient
@@ -257,6 +304,8 @@ pub struct RenderLoss {
     /// Object losses: which cells hold content, how far each cell is from it and which tiles
     /// the passes must compute, so they skip what is exactly zero.
     tile_content: Kernel,
+    /// The same from the renders' occupancy and the masks' cell maps, where the caller has them.
+    cell_content: Kernel,
     work_lists: Kernel,
     /// Bound as the object ids and the work lists of a loss without a mask.
     no_mask: wgpu::Buffer,
@@ -299,6 +348,7 @@ impl RenderLoss {
                 LOSS_COMMON,
                 LOSS_SKIP,
                 LOSS_WORK,
+                LOSS_ID_MAPS,
                 LOSS_INPUTS,
                 source,
             ]
@@ -333,6 +383,7 @@ impl RenderLoss {
                     LOSS_COMMON,
                     LOSS_SKIP,
                     LOSS_WORK,
+                    LOSS_ID_MAPS,
                     LOSS_INPUTS,
                     LOSS_PARTIALS_RUN,
                     LOSS_GRADIENT,
@@ -342,8 +393,24 @@ impl RenderLoss {
             reduce: kernel("loss_reduce", &plain(LOSS_REDUCE), "reduce_loss")?,
             tile_content: kernel(
                 "loss_tile_content",
-                &[constants.as_str(), LOSS_COMMON, LOSS_INPUTS, LOSS_CONTENT],
+                &[
+                    constants.as_str(),
+                    LOSS_COMMON,
+                    LOSS_ID_MAPS,
+                    LOSS_INPUTS,
+                    LOSS_CONTENT,
+                ],
                 "loss_tile_content",
+            )?,
+            cell_content: kernel(
+                "loss_cell_content",
+                &[
+                    constants.as_str(),
+                    LOSS_COMMON,
+                    LOSS_ID_MAPS,
+                    LOSS_CELL_CONTENT,
+                ],
+                "loss_cell_content",
             )?,
             work_lists: kernel(
                 "loss_work_lists",
@@ -470,6 +537,7 @@ impl RenderLoss {
                 slots: &slots,
                 width: images.width,
                 height: images.height,
+                content: None,
             };
             return self.encode_objects(ctx, encoder, &batch, weight, outputs);
         }
@@ -533,6 +601,9 @@ impl RenderLoss {
             height,
         };
         check_sizes(&single, images.id_maps, images.slots.len() as u32, outputs)?;
+        if let Some(content) = &images.content {
+            check_content_hints(images, content)?;
+        }
         let table = slot_table(images)?;
         if table.is_empty() {
             return Ok(());
@@ -547,7 +618,6 @@ impl RenderLoss {
         let first_map = images.id_maps[0];
         let maps: [&wgpu::Buffer; MAX_ID_MAPS] =
             std::array::from_fn(|index| images.id_maps.get(index).copied().unwrap_or(first_map));
-        let tiles_xy = [width.div_ceil(LOSS_TILE), height.div_ceil(LOSS_TILE)];
         for (chunk_index, chunk) in table.chunks(per_dispatch).enumerate() {
             let first = (chunk_index * per_dispatch) as u32;
             let count = chunk.len() as u32;
@@ -572,7 +642,15 @@ impl RenderLoss {
                 rendered_grad: outputs.rendered_grad,
                 loss_values: outputs.loss_values,
             };
-            self.encode_work_lists(ctx, encoder, scratch, &bindings, tiles_xy, count);
+            self.encode_work_lists(
+                ctx,
+                encoder,
+                scratch,
+                &bindings,
+                images.content.as_ref(),
+                [width, height],
+                count,
+            );
             encoder.clear_buffer(
                 &scratch.loss_partials,
                 0,
@@ -600,24 +678,63 @@ impl RenderLoss {
 
     /// Object losses: marks each slot's cells with content, then their distances to it and the
     /// work lists of the four passes.
+    #[allow(clippy::too_many_arguments)]
     fn encode_work_lists(
         &self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
         scratch: &LossScratch,
         bindings: &PassBindings<'_>,
-        [tiles_x, tiles_y]: [u32; 2],
+        content: Option<&ObjectContentHints<'_>>,
+        [width, height]: [u32; 2],
         slots: u32,
     ) {
-        encoder.clear_buffer(&scratch.tile_content, 0, None);
-        let bind = self
-            .tile_content
-            .bind(ctx, &with_inputs(bindings, &[&scratch.tile_content]));
-        self.tile_content.dispatch(
-            encoder,
-            &bind,
-            [tiles_x.div_ceil(CONTENT_TILES_PER_GROUP), tiles_y, slots],
-        );
+        let [tiles_x, tiles_y] = [width.div_ceil(LOSS_TILE), height.div_ceil(LOSS_TILE)];
+        match content {
+            Some(content) => {
+                let [map_0, map_1, map_2] = bindings.id_maps;
+                let first = content.cell_maps[0];
+                let [cells_0, cells_1, cells_2]: [&wgpu::Buffer; MAX_ID_MAPS] =
+                    std::array::from_fn(|index| {
+                        content.cell_maps.get(index).copied().unwrap_or(first)
+                    });
+                let bind = self.cell_content.bind(
+                    ctx,
+                    &[
+                        bindings.params,
+                        content.occupancy,
+                        &scratch.tile_content,
+                        map_0,
+                        map_1,
+                        map_2,
+                        cells_0,
+                        cells_1,
+                        cells_2,
+                    ],
+                );
+                let cells = cell_count(width, height);
+                self.cell_content.dispatch(
+                    encoder,
+                    &bind,
+                    [
+                        u32::try_from(cells.div_ceil(64)).unwrap_or(u32::MAX),
+                        slots,
+                        1,
+                    ],
+                );
+            }
+            None => {
+                encoder.clear_buffer(&scratch.tile_content, 0, None);
+                let bind = self
+                    .tile_content
+                    .bind(ctx, &with_inputs(bindings, &[&scratch.tile_content]));
+                self.tile_content.dispatch(
+                    encoder,
+                    &bind,
+                    [tiles_x.div_ceil(CONTENT_TILES_PER_GROUP), tiles_y, slots],
+                );
+            }
+        }
         encoder.copy_buffer_to_buffer(
             &self.empty_work_counts,
             0,
@@ -827,6 +944,15 @@ fn check_sizes(
             .iter()
             .map(|map| ("target object ids", *map, pixels * 4)),
     );
+    require_sizes(required, width, height)
+}
+
+/// Fails on the first buffer smaller than the bytes a `width x height` loss needs of it.
+fn require_sizes<'b>(
+    required: impl IntoIterator<Item = (&'static str, &'b wgpu::Buffer, u64)>,
+    width: u32,
+    height: u32,
+) -> Result<(), LossError> {
     for (what, buffer, needed_bytes) in required {
         if buffer.size() < needed_bytes {
             return Err(LossError::BufferTooSmall {
@@ -839,4 +965,60 @@ fn check_sizes(
         }
     }
     Ok(())
+}
+
+/// Squares of [`SKIP_CELL`] pixels in a `width x height` image.
+fn cell_count(width: u32, height: u32) -> u64 {
+    u64::from(width.div_ceil(SKIP_CELL)) * u64::from(height.div_ceil(SKIP_CELL))
+}
+
+/// Checks a batch's content hints against its images: a cell map per id map, each large enough.
+fn check_content_hints(
+    images: &ObjectLossImages<'_>,
+    content: &ObjectContentHints<'_>,
+) -> Result<(), LossError> {
+    if content.cell_maps.len() != images.id_maps.len() {
+        return Err(LossError::CellMapCount {
+            cell_maps: content.cell_maps.len(),
+            id_maps: images.id_maps.len(),
+        });
+    }
+    let (width, height) = (images.width, images.height);
+    let cell_bytes = cell_count(width, height) * 4;
+    let images_needed = u64::from(images.rendered_index) + images.slots.len() as u64;
+    let required = std::iter::once((
+        "render occupancy",
+        content.occupancy,
+        images_needed * cell_bytes,
+    ))
+    .chain(
+        content
+            .cell_maps
+            .iter()
+            .map(|map| ("cell map", *map, cell_bytes)),
+    );
+    require_sizes(required, width, height)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cell_map_names_the_one_object_of_a_square_or_marks_it_mixed() {
+        // 10 x 9 pixels: squares of 8, so 2 x 2 of them, the last column and row partial.
+        let (width, height) = (10usize, 9usize);
+        let mut ids = vec![0u32; width * height];
+        let mut set = |x: usize, y: usize, id: u32| ids[y * width + x] = id;
+        set(1, 1, 5);
+        set(7, 7, 5);
+        set(9, 0, 3);
+        set(8, 8, 3);
+        set(9, 8, 4);
+        assert_eq!(
+            object_cell_map(&ids, width as u32),
+            vec![5, 3, 0, MIXED_CELL],
+            "top left one object, top right another, bottom left empty, bottom right two"
+        );
+    }
 }

@@ -1,7 +1,9 @@
 // Object losses only: whether each SKIP_CELL square of each slot holds content, i.e. any pixel
 // whose rendered or (masked) target colour is non-zero. One workgroup per LOSS_TILE square and
-// slot (z), CONTENT_TILES_PER_GROUP tiles side by side per workgroup. An object's render and mask usually cover a small part of the image, and where both
-// are zero over the whole SSIM reach the loss and its gradient are exactly zero (loss_skip.wgsl).
+// slot (z), CONTENT_TILES_PER_GROUP tiles side by side per workgroup. An object's render and
+// mask usually cover a small part of the image, and where both are zero over the whole SSIM
+// reach the loss and its gradient are exactly zero (loss_skip.wgsl). Losses whose renders
+// marked their occupancy read that instead of every pixel (loss_cell_content.wgsl).
 
 // Zeroed before the pass; a row with content marks its cells. No workgroup memory or barriers:
 // a CPU adapter pays for a barrier in every workgroup.

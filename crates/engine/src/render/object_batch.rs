@@ -86,6 +86,14 @@ impl ObjectBatchOutput<'_> {
         &self.workspace().image
     }
 
+    /// Which squares of each slot's image hold a non-zero colour: a u32 per
+    /// [`crate::OCCUPANCY_CELL`] square, 1 or 0, `ceil(width / OCCUPANCY_CELL)` squares across
+    /// and `ceil(height / OCCUPANCY_CELL)` down, row-major, slot after slot. An object render
+    /// usually covers a small part of the image; the object loss skips what is exactly zero.
+    pub fn occupancy(&self) -> &wgpu::Buffer {
+        &self.workspace().occupancy
+    }
+
     /// Bytes of one slot's image (the byte offset of slot `s` is `s` times this).
     pub fn slot_image_bytes(&self) -> u64 {
         self.camera.pixel_count() as u64 * 16
@@ -149,8 +157,10 @@ impl Renderer {
             RenderUniforms::new(&camera, &settings, count, workspace.size.intersections);
         // Object renders do not feed the densification statistic (backward_objects_screen).
         uniforms.mean2d_abs = 0;
+        uniforms.mark_occupancy = 1;
         self.upload_uniforms(ctx, encoder, &workspace, &uniforms);
         encoder.clear_buffer(&workspace.tile_ranges, 0, None);
+        encoder.clear_buffer(&workspace.occupancy, 0, None);
         if count > 0 {
             self.encode_object_tiles(
                 ctx,
@@ -175,6 +185,7 @@ impl Renderer {
                 &workspace.final_transmittance,
                 &workspace.last_contributor,
                 &workspace.depth,
+                &workspace.occupancy,
             ],
         );
         kernels

@@ -257,6 +257,7 @@ impl Renderer {
                 &workspace.final_transmittance,
                 &workspace.last_contributor,
                 &workspace.depth,
+                &workspace.occupancy,
             ],
         );
         k.rasterize_forward

@@ -29,7 +29,9 @@ pub struct RenderUniforms {
     /// 1: the rasterize backward sums `|d loss / d mean2d|` (the densification statistic, fed by
     /// the full render's loss alone); 0 for object renders, which leave it to the full render.
     pub mean2d_abs: u32,
-    pub padding: u32,
+    /// 1: the rasterize forward marks which [`crate::OCCUPANCY_CELL`] squares hold a non-zero
+    /// colour (object renders); 0 for the full render.
+    pub mark_occupancy: u32,
 }
 
 impl RenderUniforms {
@@ -63,7 +65,7 @@ impl RenderUniforms {
             intersection_capacity,
             jacobian_limit: camera.jacobian_limit(),
             mean2d_abs: u32::from(matches!(settings.filter, ObjectFilter::All)),
-            padding: 0,
+            mark_occupancy: 0,
         }
     }
 }
@@ -148,7 +150,10 @@ mod tests {
                 "mean2d_abs",
                 std::mem::offset_of!(RenderUniforms, mean2d_abs),
             ),
-            ("padding", std::mem::offset_of!(RenderUniforms, padding)),
+            (
+                "mark_occupancy",
+                std::mem::offset_of!(RenderUniforms, mark_occupancy),
+            ),
         ];
         let host: Vec<(String, u32)> = host
             .iter()

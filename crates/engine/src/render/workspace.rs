@@ -11,6 +11,11 @@ pub const INTERSECTION_COUNT_OFFSET: u64 = 4;
 /// Byte offset of the per-intersection indirect dispatch size in `counts`.
 pub const INTERSECTION_DISPATCH_OFFSET: u64 = 8;
 
+/// Occupancy squares per tile: a tile's side spans `TILE_SIZE / OCCUPANCY_CELL` of them, and an
+/// image's last (partial) square in a row or column lies in its last tile.
+const OCCUPANCY_CELLS_PER_TILE: usize = (crate::TILE_SIZE / crate::OCCUPANCY_CELL
+    * (crate::TILE_SIZE / crate::OCCUPANCY_CELL)) as usize;
+
 /// Sizes a workspace is allocated for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct WorkspaceSize {
@@ -49,6 +54,8 @@ pub struct RenderWorkspace {
     pub final_transmittance: wgpu::Buffer,
     pub last_contributor: wgpu::Buffer,
     pub depth: wgpu::Buffer,
+    /// Per image, a u32 per [`crate::OCCUPANCY_CELL`] square (object renders mark it).
+    pub occupancy: wgpu::Buffer,
     pub grad_projected: wgpu::Buffer,
 }
 
@@ -104,6 +111,12 @@ impl RenderWorkspace {
             final_transmittance: storage(ctx, "final transmittance", pixels * 4, none)?,
             last_contributor: storage(ctx, "last contributor", pixels * 4, none)?,
             depth: storage(ctx, "rendered depth", pixels * 4, none)?,
+            occupancy: storage(
+                ctx,
+                "occupancy",
+                size.tiles * OCCUPANCY_CELLS_PER_TILE * 4,
+                none,
+            )?,
             grad_projected: storage(
                 ctx,
                 "projected splat gradients",

@@ -10,6 +10,6 @@ pub mod trainer;
 pub mod views;
 
 pub use config::TrainConfig;
-pub use object_loss::{ObjectLossConfig, ObjectTargets, SkippedPair};
+pub use object_loss::{ObjectLossConfig, ObjectTargets, SkippedPair, ViewIdMaps};
 pub use schedule::TrainSchedule;
 pub use trainer::{EvalReport, PartialFilterCost, TrainError, TrainProgress, Trainer, TrainerMeta};

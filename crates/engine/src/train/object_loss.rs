@@ -9,6 +9,7 @@ use rand::Rng;
 use rand::seq::IndexedRandom;
 use serde::{Deserialize, Serialize};
 
+use crate::loss::object_cell_map;
 use segsplat_gpu::GpuContext;
 use segsplat_scene::Level;
 
@@ -102,10 +103,23 @@ impl ObjectLossConfig {
 /// Bounds the loss slots a step needs (1 + 3 levels x m).
 pub const MAX_OBJECTS_PER_LEVEL: u32 = 16;
 
+/// One training view's object masks, as the trainer is given them.
+pub struct ViewIdMaps {
+    /// Pixels per row of every level's map.
+    pub width: u32,
+    /// Per level: `width * height` u32 object ids (0 = none), row-major.
+    pub ids: [Vec<u32>; 3],
+}
+
 /// One training view's object masks on the GPU.
 pub struct ViewObjectMasks {
     /// Per level: `width * height` u32 object ids (0 = none), the loss kernel's mask layout.
     pub ids: [wgpu::Buffer; 3],
+    /// Per level: which object each 8x8 square holds (`loss::object_cell_map`), so the object
+    /// loss finds its mask's squares without reading the ids.
+    pub cell_maps: [wgpu::Buffer; 3],
+    /// Pixels per row of the maps.
+    pub width: u32,
     /// Per level: the objects present, sorted.
     pub present: [Vec<u32>; 3],
     /// Per level: the pixels of the id map (the trainer checks them against the view's).
@@ -118,25 +132,32 @@ pub struct ObjectTargets {
 }
 
 impl ObjectTargets {
-    /// Uploads per-view id maps. `masks[v][level]` must have the training view's pixel count.
-    pub fn upload(ctx: &GpuContext, masks: Vec<[Vec<u32>; 3]>) -> Self {
+    /// Uploads per-view id maps. `masks[v]` must have the training view's size.
+    pub fn upload(ctx: &GpuContext, masks: Vec<ViewIdMaps>) -> Self {
+        let buffer = |label, contents: &[u32]| {
+            wgpu::util::DeviceExt::create_buffer_init(
+                &ctx.device,
+                &wgpu::util::BufferInitDescriptor {
+                    label: Some(label),
+                    contents: bytemuck::cast_slice(contents),
+                    usage: wgpu::BufferUsages::STORAGE,
+                },
+            )
+        };
         let views = masks
             .into_iter()
-            .map(|levels| {
-                let present = std::array::from_fn(|level| present_objects(&levels[level]));
-                let ids = std::array::from_fn(|level| {
-                    wgpu::util::DeviceExt::create_buffer_init(
-                        &ctx.device,
-                        &wgpu::util::BufferInitDescriptor {
-                            label: Some("object mask"),
-                            contents: bytemuck::cast_slice(&levels[level]),
-                            usage: wgpu::BufferUsages::STORAGE,
-                        },
-                    )
-                });
+            .map(|view| {
+                let levels = &view.ids;
                 ViewObjectMasks {
-                    ids,
-                    present,
+                    ids: std::array::from_fn(|level| buffer("object mask", &levels[level])),
+                    cell_maps: std::array::from_fn(|level| {
+                        buffer(
+                            "object cell map",
+                            &object_cell_map(&levels[level], view.width),
+                        )
+                    }),
+                    width: view.width,
+                    present: std::array::from_fn(|level| present_objects(&levels[level])),
                     pixel_counts: std::array::from_fn(|level| levels[level].len()),
                 }
             })

@@ -14,7 +14,9 @@ use segsplat_engine::GaussianModel;
 use segsplat_engine::densify::ObjectFloor;
 use segsplat_engine::train::trainer::initial_model;
 use segsplat_engine::train::views::is_held_out;
-use segsplat_engine::train::{ObjectLossConfig, ObjectTargets, TrainConfig, TrainError, Trainer};
+use segsplat_engine::train::{
+    ObjectLossConfig, ObjectTargets, TrainConfig, TrainError, Trainer, ViewIdMaps,
+};
 use segsplat_gpu::GpuContext;
 use segsplat_scene::{Scene, SparsePoints};
 use segsplat_vision::segment::MaskGenerator;
@@ -261,7 +263,14 @@ pub fn attach_object_training(
     trainer.set_prune_guard(Box::new(ObjectFloor {
         floors: options.object_floors,
     }));
-    let ids = masks.views.iter().map(|view| view.level_ids()).collect();
+    let ids = masks
+        .views
+        .iter()
+        .map(|view| ViewIdMaps {
+            width: view.camera.width,
+            ids: view.level_ids(),
+        })
+        .collect();
     trainer.set_object_targets(ObjectTargets::upload(ctx, ids))?;
     Ok(())
 }

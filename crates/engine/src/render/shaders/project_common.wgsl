@@ -8,6 +8,8 @@
 // 0-1 d/d mean2d, 2-4 d/d conic, 5-7 d/d colour, 8 d/d opacity, 9-10 sum |d/d mean2d|.
 
 const TILE_SIZE: u32 = 16u;
+// Side of the squares whose occupancy an object render marks (`mark_occupancy`).
+const OCCUPANCY_CELL: u32 = 8u;
 const GRAD_STRIDE: u32 = 12u;
 const ALPHA_MIN: f32 = 0.003921568627451; // 1 / 255
 const ALPHA_MAX: f32 = 0.99;
@@ -38,7 +40,9 @@ struct RenderUniforms {
     // 1 where the rasterize backward also sums |d loss / d mean2d| (the densification statistic,
     // which the full render's loss alone feeds); 0 for object renders.
     mean2d_abs: u32,
-    padding: u32,
+    // 1 where the rasterize forward marks the OCCUPANCY_CELL squares with a non-zero colour
+    // (object renders, for the object loss's skipping); 0 for the full render.
+    mark_occupancy: u32,
 }
 
 // Flat invocation index of a 1D workload split over x and y workgroups (see `workgroups_2d`).

@@ -105,5 +105,8 @@ fn rasterize_forward(
         final_transmittance[index] = transmittance;
         last_contributor[index] = contributed;
         depth[index] = depth_sum;
+        if uniforms.mark_occupancy != 0u && any(rgb != vec3<f32>(0.0)) {
+            mark_occupied(group.z, pixel);
+        }
     }
 }

@@ -4,7 +4,7 @@
 //! separate per-object renders they replace stay as the reference (`object_separate.rs`).
 
 use super::{TrainError, Trainer};
-use crate::loss::{LossOutputs, ObjectLossImages, ObjectLossSlot};
+use crate::loss::{LossOutputs, ObjectContentHints, ObjectLossImages, ObjectLossSlot};
 use crate::render::{ObjectSlot, RenderOutput};
 use crate::train::object_loss::{ObjectTargets, SkippedPair, sample_objects};
 use segsplat_scene::Level;
@@ -24,6 +24,12 @@ pub enum ObjectTargetsError {
         given: usize,
         expected: usize,
     },
+    #[error("training view {view}: object masks are {given} pixels wide, the view is {expected}")]
+    Width {
+        view: usize,
+        given: u32,
+        expected: u32,
+    },
 }
 
 impl Trainer {
@@ -40,6 +46,13 @@ impl Trainer {
         }
         for (view, (masks, train_view)) in targets.views.iter().zip(&self.views.train).enumerate() {
             let pixels = train_view.camera.pixel_count();
+            if masks.width != train_view.camera.width {
+                return Err(TrainError::ObjectTargets(ObjectTargetsError::Width {
+                    view,
+                    given: masks.width,
+                    expected: train_view.camera.width,
+                }));
+            }
             for level in Level::ALL {
                 let given = masks.pixel_counts[level.index()];
                 if given != pixels {
@@ -134,6 +147,7 @@ impl Trainer {
             .renderer
             .forward_objects(&self.ctx, encoder, scene, base, &slots)?;
         let id_maps: Vec<&wgpu::Buffer> = masks.ids.iter().collect();
+        let cell_maps: Vec<&wgpu::Buffer> = masks.cell_maps.iter().collect();
         let loss_slots: Vec<ObjectLossSlot> = slots
             .iter()
             .map(|slot| ObjectLossSlot {
@@ -152,6 +166,10 @@ impl Trainer {
                 slots: &loss_slots,
                 width: camera.width,
                 height: camera.height,
+                content: Some(ObjectContentHints {
+                    occupancy: batch.occupancy(),
+                    cell_maps: &cell_maps,
+                }),
             },
             config.weight,
             &LossOutputs {
