@@ -23,9 +23,14 @@ pub(crate) enum Tx {
 }
 
 impl Pool {
+    /// Begins a transaction. SQLite's takes the write lock at once (`BEGIN IMMEDIATE`, waiting
+    /// out the busy timeout for it): a deferred one that reads and then writes fails at once with
+    /// SQLITE_BUSY when another connection committed a write in between (WAL mode does not wait
+    /// there), so two requests that meet, such as a scene deletion beside a worker finishing a
+    /// job, would end in a 500.
     pub(crate) async fn begin(&self) -> Result<Tx, sqlx::Error> {
         Ok(match self {
-            Pool::Sqlite(pool) => Tx::Sqlite(pool.begin().await?),
+            Pool::Sqlite(pool) => Tx::Sqlite(pool.begin_with("BEGIN IMMEDIATE").await?),
             Pool::Postgres(pool) => Tx::Postgres(pool.begin().await?),
         })
     }
@@ -331,7 +336,51 @@ pub(crate) fn numbered(sql: &str) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::numbered;
+    use super::{Pool, Tx, numbered};
+    use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions};
+    use std::time::Duration;
+
+    /// A transaction that reads, then writes after another connection has written, commits:
+    /// the other writer waits for it instead of the transaction failing with SQLITE_BUSY (which
+    /// a deferred `BEGIN` gets in WAL mode, the busy timeout notwithstanding).
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_sqlite_transaction_reading_then_writing_outlasts_another_writer() {
+        let dir = tempfile::tempdir().unwrap();
+        let options = SqliteConnectOptions::new()
+            .filename(dir.path().join("db.sqlite"))
+            .create_if_missing(true)
+            .journal_mode(SqliteJournalMode::Wal)
+            .busy_timeout(Duration::from_secs(10));
+        let sqlite = SqlitePoolOptions::new()
+            .max_connections(2)
+            .connect_with(options)
+            .await
+            .unwrap();
+        sqlx::query("CREATE TABLE t (x INTEGER)")
+            .execute(&sqlite)
+            .await
+            .unwrap();
+        let pool = Pool::Sqlite(sqlite.clone());
+        let Tx::Sqlite(mut transaction) = pool.begin().await.unwrap() else {
+            unreachable!("a SQLite pool begins SQLite transactions")
+        };
+        sqlx::query("SELECT COUNT(*) FROM t")
+            .fetch_one(&mut *transaction)
+            .await
+            .unwrap();
+        let other = tokio::spawn(async move {
+            sqlx::query("INSERT INTO t VALUES (2)")
+                .execute(&sqlite)
+                .await
+        });
+        tokio::time::sleep(Duration::from_millis(200)).await;
+        sqlx::query("INSERT INTO t VALUES (1)")
+            .execute(&mut *transaction)
+            .await
+            .unwrap();
+        transaction.commit().await.unwrap();
+        other.await.unwrap().unwrap();
+    }
 
     #[test]
     fn placeholders_are_numbered_outside_quotes() {
