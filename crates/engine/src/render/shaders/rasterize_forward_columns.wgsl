@@ -119,12 +119,13 @@ fn rasterize_forward(
     write_pixel(group.z, first_pixel + vec2<u32>(0u, 7u), p7);
     // The column lies in one occupancy square (PIXELS == OCCUPANCY_CELL, columns start at
     // multiples of it); pixels outside the image never composite, so their colour is zero.
-    let zero = vec3<f32>(0.0);
-    let occupied = any(p0.rgb != zero) || any(p1.rgb != zero) || any(p2.rgb != zero)
-        || any(p3.rgb != zero) || any(p4.rgb != zero) || any(p5.rgb != zero)
-        || any(p6.rgb != zero) || any(p7.rgb != zero);
-    if uniforms.mark_occupancy != 0u && occupied {
-        mark_occupied(group.z, first_pixel);
+    if uniforms.mark_occupancy != 0u {
+        let zero = vec3<f32>(0.0);
+        if any(p0.rgb != zero) || any(p1.rgb != zero) || any(p2.rgb != zero)
+            || any(p3.rgb != zero) || any(p4.rgb != zero) || any(p5.rgb != zero)
+            || any(p6.rgb != zero) || any(p7.rgb != zero) {
+            mark_occupied(group.z, first_pixel);
+        }
     }
 }
 
