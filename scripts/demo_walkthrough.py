@@ -63,6 +63,9 @@ class ProgressView:
         self.stage = None
         self.last_line = None
         self.last_tenth = -1
+        # Seconds from the job's first event to each stage's first, by stage, in order.
+        self.stage_starts = {}
+        self.started = time.monotonic()
 
     def line(self, progress):
         stage = progress.get("stage", "")
@@ -83,6 +86,7 @@ class ProgressView:
 
     def update(self, progress):
         stage = progress.get("stage", "")
+        self.stage_starts.setdefault(stage, time.monotonic() - self.started)
         text = self.line(progress)
         if text == self.last_line:
             return
@@ -104,11 +108,19 @@ class ProgressView:
         if self.tty and self.stage is not None:
             sys.stdout.write("\n")
             sys.stdout.flush()
+        self.ended = time.monotonic() - self.started
+
+    def stage_times(self):
+        """Each stage's wall time, from its first event to the next stage's (the last one's to
+        the job's end): where a job's time goes, e.g. "segment 3s, train 2m50s"."""
+        starts = list(self.stage_starts.items())
+        ends = [start for _, start in starts[1:]] + [self.ended]
+        return ", ".join(f"{stage} {duration(end - start)}"
+                         for (stage, start), end in zip(starts, ends))
 
 
-def follow_job(url, job_id):
+def follow_job(url, job_id, view):
     """Follows the job's Server-Sent Events until its final state; returns that state's payload."""
-    view = ProgressView()
     final = None
     with urllib.request.urlopen(f"{url}/v1/jobs/{job_id}/events") as stream:
         data = []
@@ -145,11 +157,20 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--url", required=True)
     parser.add_argument("--dataset", required=True)
-    parser.add_argument("--steps", type=int, required=True)
+    parser.add_argument("--steps", required=True,
+                        help='training steps at 256 px, or "defaults": the job\'s own config '
+                             '(steps from the scene\'s size, full resolution)')
     parser.add_argument("--out", required=True)
     args = parser.parse_args()
     url, out = args.url, args.out
     started = time.monotonic()
+    if args.steps == "defaults":
+        config, settings = {}, "the job's defaults"
+    elif args.steps.isdigit():
+        config = {"steps": int(args.steps), "max_resolution": 256, "checkpoint_every": 0}
+        settings = f"{args.steps} steps at 256 px"
+    else:
+        sys.exit(f'STEPS must be a number of steps or "defaults", not {args.steps!r}')
 
     print(f"uploading {args.dataset} ...", flush=True)
     scene = json.loads(request(f"{url}/v1/scenes", dataset_archive(args.dataset),
@@ -158,11 +179,11 @@ def main():
     print(f"scene {scene['id']}: {scene['format']}, {scene['frame_count']} frames ({size}), "
           f"{scene['sparse_point_count']} sparse points", flush=True)
 
-    config = {"steps": args.steps, "max_resolution": 256, "checkpoint_every": 0}
     job = post_json(f"{url}/v1/scenes/{scene['id']}/jobs",
                     {"kind": "segment_then_splat", "config": config})
-    print(f"job {job['id']}: segment_then_splat, {args.steps} steps at 256 px", flush=True)
-    final = follow_job(url, job["id"])
+    print(f"job {job['id']}: segment_then_splat, {settings}", flush=True)
+    view = ProgressView()
+    final = follow_job(url, job["id"], view)
     if not final or final.get("state") != "succeeded":
         reason = (final or {}).get("error") or "the event stream ended early"
         sys.exit(f"job {job['id']} {(final or {}).get('state', 'ended')}: {reason}")
@@ -191,7 +212,8 @@ def main():
     held_out = metrics.get("held_out") or {}
     print("\nSummary")
     rows = [["scene", scene["id"]], ["job", job["id"]],
-            ["wall time", duration(time.monotonic() - started)]]
+            ["wall time", duration(time.monotonic() - started)],
+            ["stage times", view.stage_times()]]
     if held_out:
         rows.append(["held-out PSNR / SSIM",
                      f"{held_out.get('psnr', 0):.2f} dB / {held_out.get('ssim', 0):.3f} "

@@ -1,7 +1,7 @@
 //! `scripts/demo.sh` as a person runs it, with an existing binary (`SEGSPLAT_BIN`): a progress
 //! bar per stage (the segmentation stage counting views), no line printed twice in a row, no
-//! colour codes or raw dicts, the server's log in a file, a summary table, and every output in
-//! the one folder it names (nothing in the repository).
+//! colour codes or raw dicts, the server's log in a file, a summary table with each stage's time,
+//! and every output in the one folder it names (nothing in the repository).
 
 use std::process::Command;
 
@@ -62,6 +62,16 @@ fn the_demo_walks_through_the_job_cleanly() {
     for heading in ["Objects found", "Summary", "held-out PSNR"] {
         assert!(stdout.contains(heading), "{heading}: {stdout}");
     }
+    // Where the job's time went, stage by stage in the order they ran.
+    let stage_times = lines
+        .iter()
+        .find(|line| line.starts_with("stage times"))
+        .unwrap_or_else(|| panic!("no stage times row: {stdout}"));
+    let segment = stage_times
+        .find("segment ")
+        .expect("the segment stage's time");
+    let train = stage_times.find("train ").expect("the train stage's time");
+    assert!(segment < train, "{stage_times}");
     for file in ["server.log", "summary.txt", "objects.json"] {
         assert!(out.join(file).is_file(), "{file}");
     }
@@ -90,4 +100,26 @@ fn the_demo_walks_through_the_job_cleanly() {
         .collect();
     left.sort();
     assert_eq!(left, ["dataset", "demo-output"]);
+}
+
+#[test]
+fn the_demo_refuses_steps_that_are_neither_a_number_nor_defaults() {
+    let work = tempfile::tempdir().unwrap();
+    let repo = env!("CARGO_MANIFEST_DIR");
+    let run = Command::new("bash")
+        .arg(format!("{repo}/scripts/demo.sh"))
+        .arg(work.path())
+        .arg("500x")
+        .env("SEGSPLAT_BIN", env!("CARGO_BIN_EXE_segsplat"))
+        .env("SEGSPLAT_DEMO_OUT", work.path().join("demo-output"))
+        .current_dir(work.path())
+        .output()
+        .unwrap();
+    assert_eq!(run.status.code(), Some(2), "{run:?}");
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        stderr.contains("STEPS") && stderr.contains("500x"),
+        "{stderr}"
+    );
+    assert!(!work.path().join("demo-output").exists(), "nothing written");
 }
