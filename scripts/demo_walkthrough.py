@@ -63,9 +63,11 @@ class ProgressView:
         self.stage = None
         self.last_line = None
         self.last_tenth = -1
-        # Seconds from the job's first event to each stage's first, by stage, in order.
-        self.stage_starts = {}
+        # Seconds from the job's submission to each stage's first event, by stage, in order, and
+        # to the job's final state (set by `finish`).
         self.started = time.monotonic()
+        self.stage_starts = {}
+        self.ended = 0.0
 
     def line(self, progress):
         stage = progress.get("stage", "")
