@@ -2,9 +2,12 @@
 //! headless host without `XDG_RUNTIME_DIR`, `segsplat adapters` used to print libwayland's
 //! `XDG_RUNTIME_DIR is invalid or not set` twice (Mesa's device-select layer probing a display).
 
+#[path = "common/segsplat_bin.rs"]
+mod segsplat_bin;
+
 #[test]
 fn listing_adapters_headless_prints_no_display_noise() {
-    let output = std::process::Command::new(env!("CARGO_BIN_EXE_segsplat"))
+    let output = std::process::Command::new(segsplat_bin::segsplat_bin())
         .arg("adapters")
         .env_remove("XDG_RUNTIME_DIR")
         .env_remove("NODEVICE_SELECT")

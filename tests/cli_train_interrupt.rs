@@ -2,6 +2,9 @@
 //! final checkpoint, says where it is and how to resume, and exits 130; `--resume` then starts
 //! from that checkpoint's step.
 
+#[path = "common/segsplat_bin.rs"]
+mod segsplat_bin;
+
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
@@ -20,7 +23,7 @@ fn start_training(
     out: &Path,
     extra: &[&str],
 ) -> (Child, String, mpsc::Receiver<String>) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_segsplat"))
+    let mut child = Command::new(segsplat_bin::segsplat_bin())
         .arg("train")
         .arg(dataset)
         .arg("--out")

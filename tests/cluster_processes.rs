@@ -37,7 +37,7 @@ impl Drop for Process {
 
 fn spawn(args: &[&str], environment: &BTreeMap<String, String>) -> Process {
     let data_dir = tempfile::tempdir().unwrap();
-    let child = Command::new(env!("CARGO_BIN_EXE_segsplat"))
+    let child = Command::new(common::segsplat_bin::segsplat_bin())
         .args(args)
         .arg("--data-dir")
         .arg(data_dir.path())

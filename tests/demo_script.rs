@@ -3,6 +3,9 @@
 //! colour codes or raw dicts, the server's log in a file, a summary table with each stage's time,
 //! and every output in the one folder it names (nothing in the repository).
 
+#[path = "common/segsplat_bin.rs"]
+mod segsplat_bin;
+
 use std::process::Command;
 
 fn free_port() -> u16 {
@@ -16,7 +19,7 @@ fn free_port() -> u16 {
 fn the_demo_walks_through_the_job_cleanly() {
     let work = tempfile::tempdir().unwrap();
     let dataset = work.path().join("dataset");
-    let made = Command::new(env!("CARGO_BIN_EXE_segsplat"))
+    let made = Command::new(segsplat_bin::segsplat_bin())
         .arg("synthetic-scene")
         .arg(&dataset)
         .output()
@@ -28,7 +31,7 @@ fn the_demo_walks_through_the_job_cleanly() {
         .arg(format!("{repo}/scripts/demo.sh"))
         .arg(&dataset)
         .arg("40")
-        .env("SEGSPLAT_BIN", env!("CARGO_BIN_EXE_segsplat"))
+        .env("SEGSPLAT_BIN", segsplat_bin::segsplat_bin())
         .env("SEGSPLAT_DEMO_OUT", &out)
         .env("SEGSPLAT_DEMO_PORT", free_port().to_string())
         .current_dir(work.path())
@@ -110,7 +113,7 @@ fn the_demo_refuses_steps_that_are_neither_a_number_nor_defaults() {
         .arg(format!("{repo}/scripts/demo.sh"))
         .arg(work.path())
         .arg("500x")
-        .env("SEGSPLAT_BIN", env!("CARGO_BIN_EXE_segsplat"))
+        .env("SEGSPLAT_BIN", segsplat_bin::segsplat_bin())
         .env("SEGSPLAT_DEMO_OUT", work.path().join("demo-output"))
         .current_dir(work.path())
         .output()

@@ -7,6 +7,9 @@
 //! Where `kubectl` is installed, the overlay is also rendered by kustomize, and where
 //! `kubernetes-validate` is, the rendered objects are checked against the Kubernetes schemas.
 
+#[path = "common/segsplat_bin.rs"]
+mod segsplat_bin;
+
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -218,7 +221,7 @@ fn assert_command_exists(args: &[String], place: &str) {
     let subcommand = args
         .first()
         .unwrap_or_else(|| panic!("{place}: no subcommand"));
-    let output = Command::new(env!("CARGO_BIN_EXE_segsplat"))
+    let output = Command::new(segsplat_bin::segsplat_bin())
         .args([subcommand.as_str(), "--help"])
         .output()
         .unwrap();

@@ -517,7 +517,7 @@ async fn masks_and_exports_of_a_trained_scene() {
 }
 
 fn segsplat(args: &[&str]) -> std::process::Output {
-    std::process::Command::new(env!("CARGO_BIN_EXE_segsplat"))
+    std::process::Command::new(common::segsplat_bin::segsplat_bin())
         .args(args)
         .output()
         .unwrap()

@@ -353,7 +353,7 @@ async fn segment_then_splat_embeds_objects_and_answers_text_queries() {
 
     // `segsplat query` on the same data dir: the answer as JSON, masks as PNGs.
     let out = data.path().join("masks");
-    let output = std::process::Command::new(env!("CARGO_BIN_EXE_segsplat"))
+    let output = std::process::Command::new(common::segsplat_bin::segsplat_bin())
         .args([
             "query",
             scene_id,

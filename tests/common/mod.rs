@@ -8,6 +8,7 @@ pub mod handlers;
 pub mod models_support;
 pub mod object_store;
 pub mod postgres;
+pub mod segsplat_bin;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

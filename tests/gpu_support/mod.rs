@@ -2,6 +2,9 @@
 //! and buffer helpers.
 #![allow(dead_code)]
 
+#[path = "../common/segsplat_bin.rs"]
+pub mod segsplat_bin;
+
 use std::sync::OnceLock;
 
 use segsplat_gpu::GpuContext;
@@ -60,9 +63,10 @@ pub fn seeded_rng(seed: u64) -> rand_chacha::ChaCha8Rng {
     rand_chacha::ChaCha8Rng::seed_from_u64(seed)
 }
 
-/// Runs the `segsplat` binary with `args` (CLI tests of `train`, `bench`, `synthetic-scene`).
+/// Runs the `segsplat` binary ([`segsplat_bin`]) with `args` (CLI tests of `train`, `bench`,
+/// `synthetic-scene`).
 pub fn segsplat(args: &[&str]) -> std::process::Output {
-    std::process::Command::new(env!("CARGO_BIN_EXE_segsplat"))
+    std::process::Command::new(segsplat_bin::segsplat_bin())
         .args(args)
         .output()
         .expect("run segsplat")
