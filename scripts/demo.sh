@@ -8,8 +8,9 @@
 #
 #   bash scripts/demo.sh [DATASET_DIR] [STEPS]
 #
-# STEPS (500) trains that many steps at 256 px; "defaults" runs the job exactly at its own
-# defaults (steps from the scene's size, full resolution): the whole job as a user gets it.
+# STEPS (500) trains that many steps at 256 px; "auto" trains at 256 px for the steps the job
+# sizes from the scene; "defaults" runs the job exactly at its own defaults (steps from the
+# scene, full resolution): the whole job as a user gets it.
 # Without DATASET_DIR it uses ../shared/data/figurine when present, else a synthetic scene.
 # Everything it writes (the service's data, the server log, the mask, the summary) goes into one
 # folder, demo-output in the current directory unless SEGSPLAT_DEMO_OUT names another. SEGSPLAT_BIN=path/to/segsplat
@@ -17,8 +18,8 @@
 # SEGSPLAT_DEMO_PORT picks the HTTP port (8080).
 set -euo pipefail
 case ${2:-500} in
-  defaults) ;;
-  *[!0-9]*) echo "STEPS must be a number of steps or \"defaults\", not '$2'" >&2; exit 2;;
+  defaults|auto) ;;
+  *[!0-9]*) echo "STEPS must be a number of steps, \"auto\" or \"defaults\", not '$2'" >&2; exit 2;;
 esac
 # Paths the caller gives are theirs: resolve them before moving to the repository.
 caller=$(pwd)

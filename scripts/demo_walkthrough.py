@@ -160,19 +160,23 @@ def main():
     parser.add_argument("--url", required=True)
     parser.add_argument("--dataset", required=True)
     parser.add_argument("--steps", required=True,
-                        help='training steps at 256 px, or "defaults": the job\'s own config '
-                             '(steps from the scene\'s size, full resolution)')
+                        help='training steps at 256 px, "auto" (256 px, steps sized by the '
+                             'job from the scene) or "defaults": the job\'s own config '
+                             '(steps from the scene, full resolution)')
     parser.add_argument("--out", required=True)
     args = parser.parse_args()
     url, out = args.url, args.out
     started = time.monotonic()
     if args.steps == "defaults":
         config, settings = {}, "the job's defaults"
+    elif args.steps == "auto":
+        config = {"max_resolution": 256, "checkpoint_every": 0}
+        settings = "steps from the scene at 256 px"
     elif args.steps.isdigit():
         config = {"steps": int(args.steps), "max_resolution": 256, "checkpoint_every": 0}
         settings = f"{args.steps} steps at 256 px"
     else:
-        sys.exit(f'STEPS must be a number of steps or "defaults", not {args.steps!r}')
+        sys.exit(f'STEPS must be a number of steps, "auto" or "defaults", not {args.steps!r}')
 
     print(f"uploading {args.dataset} ...", flush=True)
     scene = json.loads(request(f"{url}/v1/scenes", dataset_archive(args.dataset),

@@ -98,6 +98,10 @@ struct SyntheticSceneArgs {
     /// fourth frame held out), e.g. for `segsplat bench --deformation`.
     #[arg(long)]
     dynamic: bool,
+    /// The static spheres in the Blender (NeRF-synthetic) layout: RGBA images on a transparent
+    /// background, `transforms_{train,test}.json`, no sparse points.
+    #[arg(long, conflicts_with = "dynamic")]
+    blender: bool,
 }
 
 #[derive(Args)]
@@ -257,7 +261,7 @@ fn init_logging(config: &Config) -> anyhow::Result<()> {
 
 fn write_synthetic_scene(args: &SyntheticSceneArgs) -> anyhow::Result<()> {
     use segsplat_scene::Level;
-    use segsplat_scene::synthetic::{SyntheticSpec, write_colmap};
+    use segsplat_scene::synthetic::{SyntheticSpec, write_blender, write_colmap};
     use segsplat_scene::synthetic_dynamic::write_dynamic_blender;
     let spec = SyntheticSpec {
         frame_count: args.frames,
@@ -268,6 +272,8 @@ fn write_synthetic_scene(args: &SyntheticSceneArgs) -> anyhow::Result<()> {
     };
     let (written, kind) = if args.dynamic {
         (write_dynamic_blender(&args.dir, &spec), "dynamic D-NeRF")
+    } else if args.blender {
+        (write_blender(&args.dir, &spec), "Blender")
     } else {
         let encoding = segsplat_scene::colmap::ColmapEncoding::Binary;
         (write_colmap(&args.dir, &spec, encoding), "COLMAP")

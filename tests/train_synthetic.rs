@@ -7,7 +7,7 @@ mod gpu_support;
 
 use gpu_support::segsplat;
 use segsplat_engine::checkpoint::Checkpoint;
-use segsplat_engine::train::trainer::initial_model;
+use segsplat_engine::train::trainer::{initial_model, plain_initial_model};
 use segsplat_engine::train::{TrainConfig, Trainer, TrainerMeta};
 use segsplat_gpu::GpuContext;
 use segsplat_scene::colmap::ColmapEncoding;
@@ -89,6 +89,48 @@ fn short_training_reaches_held_out_psnr() {
     assert!(after.ssim > before.ssim);
     // Densification ran (clones, splits and prunes change the count).
     assert_ne!(progress.gaussians, initial_gaussians);
+}
+
+/// Densification never grows the model past its Gaussian budget, and fills it: the candidates
+/// it keeps are the highest-gradient ones, so a budget above the start is reached, not skipped.
+#[test]
+fn densification_stays_within_the_gaussian_budget() {
+    let Some(ctx) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let scene = synthetic_scene(dir.path());
+    let start = plain_initial_model(&scene, &config(300)).unwrap().len();
+    let budget = start + 40;
+    let budgeted = TrainConfig {
+        gaussian_budget: Some(budget),
+        ..config(300)
+    };
+    let mut trainer = Trainer::new(&ctx, &scene, budgeted, None).unwrap();
+    assert_eq!(trainer.gaussian_budget(), budget);
+    let mut largest = 0;
+    trainer
+        .run(|progress| {
+            largest = largest.max(progress.gaussians);
+            true
+        })
+        .unwrap();
+    assert!(
+        largest <= budget,
+        "{largest} Gaussians against a budget of {budget}"
+    );
+    assert!(largest > start, "the budget left room, yet nothing grew");
+    // Left out, the budget follows the training pixels (never below the start).
+    let mut scene_sized = Trainer::new(&ctx, &scene, config(300), None).unwrap();
+    let pixels: u64 = scene_sized
+        .views()
+        .train
+        .iter()
+        .map(|view| view.camera.pixel_count() as u64)
+        .sum();
+    assert_eq!(
+        scene_sized.gaussian_budget(),
+        segsplat_engine::train::budget::scene_gaussian_budget(pixels, start)
+    );
+    scene_sized.run_until(1, |_| true).unwrap();
 }
 
 /// The coarse steps (the first half by default) train on each view filtered down to half

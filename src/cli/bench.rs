@@ -4,6 +4,8 @@
 //! the same Gaussians twice, as a static scene and with the deformation field, and reports what
 //! the field costs per step.
 
+mod curve;
+
 use std::path::PathBuf;
 
 use anyhow::Context;
@@ -17,8 +19,8 @@ use segsplat_engine::init::random_gaussians;
 use segsplat_engine::ply::read_ply_file;
 use segsplat_engine::train::trainer::initial_model;
 use segsplat_engine::train::{TrainConfig, Trainer};
-use segsplat_gpu::GpuContext;
 use segsplat_gpu::profiler::KernelTime;
+use segsplat_gpu::{GpuContext, HostCostReading};
 use segsplat_scene::Scene;
 use serde::Serialize;
 
@@ -82,6 +84,10 @@ pub struct BenchArgs {
     /// `--max-resolution`, `--eval-split-every` and `--seed` still apply on top.
     #[arg(long)]
     pub train_config: Option<PathBuf>,
+    /// Evaluate the held-out views every this many steps (`curve` in the report: PSNR against
+    /// training time; evaluations are not timed).
+    #[arg(long, conflicts_with_all = ["object_loss", "deformation"])]
+    pub eval_every: Option<u32>,
     /// Print one JSON object (otherwise a readable summary).
     #[arg(long)]
     pub json: bool,
@@ -250,6 +256,8 @@ struct BenchReport {
     steps: u32,
     gaussians_start: usize,
     gaussians_end: usize,
+    /// Gaussians densification may grow to (the config's, or the scene's).
+    gaussian_budget: usize,
     /// Mean wall time of one forward render (submit to completion), at the start and the end.
     forward_ms_start: f64,
     forward_ms_end: f64,
@@ -260,6 +268,8 @@ struct BenchReport {
     steps_per_sec: f64,
     /// Kernel dispatches recorded by the training loop, per step.
     dispatches_per_step: f64,
+    /// The host's side of the training loop, per step.
+    host: HostCostReport,
     train_seconds: f64,
     psnr: f64,
     ssim: f64,
@@ -276,6 +286,9 @@ struct BenchReport {
     deformation: Option<DeformationReport>,
     #[serde(skip_serializing_if = "Option::is_none")]
     kernel_profile: Option<KernelProfileReport>,
+    /// With `--eval-every`: held-out quality along the run.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    curve: Option<Vec<curve::CurvePoint>>,
 }
 
 /// The plain step on the object-loss run's own starting Gaussians (background shell included),
@@ -317,12 +330,64 @@ struct TimedRun {
     seconds: f64,
     /// Kernel dispatches per step, the partial-mask filter's left out.
     dispatches_per_step: f64,
+    /// What the host waited for and read back over the run.
+    host: HostCostReading,
 }
 
 impl TimedRun {
     fn steps_per_sec(&self) -> f64 {
         f64::from(self.steps) / self.seconds.max(f64::MIN_POSITIVE)
     }
+
+    /// Trains `trainer` to `last_step`, adding the turn's time, steps and host costs to this
+    /// run; returns the kernel dispatches it recorded, the partial-mask filter's left out.
+    fn train_turn(
+        &mut self,
+        ctx: &GpuContext,
+        trainer: &mut Trainer,
+        last_step: u32,
+    ) -> anyhow::Result<u64> {
+        let first_step = trainer.step();
+        let before = ctx.dispatch_count();
+        let filter_before = trainer.partial_filter_cost().dispatches;
+        let host_before = ctx.host_costs.reading();
+        let started = std::time::Instant::now();
+        // Ends on a read-back, so the turn's GPU work is done when the clock stops.
+        let progress = trainer.run_until(last_step, |_| true)?;
+        self.seconds += started.elapsed().as_secs_f64();
+        self.host.add(&ctx.host_costs.reading().since(&host_before));
+        self.steps += progress.step - first_step;
+        let filter = trainer.partial_filter_cost().dispatches - filter_before;
+        Ok(ctx.dispatch_count() - before - filter)
+    }
+
+    /// The host's side of a step, per step.
+    fn host_report(&self) -> HostCostReport {
+        let steps = f64::from(self.steps.max(1));
+        let waited = self.host.wait_seconds().min(self.seconds);
+        let submitted = self.host.submit_seconds().min(self.seconds - waited);
+        HostCostReport {
+            bytes_read_back_per_step: self.host.bytes_read_back as f64 / steps,
+            read_backs_per_step: self.host.read_backs as f64 / steps,
+            host_ms_per_step: (self.seconds - waited - submitted) * 1e3 / steps,
+            wait_ms_per_step: waited * 1e3 / steps,
+            submit_ms_per_step: submitted * 1e3 / steps,
+        }
+    }
+}
+
+/// Per training step: what the host read back, and its time outside the device's work
+/// (encoding, progress, densification on the CPU), waiting for the device, and inside queue
+/// submissions. A GPU's queue returns from a submission at once and the waits hold its
+/// arithmetic; lavapipe's queue runs the work inside the submission, so there the submit
+/// milliseconds hold it. Either way `host_ms_per_step` is the host's own share.
+#[derive(Debug, Clone, Copy, Serialize)]
+struct HostCostReport {
+    bytes_read_back_per_step: f64,
+    read_backs_per_step: f64,
+    host_ms_per_step: f64,
+    wait_ms_per_step: f64,
+    submit_ms_per_step: f64,
 }
 
 /// Trains each of `trainers` to its last step, timing each. With more than one they take turns
@@ -347,15 +412,7 @@ fn timed_runs(ctx: &GpuContext, trainers: &mut [&mut Trainer]) -> anyhow::Result
             if first_step >= trainer.config().steps {
                 continue;
             }
-            let before = ctx.dispatch_count();
-            let filter_before = trainer.partial_filter_cost().dispatches;
-            let started = std::time::Instant::now();
-            // Ends on a read-back, so the turn's GPU work is done when the clock stops.
-            let progress = trainer.run_until(first_step.saturating_add(turn), |_| true)?;
-            run.seconds += started.elapsed().as_secs_f64();
-            run.steps += progress.step - first_step;
-            let filter = trainer.partial_filter_cost().dispatches - filter_before;
-            *dispatched += ctx.dispatch_count() - before - filter;
+            *dispatched += run.train_turn(ctx, trainer, first_step.saturating_add(turn))?;
         }
     }
     for (run, dispatched) in runs.iter_mut().zip(dispatches) {
@@ -552,12 +609,20 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     };
     let gaussians_start = trainer.gaussian_count();
     let (forward_ms_start, backward_ms_start) = trainer.time_passes(args.timing_repeats)?;
+    let mut curve = None;
     let (run, plain_run) = match plain.as_mut() {
         Some(plain) => match timed_runs(&ctx, &mut [&mut trainer, plain])?[..] {
             [run, plain_run] => (run, Some((plain, plain_run))),
             _ => anyhow::bail!("two timed runs expected"),
         },
-        None => (timed_runs(&ctx, &mut [&mut trainer])?[0], None),
+        None => match args.eval_every {
+            Some(every) => {
+                let (run, points) = curve::run_with_curve(&ctx, &mut trainer, every)?;
+                curve = Some(points);
+                (run, None)
+            }
+            None => (timed_runs(&ctx, &mut [&mut trainer])?[0], None),
+        },
     };
     let filter = trainer.partial_filter_cost();
     let partial_filter_seconds = filter.seconds;
@@ -626,12 +691,14 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         steps: trainer.step(),
         gaussians_start,
         gaussians_end: trainer.gaussian_count(),
+        gaussian_budget: trainer.gaussian_budget(),
         forward_ms_start,
         forward_ms_end,
         backward_ms_start,
         backward_ms_end,
         steps_per_sec: run.steps_per_sec(),
         dispatches_per_step: run.dispatches_per_step,
+        host: run.host_report(),
         train_seconds: run.seconds,
         psnr: eval.psnr,
         ssim: eval.ssim,
@@ -641,6 +708,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         plain_baseline,
         deformation,
         kernel_profile,
+        curve,
     };
     if args.json {
         println!("{}", serde_json::to_string(&report)?);

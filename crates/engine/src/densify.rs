@@ -187,12 +187,17 @@ fn sigmoid(x: f32) -> f32 {
 }
 
 /// Decides clones, splits and prunes. `scene_extent` as in [`crate::schedule::scene_extent`].
+/// `max_new` bounds the Gaussians the plan adds (a clone adds one, a split `children - 1`):
+/// when more candidates pass the threshold, those with the highest mean gradient grow, so a
+/// budget fills with the Gaussians the loss asks for most (ties by index, so the plan is
+/// deterministic). `None`: no bound.
 pub fn plan_densification<R: Rng>(
     model: &GaussianModel,
     stats: &DensifyStats,
     config: &DensifyConfig,
     scene_extent: f32,
     guard: Option<&dyn PruneGuard>,
+    max_new: Option<usize>,
     rng: &mut R,
 ) -> DensifyPlan {
     let count = model.len();
@@ -232,6 +237,9 @@ pub fn plan_densification<R: Rng>(
         prune[i] = sigmoid(model.opacity_logits[i]) < config.min_opacity
             || too_big_on_screen
             || too_big_in_world;
+    }
+    if let Some(max_new) = max_new {
+        limit_growth(&mut growth, &mut survivors, stats, max_new);
     }
     let candidates = prune.iter().filter(|&&p| p).count();
     if let Some(guard) = guard {
@@ -274,6 +282,43 @@ pub fn plan_densification<R: Rng>(
         }
     }
     plan
+}
+
+/// Keeps the growth of the highest-gradient candidates whose additions fit in `max_new`; the
+/// rest stay as they are.
+fn limit_growth(
+    growth: &mut [Growth],
+    survivors: &mut [u32],
+    stats: &DensifyStats,
+    max_new: usize,
+) {
+    let added = |survivors: &[u32], i: usize| survivors[i].saturating_sub(1) as usize;
+    let wanted: usize = (0..growth.len()).map(|i| added(survivors, i)).sum();
+    if wanted <= max_new {
+        return;
+    }
+    let mean_gradient = |i: usize| {
+        let visible = stats.visible_counts.get(i).copied().unwrap_or(0).max(1);
+        stats.gradient_sums.get(i).copied().unwrap_or(0.0) / visible as f32
+    };
+    let mut candidates: Vec<usize> = (0..growth.len())
+        .filter(|&i| growth[i] != Growth::None)
+        .collect();
+    candidates.sort_by(|&a, &b| {
+        mean_gradient(b)
+            .total_cmp(&mean_gradient(a))
+            .then(a.cmp(&b))
+    });
+    let mut room = max_new;
+    for i in candidates {
+        let adds = added(survivors, i);
+        if adds <= room {
+            room -= adds;
+        } else {
+            growth[i] = Growth::None;
+            survivors[i] = 1;
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -332,6 +377,7 @@ mod tests {
             &DensifyConfig::default(),
             1.0,
             None,
+            None,
             &mut rng,
         );
         assert_eq!((plan.cloned, plan.split, plan.pruned), (1, 1, 1));
@@ -368,6 +414,7 @@ mod tests {
             &DensifyConfig::default(),
             1.0,
             Some(&guard),
+            None,
             &mut rng,
         );
         assert_eq!(plan.spared, 2);
@@ -398,9 +445,67 @@ mod tests {
             &DensifyConfig::default(),
             1.0,
             Some(&guard),
+            None,
             &mut rng,
         );
         assert_eq!(plan.origins, vec![Origin::Keep(0)]);
+    }
+
+    #[test]
+    fn a_growth_bound_keeps_the_highest_gradients() {
+        // Four clone candidates and one split (adds one with two children); room for two new
+        // Gaussians: the two highest gradients grow (index 3 clones, index 1 splits).
+        let ids = [[OBJECT_NONE; 3]; 5];
+        let model = model_with(&[0.001, 0.5, 0.001, 0.001, 0.001], &[0.5; 5], &ids);
+        let gradients = [0.002, 0.009, 0.003, 0.01, 0.0];
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let config = DensifyConfig::default();
+        let plan = plan_densification(
+            &model,
+            &stats(&gradients),
+            &config,
+            1.0,
+            None,
+            Some(2),
+            &mut rng,
+        );
+        assert_eq!((plan.cloned, plan.split), (1, 1));
+        assert_eq!(plan.origins.len(), 5 + 2);
+        assert!(plan.origins.contains(&Origin::Clone(3)));
+        assert!(!plan.origins.contains(&Origin::Clone(0)));
+        // A bound the candidates fit in changes nothing; zero room grows nothing.
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let unbounded = plan_densification(
+            &model,
+            &stats(&gradients),
+            &config,
+            1.0,
+            None,
+            None,
+            &mut rng,
+        );
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let roomy = plan_densification(
+            &model,
+            &stats(&gradients),
+            &config,
+            1.0,
+            None,
+            Some(4),
+            &mut rng,
+        );
+        assert_eq!(unbounded, roomy);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let full = plan_densification(
+            &model,
+            &stats(&gradients),
+            &config,
+            1.0,
+            None,
+            Some(0),
+            &mut rng,
+        );
+        assert_eq!(full.origins.len(), 5);
     }
 
     #[test]

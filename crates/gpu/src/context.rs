@@ -188,6 +188,69 @@ pub struct GpuContext {
     pub dispatches: Arc<AtomicU64>,
     /// Variants forced instead of the adapter's own (see [`KernelChoices`]).
     pub kernel_choices: KernelChoices,
+    /// Read-backs and waits of every caller on this context: on a fast GPU the host's waits,
+    /// not the kernels, bound a step, so benchmarks and jobs report them.
+    pub host_costs: Arc<HostCosts>,
+}
+
+/// Counters of what the host waited for and read back (see [`GpuContext::host_costs`]).
+#[derive(Debug, Default)]
+pub struct HostCosts {
+    bytes_read_back: AtomicU64,
+    read_backs: AtomicU64,
+    wait_nanos: AtomicU64,
+    submit_nanos: AtomicU64,
+}
+
+/// A reading of [`HostCosts`]; differences of two readings give what happened in between.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct HostCostReading {
+    pub bytes_read_back: u64,
+    pub read_backs: u64,
+    /// Time the host spent blocked on the device (waits and mapped read-backs).
+    pub wait_nanos: u64,
+    /// Time inside [`GpuContext::submit`]: microseconds on a GPU; on a software adapter, whose
+    /// queue may run the work before it returns, it holds the arithmetic.
+    pub submit_nanos: u64,
+}
+
+impl HostCosts {
+    pub fn reading(&self) -> HostCostReading {
+        HostCostReading {
+            bytes_read_back: self.bytes_read_back.load(Ordering::Relaxed),
+            read_backs: self.read_backs.load(Ordering::Relaxed),
+            wait_nanos: self.wait_nanos.load(Ordering::Relaxed),
+            submit_nanos: self.submit_nanos.load(Ordering::Relaxed),
+        }
+    }
+}
+
+impl HostCostReading {
+    /// What happened between `earlier` and this reading.
+    pub fn since(&self, earlier: &HostCostReading) -> HostCostReading {
+        HostCostReading {
+            bytes_read_back: self.bytes_read_back.saturating_sub(earlier.bytes_read_back),
+            read_backs: self.read_backs.saturating_sub(earlier.read_backs),
+            wait_nanos: self.wait_nanos.saturating_sub(earlier.wait_nanos),
+            submit_nanos: self.submit_nanos.saturating_sub(earlier.submit_nanos),
+        }
+    }
+
+    /// Adds `other`'s counts to these.
+    pub fn add(&mut self, other: &HostCostReading) {
+        self.bytes_read_back += other.bytes_read_back;
+        self.read_backs += other.read_backs;
+        self.wait_nanos += other.wait_nanos;
+        self.submit_nanos += other.submit_nanos;
+    }
+
+    pub fn wait_seconds(&self) -> f64 {
+        self.wait_nanos as f64 * 1e-9
+    }
+
+    pub fn submit_seconds(&self) -> f64 {
+        self.submit_nanos as f64 * 1e-9
+    }
 }
 
 impl GpuContext {
@@ -247,6 +310,7 @@ impl GpuContext {
             profiler: None,
             dispatches: Arc::new(AtomicU64::new(0)),
             kernel_choices: KernelChoices::default(),
+            host_costs: Arc::new(HostCosts::default()),
         })
     }
 
@@ -317,9 +381,26 @@ impl GpuContext {
         }))
     }
 
+    /// Submits `commands`, timing the call into [`Self::host_costs`] (the training loop's
+    /// submissions go through here, so a step's host time can be told from its device time).
+    pub fn submit(&self, commands: wgpu::CommandBuffer) {
+        let started = std::time::Instant::now();
+        self.queue.submit([commands]);
+        let took = u64::try_from(started.elapsed().as_nanos()).unwrap_or(u64::MAX);
+        self.host_costs
+            .submit_nanos
+            .fetch_add(took, Ordering::Relaxed);
+    }
+
     /// Blocks until all submitted work is done.
     pub fn wait_idle(&self) -> Result<(), GpuError> {
-        self.device.poll(wgpu::PollType::wait_indefinitely())?;
+        let started = std::time::Instant::now();
+        let polled = self.device.poll(wgpu::PollType::wait_indefinitely());
+        let waited = u64::try_from(started.elapsed().as_nanos()).unwrap_or(u64::MAX);
+        self.host_costs
+            .wait_nanos
+            .fetch_add(waited, Ordering::Relaxed);
+        polled?;
         Ok(())
     }
 
@@ -353,6 +434,11 @@ impl GpuContext {
             .map_err(|error| GpuError::Device(format!("mapping the read-back buffer: {error}")))?
             .to_vec();
         staging.unmap();
+        let costs = &self.host_costs;
+        costs.read_backs.fetch_add(1, Ordering::Relaxed);
+        costs
+            .bytes_read_back
+            .fetch_add(size_bytes, Ordering::Relaxed);
         Ok(bytes)
     }
 

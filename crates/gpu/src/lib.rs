@@ -9,7 +9,7 @@ pub mod scan;
 pub mod sort;
 pub mod validation;
 
-pub use context::{AdapterFilter, AdapterReport, GpuContext, GpuError};
+pub use context::{AdapterFilter, AdapterReport, GpuContext, GpuError, HostCostReading};
 pub use kernel::Kernel;
 pub use kernel_choices::{GemmLayout, KernelChoices, RasterLayout};
 pub use profiler::{KernelProfile, KernelProfiler};

@@ -50,6 +50,10 @@ pub struct TrainConfig {
     pub coarse_halvings: u32,
     /// Upper bound on Gaussians: densification stops growing past it.
     pub max_gaussians: usize,
+    /// Gaussians densification may grow the model to; `None` sizes it from the scene (its
+    /// training pixels, [`crate::train::budget`]), so a sparse capture is not grown into
+    /// floaters that fit each training view and no other. Always within `max_gaussians`.
+    pub gaussian_budget: Option<usize>,
     /// Random initial Gaussians when the dataset has no sparse points.
     pub random_init_count: usize,
     /// Background Gaussians (no object) on a far sphere around the cameras and points, for the
@@ -84,6 +88,7 @@ impl Default for TrainConfig {
             coarse_until: None,
             coarse_halvings: 1,
             max_gaussians: 6_000_000,
+            gaussian_budget: None,
             random_init_count: 100_000,
             background_shell: crate::background_shell::DEFAULT_BACKGROUND_SHELL,
             object_loss: None,
@@ -163,6 +168,9 @@ impl TrainConfig {
         }
         if self.max_gaussians == 0 {
             return fail("max_gaussians", "must be at least 1");
+        }
+        if self.gaussian_budget == Some(0) {
+            return fail("gaussian_budget", "must be at least 1");
         }
         if let Some(object_loss) = &self.object_loss
             && let Err((field, problem)) = object_loss.validate()

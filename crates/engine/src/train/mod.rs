@@ -1,5 +1,6 @@
 //! Training: configuration, resident views, densification statistics and the loop.
 
+pub mod budget;
 pub mod config;
 pub mod densify_stats;
 pub mod mask_iou;

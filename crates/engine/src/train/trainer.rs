@@ -5,9 +5,18 @@
 //! is submitted without waiting; nothing is read back inside a step. CPU round trips happen only
 //! (a) every `sync_every` steps to read the loss and the renderer's intersection peak (capacity
 //! growth), and (b) at densification / opacity reset, which re-lays out every per-Gaussian buffer
-//! on the CPU (every 100 steps; see `splat::densify`).
+//! on the CPU (every 100 steps; see `crate::densify`).
+//!
+//! This file holds the step loop; each other concern has its own file under `trainer/`: the
+//! Adam update (`adam_step`), densification within the Gaussian budget (`densification`),
+//! checkpoints (`checkpointing`), timing and evaluation (`measure`), the object loss
+//! (`object_step`, `object_separate`, `partial_filter`) and the deformation field (`dynamics`).
 
+mod adam_step;
+mod checkpointing;
+mod densification;
 mod dynamics;
+mod measure;
 mod object_separate;
 mod object_step;
 mod partial_filter;
@@ -20,10 +29,10 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::adam::{Adam, AdamBuffers, AdamError, AdamGroup, AdamSettings};
+use crate::adam::{Adam, AdamError, AdamSettings};
 use crate::background_shell::{append_points, background_shell_points};
-use crate::checkpoint::{Checkpoint, CheckpointError};
-use crate::densify::{self, DensifyPlan, DensifyStats, PruneGuard};
+use crate::checkpoint::CheckpointError;
+use crate::densify::PruneGuard;
 use crate::init::gaussians_from_points;
 use crate::loss::{LossError, LossImages, LossOutputs, RenderLoss};
 use crate::model::{
@@ -32,11 +41,12 @@ use crate::model::{
 };
 use crate::render::{RenderError, RenderOutput, Renderer};
 use crate::schedule::scene_extent;
+use crate::train::budget::scene_gaussian_budget;
 use crate::train::config::{ConfigError, TrainConfig};
 use crate::train::densify_stats::DensifyAccumulators;
 use crate::train::object_loss::{MAX_OBJECTS_PER_LEVEL, ObjectTargets, SkippedPair};
 use crate::train::random_init::{camera_centres, has_sparse_points, random_visible_gaussians};
-use crate::train::schedule::{DeformationSchedule, TrainSchedule};
+use crate::train::schedule::{DeformationSchedule, SPARSE_CAPTURE_VIEWS, TrainSchedule};
 use crate::train::views::{Views, ViewsError};
 use crate::{ObjectFilter, RenderSettings};
 use segsplat_gpu::{GpuContext, GpuError};
@@ -119,6 +129,10 @@ pub struct TrainerMeta {
     /// (object, view) pairs the partial-mask filter has left out.
     #[serde(default)]
     pub skipped_pairs: Vec<SkippedPair>,
+    /// The job's Gaussian budget (absent in checkpoints written before budgets: the resumed
+    /// trainer then sizes it from the scene again, at least the checkpoint's count).
+    #[serde(default)]
+    pub gaussian_budget: Option<usize>,
 }
 
 pub struct Trainer {
@@ -155,6 +169,8 @@ pub struct Trainer {
     object_buffers: object_step::ObjectBuffers,
     /// The training resolution of the last step ([`TrainSchedule::resolution_divisor_at`]).
     resolution_divisor: Option<u32>,
+    /// Gaussians densification may grow to (the config's, or the scene's).
+    gaussian_budget: usize,
 }
 
 /// Wall time and kernel dispatches the partial-mask filter has taken, inside [`Trainer::run`]'s
@@ -229,12 +245,24 @@ impl Trainer {
             config.eval_split_every,
             schedule.coarse_halvings,
         )?;
-        let capacity = grown_capacity(ctx, model.len(), config.max_gaussians);
+        if views.train.len() < SPARSE_CAPTURE_VIEWS {
+            schedule = schedule.for_sparse_capture(config.opacity_reset_interval);
+        }
+
         let [max_width, max_height] = views.max_size();
         let pixels = max_width as u64 * max_height as u64;
         let mut loss = RenderLoss::new(ctx)?;
         loss.reserve(ctx, max_width, max_height)?;
         let train_views = views.train.len();
+        let training_pixels: u64 = views
+            .train
+            .iter()
+            .map(|v| v.camera.pixel_count() as u64)
+            .sum();
+        let gaussian_budget = config
+            .gaussian_budget
+            .unwrap_or_else(|| scene_gaussian_budget(training_pixels, model.len()));
+        let capacity = grown_capacity(ctx, model.len(), config.max_gaussians.min(gaussian_budget));
         let extent = scene_extent(&camera_centres(scene));
         let mut trainer = Self {
             gaussians: GpuGaussians::upload(ctx, &model, capacity)?,
@@ -265,6 +293,7 @@ impl Trainer {
             separate_object_renders: false,
             object_buffers: object_step::ObjectBuffers::default(),
             resolution_divisor: None,
+            gaussian_budget,
         };
         trainer.rng = ChaCha8Rng::seed_from_u64(trainer.config.seed);
         if let Some(deformation) = trainer.config.deformation.clone() {
@@ -295,6 +324,11 @@ impl Trainer {
 
     pub fn step(&self) -> u32 {
         self.step
+    }
+
+    /// The GPU context it trains on (its dispatch and host-cost counters).
+    pub fn gpu(&self) -> &GpuContext {
+        &self.ctx
     }
 
     pub fn gaussian_count(&self) -> usize {
@@ -379,7 +413,7 @@ impl Trainer {
         drop(output);
         self.encode_deform_backward_and_step(&mut encoder, step)?;
         self.encode_adam(&mut encoder, step, count, sh_degree)?;
-        self.ctx.queue.submit([encoder.finish()]);
+        self.ctx.submit(encoder.finish());
         self.step = step;
         if self.schedule.densifies_at(step) || self.schedule.resets_opacity_at(step) {
             self.densify_and_reset(step)?;
@@ -468,115 +502,6 @@ impl Trainer {
         self.resolution_divisor = Some(divisor);
     }
 
-    /// Adam over every parameter group, except SH bands above `sh_degree`: until the degree
-    /// ramp reaches a band its gradients are exactly zero, so its moments stay zero and Adam
-    /// would leave it unchanged (skipping them saves three quarters of Adam's traffic in the
-    /// first thousand steps).
-    fn encode_adam(
-        &self,
-        encoder: &mut wgpu::CommandEncoder,
-        step: u32,
-        count: u32,
-        sh_degree: u32,
-    ) -> Result<(), TrainError> {
-        let rates = &self.config.learning_rates;
-        let position_rate = rates.position_at(
-            self.step,
-            self.schedule.position_decay_steps,
-            self.scene_extent,
-        );
-        let p = &self.gaussians.parameters;
-        let g = &self.grads.parameters;
-        let m = &self.first_moments;
-        let v = &self.second_moments;
-        let rest = rates.sh_rest();
-        let groups: [(
-            &wgpu::Buffer,
-            &wgpu::Buffer,
-            &wgpu::Buffer,
-            &wgpu::Buffer,
-            u32,
-            f32,
-        ); 8] = [
-            (&p.means, &g.means, &m.means, &v.means, 3, position_rate),
-            (
-                &p.log_scales,
-                &g.log_scales,
-                &m.log_scales,
-                &v.log_scales,
-                3,
-                rates.scale,
-            ),
-            (
-                &p.rotations,
-                &g.rotations,
-                &m.rotations,
-                &v.rotations,
-                4,
-                rates.rotation,
-            ),
-            (
-                &p.opacity_logits,
-                &g.opacity_logits,
-                &m.opacity_logits,
-                &v.opacity_logits,
-                1,
-                rates.opacity,
-            ),
-            (&p.sh_dc, &g.sh_dc, &m.sh_dc, &v.sh_dc, 3, rates.sh_dc),
-            (
-                &p.sh_rest[0],
-                &g.sh_rest[0],
-                &m.sh_rest[0],
-                &v.sh_rest[0],
-                15,
-                rest,
-            ),
-            (
-                &p.sh_rest[1],
-                &g.sh_rest[1],
-                &m.sh_rest[1],
-                &v.sh_rest[1],
-                15,
-                rest,
-            ),
-            (
-                &p.sh_rest[2],
-                &g.sh_rest[2],
-                &m.sh_rest[2],
-                &v.sh_rest[2],
-                15,
-                rest,
-            ),
-        ];
-        // sh_rest[g] (the last three groups) holds coefficients 1 + 5g ..= 5 + 5g, which start
-        // in band g + 1: the first `sh_degree` of them have been reached.
-        let reached = groups.len() - 3 + sh_degree.min(3) as usize;
-        let steps: Vec<AdamGroup<'_>> = groups
-            .into_iter()
-            .take(reached)
-            .map(
-                |(params, grads, first_moment, second_moment, width, rate)| AdamGroup {
-                    buffers: AdamBuffers {
-                        params,
-                        grads,
-                        first_moment,
-                        second_moment,
-                    },
-                    element_count: count * width,
-                    learning_rate: rate,
-                },
-            )
-            .collect();
-        // Where the adapter allows, one dispatch for the groups of 1 to 4 floats per Gaussian and
-        // one for the SH rest groups (15 each): a dispatch steps element i of each of its groups
-        // together, so its groups should be of similar sizes (adam/groups.rs).
-        let (small, rest) = steps.split_at(steps.len().min(SMALL_ADAM_GROUPS));
-        self.adam.encode_steps(&self.ctx, encoder, small, step)?;
-        self.adam.encode_steps(&self.ctx, encoder, rest, step)?;
-        Ok(())
-    }
-
     /// Trains until the configured `steps` are done; see [`Trainer::run_until`].
     pub fn run(
         &mut self,
@@ -624,292 +549,6 @@ impl Trainer {
         })
     }
 
-    /// Densification and/or opacity reset: read back, re-lay out on the CPU, upload.
-    fn densify_and_reset(&mut self, step: u32) -> Result<(), TrainError> {
-        let ctx = self.ctx.clone();
-        let count = self.gaussians.count();
-        let mut model = self.gaussians.download(&ctx)?;
-        let mut first = self.first_moments.download(&ctx, count)?;
-        let mut second = self.second_moments.download(&ctx, count)?;
-        if self.schedule.densifies_at(step) {
-            let stats = self.accumulators.download(&ctx, count)?;
-            let mut config = self.config.densify.clone();
-            if self.schedule.prunes_oversized_at(step) {
-                config.max_world_scale_fraction.get_or_insert(0.1);
-                config.max_screen_radius_fraction.get_or_insert(0.15);
-            }
-            // Stop growing at the configured maximum or what the adapter can hold.
-            if count
-                >= self
-                    .config
-                    .max_gaussians
-                    .min(max_gaussians_for_adapter(&ctx))
-            {
-                config.gradient_threshold = f32::INFINITY;
-            }
-            let plan = densify::plan_densification(
-                &model,
-                &stats,
-                &config,
-                self.scene_extent,
-                self.prune_guard.as_deref().map(|g| g as &dyn PruneGuard),
-                &mut self.rng,
-            );
-            tracing::debug!(
-                step,
-                cloned = plan.cloned,
-                split = plan.split,
-                pruned = plan.pruned,
-                spared = plan.spared,
-                "densified"
-            );
-            model = plan.apply(&model, config.split_children);
-            first = gather_fresh_zero(&plan, &first);
-            second = gather_fresh_zero(&plan, &second);
-        }
-        if self.schedule.resets_opacity_at(step) {
-            densify::reset_opacity_logits(&mut model.opacity_logits, 0.01);
-            first.opacity_logits.iter_mut().for_each(|m| *m = 0.0);
-            second.opacity_logits.iter_mut().for_each(|v| *v = 0.0);
-        }
-        self.replace_state(&model, &first, &second, &DensifyStats::default())?;
-        Ok(())
-    }
-
-    /// Uploads a new model with its optimiser moments, growing buffers when needed.
-    fn replace_state(
-        &mut self,
-        model: &GaussianModel,
-        first: &GaussianModel,
-        second: &GaussianModel,
-        stats: &DensifyStats,
-    ) -> Result<(), TrainError> {
-        let ctx = self.ctx.clone();
-        let count = model.len();
-        if count > self.gaussians.capacity() {
-            let capacity = grown_capacity(&ctx, count, self.config.max_gaussians);
-            self.gaussians = GpuGaussians::upload(&ctx, model, capacity)?;
-            self.grads = GpuGaussianGrads::new(&ctx, capacity)?;
-            self.first_moments = GaussianParameterBuffers::new(&ctx, "adam.m", capacity)?;
-            self.second_moments = GaussianParameterBuffers::new(&ctx, "adam.v", capacity)?;
-            self.accumulators = DensifyAccumulators::new(&ctx, capacity)?;
-        } else {
-            self.gaussians.write(&ctx, model)?;
-        }
-        self.first_moments.write(&ctx, first)?;
-        self.second_moments.write(&ctx, second)?;
-        let mut encoder = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("densify reset"),
-            });
-        self.accumulators.encode_clear(&mut encoder);
-        ctx.queue.submit([encoder.finish()]);
-        if !stats.gradient_sums.is_empty() {
-            self.accumulators.upload(&ctx, stats);
-        }
-        Ok(())
-    }
-
-    /// Times a step's render passes ([`Self::encode_view_render`]) on the training views without
-    /// changing the model: forward alone, and forward + loss + backward, each submitted and
-    /// waited for (wall clock, so it includes submission overhead). A dynamic scene's views are
-    /// rendered through the deformation at their own time (no time noise, which would draw from
-    /// the training's random numbers); the field's own backward is not timed. Returns (forward ms, backward-with-loss ms) averaged over `repeats`,
-    /// after one untimed round (the first render of a trainer pays first-use costs, such as
-    /// growing the intersection buffers, which would otherwise land in the forward figure).
-    pub fn time_passes(&mut self, repeats: u32) -> Result<(f64, f64), TrainError> {
-        let settings = RenderSettings {
-            filter: ObjectFilter::All,
-            background: self.config.background,
-            sh_degree: self.schedule.sh_degree_at(self.step),
-        };
-        let ctx = self.ctx.clone();
-        let (mut forward_secs, mut full_secs) = (0.0, 0.0);
-        for repeat in 0..=repeats.max(1) {
-            let view_index = repeat as usize % self.views.train.len();
-            let time = self.views.train[view_index].time;
-            for with_backward in [false, true] {
-                let started = Instant::now();
-                let mut encoder =
-                    ctx.device
-                        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                            label: Some("timing"),
-                        });
-                if with_backward {
-                    self.grads.encode_zero(&mut encoder);
-                }
-                let output = self.encode_view_render(
-                    &mut encoder,
-                    view_index,
-                    1,
-                    time,
-                    &settings,
-                    with_backward,
-                )?;
-                if with_backward {
-                    self.encode_projection_backward(&mut encoder, &output)?;
-                }
-                ctx.queue.submit([encoder.finish()]);
-                ctx.wait_idle()?;
-                let secs = started.elapsed().as_secs_f64();
-                if repeat == 0 {
-                    continue;
-                } else if with_backward {
-                    full_secs += secs;
-                } else {
-                    forward_secs += secs;
-                }
-            }
-        }
-        let repeats = repeats.max(1) as f64;
-        let forward_ms = forward_secs / repeats * 1e3;
-        let full_ms = full_secs / repeats * 1e3;
-        Ok((forward_ms, (full_ms - forward_ms).max(0.0)))
-    }
-
-    /// Renders every held-out view and compares it with its image.
-    pub fn evaluate(&mut self) -> Result<EvalReport, TrainError> {
-        let settings = RenderSettings {
-            filter: ObjectFilter::All,
-            background: self.config.background,
-            sh_degree: self.schedule.sh_degree_at(self.step),
-        };
-        let mut report = EvalReport::default();
-        for view in &self.views.test {
-            if self.dynamics.is_some() {
-                let mut encoder =
-                    self.ctx
-                        .device
-                        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                            label: Some("deform for evaluation"),
-                        });
-                dynamics::deform_to(
-                    &self.ctx,
-                    self.step,
-                    &mut self.dynamics,
-                    &self.gaussians,
-                    &mut encoder,
-                    view.time,
-                )?;
-                self.ctx.queue.submit([encoder.finish()]);
-            }
-            let output = self.renderer.render_checked(
-                &self.ctx,
-                dynamics::render_view(&self.gaussians, &self.dynamics),
-                &view.camera,
-                &settings,
-            )?;
-            let image = output.read_image(&self.ctx)?;
-            let rendered: Vec<[f32; 3]> = image
-                .iter()
-                .take(view.camera.pixel_count())
-                .map(|p| {
-                    [
-                        p[0].clamp(0.0, 1.0),
-                        p[1].clamp(0.0, 1.0),
-                        p[2].clamp(0.0, 1.0),
-                    ]
-                })
-                .collect();
-            let psnr = crate::image_metrics::psnr(&rendered, &view.target_rgb);
-            if report.views == 0 || psnr < report.worst_psnr {
-                report.worst_psnr = psnr;
-                report.worst_view = report.views;
-            }
-            report.psnr += psnr;
-            report.ssim += crate::image_metrics::ssim(
-                &rendered,
-                &view.target_rgb,
-                view.camera.width as usize,
-                view.camera.height as usize,
-            );
-            report.views += 1;
-        }
-        if report.views > 0 {
-            report.psnr /= report.views as f64;
-            report.ssim /= report.views as f64;
-        }
-        Ok(report)
-    }
-
-    /// Everything needed to continue exactly here.
-    pub fn checkpoint(&self) -> Result<Checkpoint<TrainerMeta>, TrainError> {
-        let ctx = &self.ctx;
-        let count = self.gaussians.count();
-        let model = self.gaussians.download(ctx)?;
-        let first = self.first_moments.download(ctx, count)?;
-        let second = self.second_moments.download(ctx, count)?;
-        let stats = self.accumulators.download(ctx, count)?;
-        let mut checkpoint = Checkpoint::new(TrainerMeta {
-            step: self.step,
-            gaussians: count,
-            rng: self.rng.clone(),
-            view_queue: self.view_queue.clone(),
-            intersection_capacity: self.renderer.intersection_capacity(),
-            config: self.config.clone(),
-            train_views: self.views.train.len(),
-            skipped_pairs: self.skipped_pairs.iter().copied().collect(),
-        });
-        put_model(&mut checkpoint, "model", &model);
-        put_model(&mut checkpoint, "adam.m", &first);
-        put_model(&mut checkpoint, "adam.v", &second);
-        checkpoint.put("object_ids", &model.object_ids);
-        checkpoint.put("densify.gradient_sums", &stats.gradient_sums);
-        checkpoint.put("densify.visible_counts", &stats.visible_counts);
-        checkpoint.put("densify.max_radii", &stats.max_radii);
-        if let Some(dynamics) = &self.dynamics {
-            let field = &dynamics.field;
-            checkpoint.put("deform.parameters", &field.read(ctx, &field.parameters)?);
-            checkpoint.put("deform.m", &field.read(ctx, &field.first_moment)?);
-            checkpoint.put("deform.v", &field.read(ctx, &field.second_moment)?);
-        }
-        Ok(checkpoint)
-    }
-
-    /// A trainer continuing from `checkpoint` (same scene; the config it was made with).
-    pub fn resume(
-        ctx: &GpuContext,
-        scene: &Scene,
-        checkpoint: &Checkpoint<TrainerMeta>,
-    ) -> Result<Self, TrainError> {
-        let meta = &checkpoint.meta;
-        let count = meta.gaussians;
-        let mut model = get_model(checkpoint, "model", count)?;
-        model.object_ids = checkpoint.get("object_ids")?;
-        let first = get_model(checkpoint, "adam.m", count)?;
-        let second = get_model(checkpoint, "adam.v", count)?;
-        let stats = DensifyStats {
-            gradient_sums: checkpoint.get("densify.gradient_sums")?,
-            visible_counts: checkpoint.get("densify.visible_counts")?,
-            max_radii: checkpoint.get("densify.max_radii")?,
-        };
-        let mut trainer = Self::new(ctx, scene, meta.config.clone(), Some(model.clone()))?;
-        if trainer.views.train.len() != meta.train_views {
-            return Err(TrainError::CheckpointMismatch(format!(
-                "{} training views now, {} when saved",
-                trainer.views.train.len(),
-                meta.train_views
-            )));
-        }
-        trainer.replace_state(&model, &first, &second, &stats)?;
-        trainer.step = meta.step;
-        trainer.rng = meta.rng.clone();
-        trainer.view_queue = meta.view_queue.clone();
-        trainer.skipped_pairs = meta.skipped_pairs.iter().copied().collect();
-        trainer
-            .renderer
-            .set_intersection_capacity(meta.intersection_capacity);
-        if let Some(dynamics) = &trainer.dynamics {
-            let parameters: Vec<f32> = checkpoint.get("deform.parameters")?;
-            let first: Vec<f32> = checkpoint.get("deform.m")?;
-            let second: Vec<f32> = checkpoint.get("deform.v")?;
-            dynamics.field.write_parameters(ctx, &parameters)?;
-            dynamics.field.write_moments(ctx, &first, &second)?;
-        }
-        Ok(trainer)
-    }
-
     /// Seeded randomness for callers that extend a step (object sampling).
     pub fn rng(&mut self) -> &mut impl Rng {
         &mut self.rng
@@ -924,45 +563,4 @@ fn grown_capacity(ctx: &GpuContext, count: usize, max_gaussians: usize) -> usize
     ((count as f64 * CAPACITY_GROWTH) as usize)
         .min(ceiling)
         .max(count)
-}
-
-fn gather_fresh_zero(plan: &DensifyPlan, rows: &GaussianModel) -> GaussianModel {
-    GaussianModel {
-        means: plan.gather(&rows.means, |_| [0.0; 3]),
-        log_scales: plan.gather(&rows.log_scales, |_| [0.0; 3]),
-        rotations: plan.gather(&rows.rotations, |_| [0.0; 4]),
-        opacity_logits: plan.gather(&rows.opacity_logits, |_| 0.0),
-        sh_coefficients: plan.gather(&rows.sh_coefficients, |_| Default::default()),
-        object_ids: Vec::new(),
-    }
-}
-
-fn put_model(checkpoint: &mut Checkpoint<TrainerMeta>, prefix: &str, model: &GaussianModel) {
-    checkpoint.put(&format!("{prefix}.means"), &model.means);
-    checkpoint.put(&format!("{prefix}.log_scales"), &model.log_scales);
-    checkpoint.put(&format!("{prefix}.rotations"), &model.rotations);
-    checkpoint.put(&format!("{prefix}.opacity_logits"), &model.opacity_logits);
-    checkpoint.put(&format!("{prefix}.sh"), &model.sh_coefficients);
-}
-
-fn get_model(
-    checkpoint: &Checkpoint<TrainerMeta>,
-    prefix: &str,
-    count: usize,
-) -> Result<GaussianModel, TrainError> {
-    let model = GaussianModel {
-        means: checkpoint.get(&format!("{prefix}.means"))?,
-        log_scales: checkpoint.get(&format!("{prefix}.log_scales"))?,
-        rotations: checkpoint.get(&format!("{prefix}.rotations"))?,
-        opacity_logits: checkpoint.get(&format!("{prefix}.opacity_logits"))?,
-        sh_coefficients: checkpoint.get(&format!("{prefix}.sh"))?,
-        object_ids: vec![[crate::OBJECT_NONE; 3]; count],
-    };
-    if model.means.len() != count {
-        return Err(TrainError::CheckpointMismatch(format!(
-            "{prefix}: {} Gaussians stored, header says {count}",
-            model.means.len()
-        )));
-    }
-    Ok(model)
 }

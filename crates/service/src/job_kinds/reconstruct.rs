@@ -9,7 +9,7 @@ use futures::future::BoxFuture;
 use serde::{Deserialize, Serialize};
 
 use super::training::{
-    fatal, load_resume_point, report_evaluation, store_outputs, train_failure,
+    TrainingStageReport, fatal, load_resume_point, report_evaluation, store_outputs, train_failure,
     train_with_checkpoints,
 };
 use crate::jobs::{JobContext, JobFailure, JobHandler};
@@ -92,26 +92,39 @@ fn run_blocking(ctx: &JobContext) -> Result<(), JobFailure> {
         Some(checkpoint) => Trainer::resume(&gpu, &scene, &checkpoint).map_err(train_failure)?,
         None => Trainer::new(&gpu, &scene, config.train.clone(), None).map_err(train_failure)?,
     };
-    let train_seconds =
+    let training =
         train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?;
-    finish(ctx, &scene, &mut trainer, train_seconds)
+    finish(ctx, &scene, &mut trainer, training)
+}
+
+/// A reconstruct job's metrics.json: the training command's metrics and the training stage's
+/// host costs.
+#[derive(Serialize)]
+struct ReconstructJobMetrics<'a> {
+    #[serde(flatten)]
+    metrics: &'a ReconstructMetrics,
+    training: TrainingStageReport,
 }
 
 fn finish(
     ctx: &JobContext,
     scene: &Scene,
     trainer: &mut Trainer,
-    train_seconds: f64,
+    training: TrainingStageReport,
 ) -> Result<(), JobFailure> {
     let held_out = trainer.evaluate().map_err(train_failure)?;
     let model = trainer.model().map_err(train_failure)?;
     let metrics = ReconstructMetrics {
         steps: trainer.step(),
         gaussians: model.len(),
-        train_seconds,
+        train_seconds: training.seconds,
         held_out,
     };
-    let metrics_json = serde_json::to_vec_pretty(&metrics).map_err(fatal)?;
+    let metrics_json = serde_json::to_vec_pretty(&ReconstructJobMetrics {
+        metrics: &metrics,
+        training,
+    })
+    .map_err(fatal)?;
     let mut documents = vec![("metrics.json", metrics_json)];
     // A config with `deformation` trains a dynamic scene's field; it is stored with the scene.
     if let Some(stored) = trainer

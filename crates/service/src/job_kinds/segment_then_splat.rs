@@ -17,8 +17,8 @@ use futures::future::BoxFuture;
 use serde::{Deserialize, Serialize};
 
 use crate::job_kinds::training::{
-    fatal, load_resume_point, report, report_evaluation, retryable, store_outputs, train_failure,
-    train_with_checkpoints,
+    TrainingStageReport, fatal, load_resume_point, report, report_evaluation, retryable,
+    store_outputs, train_failure, train_with_checkpoints,
 };
 use crate::jobs::{JobContext, JobFailure, JobHandler, Progress};
 use crate::store::objects::{ObjectEmbedding, ObjectRecord};
@@ -81,9 +81,10 @@ pub struct SegmentThenSplatConfig {
     pub object_floors: [usize; 3],
     /// Steps between checkpoints (0 = only at the end).
     pub checkpoint_every: u32,
-    /// Fields that follow the scene's size at run time (docs/method.md: 20k steps and one object
-    /// per level for scenes under 100 training views, else 40k and three; middle and large
-    /// levels from step 5k and 10k). Filled on submission with the fields the config left out.
+    /// Fields that follow the scene at run time (docs/method.md: steps of about 100 passes over
+    /// the training views, 2k to 30k; one object per level for scenes under 100 training views,
+    /// else three; the middle and large levels from the released code's shares of the job).
+    /// Filled on submission with the fields the config left out.
     pub scene_sized: SceneSizedFields,
 }
 
@@ -108,6 +109,9 @@ pub struct SegmentThenSplatMetrics {
     pub steps: u32,
     pub gaussians: usize,
     pub train_seconds: f64,
+    /// The training stage's host costs per step and its Gaussian budget.
+    #[serde(default)]
+    pub training: TrainingStageReport,
     pub held_out: EvalReport,
     /// Objects per level (small, middle, large).
     pub objects: [usize; 3],
@@ -192,7 +196,7 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
     let scene = load_scene(&ctx.scene_dir, &LoadOptions::default()).map_err(fatal)?;
     let frames = training_frames(&scene, &config.train);
     let size = SceneSize::of(frames.len());
-    config.scene_sized.apply(size, &mut config.train);
+    config.scene_sized.apply(frames.len(), &mut config.train);
     config
         .scene_sized
         .apply_deformation(scene.is_dynamic(), &mut config.train);
@@ -226,9 +230,9 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
                 .map_err(fatal)?
         }
     };
-    let train_seconds =
+    let training =
         train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?;
-    let objects = finish(ctx, &scene, &mut trainer, train_seconds, segmented)?;
+    let objects = finish(ctx, &scene, &mut trainer, training, segmented)?;
     let embeddings = embed_objects(ctx, &scene, &trainer, &masks, &objects)?;
     Ok((objects, embeddings))
 }
@@ -530,7 +534,7 @@ fn finish(
     ctx: &JobContext,
     scene: &Scene,
     trainer: &mut Trainer,
-    train_seconds: f64,
+    training: TrainingStageReport,
     segment: SegmentReport,
 ) -> Result<Vec<ObjectRecord>, JobFailure> {
     let held_out = trainer.evaluate().map_err(train_failure)?;
@@ -557,7 +561,8 @@ fn finish(
     let metrics = SegmentThenSplatMetrics {
         steps: trainer.step(),
         gaussians: model.len(),
-        train_seconds,
+        train_seconds: training.seconds,
+        training,
         held_out,
         objects: Level::ALL.map(|level| summaries.iter().filter(|s| s.level == level).count()),
         skipped_pairs: skipped.len(),

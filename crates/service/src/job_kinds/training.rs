@@ -6,10 +6,12 @@ use segsplat_engine::GaussianModel;
 use segsplat_engine::checkpoint::Checkpoint;
 use segsplat_engine::model::ModelError;
 use segsplat_engine::train::{EvalReport, TrainError, TrainProgress, Trainer, TrainerMeta};
+use segsplat_gpu::HostCostReading;
 use segsplat_method::cameras::CAMERAS_FILE;
 use segsplat_method::scene_files::write_scene_files;
 use segsplat_method::scene_files::{LABELS_FILE, SCENE_FILE};
 use segsplat_scene::Scene;
+use serde::{Deserialize, Serialize};
 
 pub fn fatal(error: impl std::fmt::Display) -> JobFailure {
     JobFailure::Fatal(error.to_string())
@@ -109,20 +111,60 @@ fn save_checkpoint(ctx: &JobContext, name: &str, trainer: &Trainer) -> Result<()
     ctx.save_checkpoint(name, &bytes).map_err(retryable)
 }
 
+/// How this attempt's training stage went (`training` in a job's metrics.json): its time, and
+/// per step what the host did besides waiting for the GPU, so a job's overhead over the
+/// engine's own step can be read without a GPU (docs/benchmarks.md, "The host's side").
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct TrainingStageReport {
+    /// Wall seconds of the stage, checkpoints included.
+    pub seconds: f64,
+    /// Steps trained in this attempt (a resumed attempt starts at its checkpoint).
+    pub steps: u32,
+    /// Gaussians densification could grow to (the config's, or the scene's).
+    pub gaussian_budget: usize,
+    /// Wall seconds spent writing checkpoints (inside `seconds`).
+    pub checkpoint_seconds: f64,
+    /// Wall seconds spent reporting progress (inside `seconds`).
+    #[serde(default)]
+    pub report_seconds: f64,
+    /// `seconds` over the seconds of the steps themselves (the stage less its checkpoints and
+    /// progress reports): the job's step rate against `segsplat bench`'s loop on the same
+    /// models. 1.0 is no overhead.
+    #[serde(default)]
+    pub job_overhead_ratio: f64,
+    pub dispatches_per_step: f64,
+    pub bytes_read_back_per_step: f64,
+    /// Host milliseconds a step outside the device's work and checkpoints (encoding,
+    /// progress, densification's re-layout on the CPU).
+    pub host_ms_per_step: f64,
+    /// Milliseconds a step the host waited for the GPU (read-backs, waits).
+    pub wait_ms_per_step: f64,
+    /// Milliseconds a step inside queue submissions (a software adapter runs the work there).
+    #[serde(default)]
+    pub submit_ms_per_step: f64,
+}
+
 /// Trains to the configured end, saving a checkpoint named `checkpoint_name` every
 /// `checkpoint_every` steps (0 = only at the end) and stopping at the next report when the job
-/// is cancelled or the service shuts down. Returns this attempt's training seconds.
+/// is cancelled or the service shuts down. Returns how this attempt's training went.
 pub fn train_with_checkpoints(
     ctx: &JobContext,
     trainer: &mut Trainer,
     checkpoint_name: &str,
     checkpoint_every: u32,
-) -> Result<f64, JobFailure> {
+) -> Result<TrainingStageReport, JobFailure> {
     let total = trainer.config().steps;
     if trainer.step() == 0 {
         warn_about_schedule(ctx, trainer);
     }
+    let gpu = trainer.gpu().clone();
+    let first_step = trainer.step();
+    let dispatches_before = gpu.dispatch_count();
+    let host_before = gpu.host_costs.reading();
     let started = std::time::Instant::now();
+    let mut checkpoint_seconds = 0.0;
+    let mut report_seconds = 0.0;
+    let mut checkpoint_host = HostCostReading::default();
     while trainer.step() < total {
         let next_checkpoint = match checkpoint_every {
             0 => total,
@@ -130,14 +172,43 @@ pub fn train_with_checkpoints(
         };
         trainer
             .run_until(next_checkpoint, |progress| {
+                let reporting = std::time::Instant::now();
                 report_training(ctx, progress);
-                ctx.stop_requested().is_ok()
+                let go_on = ctx.stop_requested().is_ok();
+                report_seconds += reporting.elapsed().as_secs_f64();
+                go_on
             })
             .map_err(train_failure)?;
         ctx.stop_requested()?;
+        let checkpoint_started = std::time::Instant::now();
+        let host_at_checkpoint = gpu.host_costs.reading();
         save_checkpoint(ctx, checkpoint_name, trainer)?;
+        checkpoint_seconds += checkpoint_started.elapsed().as_secs_f64();
+        checkpoint_host.add(&gpu.host_costs.reading().since(&host_at_checkpoint));
     }
-    Ok(started.elapsed().as_secs_f64())
+    let seconds = started.elapsed().as_secs_f64();
+    let host = gpu.host_costs.reading().since(&host_before);
+    let steps = trainer.step() - first_step;
+    let per_step = |value: f64| value / f64::from(steps.max(1));
+    let waited = host.wait_seconds() - checkpoint_host.wait_seconds();
+    let submitted = host.submit_seconds() - checkpoint_host.submit_seconds();
+    Ok(TrainingStageReport {
+        seconds,
+        steps,
+        gaussian_budget: trainer.gaussian_budget(),
+        checkpoint_seconds,
+        report_seconds,
+        job_overhead_ratio: seconds / (seconds - checkpoint_seconds - report_seconds).max(1e-9),
+        dispatches_per_step: per_step((gpu.dispatch_count() - dispatches_before) as f64),
+        bytes_read_back_per_step: per_step(
+            (host.bytes_read_back - checkpoint_host.bytes_read_back) as f64,
+        ),
+        host_ms_per_step: per_step(
+            (seconds - checkpoint_seconds - waited - submitted).max(0.0) * 1e3,
+        ),
+        wait_ms_per_step: per_step(waited.max(0.0) * 1e3),
+        submit_ms_per_step: per_step(submitted.max(0.0) * 1e3),
+    })
 }
 
 /// Stores a finished job's outputs under its output prefix: the trained scene (`scene.ply`,

@@ -11,6 +11,7 @@ pub fn check_job_bounds(config: &serde_json::Value, jobs: &JobsConfig) -> Result
     let bounded = [
         ("steps", jobs.max_steps, "jobs.max_steps"),
         ("max_gaussians", jobs.max_gaussians, "jobs.max_gaussians"),
+        ("gaussian_budget", jobs.max_gaussians, "jobs.max_gaussians"),
         (
             "random_init_count",
             jobs.max_gaussians,

@@ -193,7 +193,7 @@ impl Trainer {
                 &dynamics.geometry,
                 time,
             )?;
-            ctx.queue.submit([encoder.finish()]);
+            ctx.submit(encoder.finish());
             ctx.wait_idle()?;
             forward_secs += started.elapsed().as_secs_f64();
             // The backward reuses the activations the forward left resident (as in a step).
@@ -211,7 +211,7 @@ impl Trainer {
                 &self.grads,
                 time,
             )?;
-            ctx.queue.submit([encoder.finish()]);
+            ctx.submit(encoder.finish());
             ctx.wait_idle()?;
             backward_secs += started.elapsed().as_secs_f64();
         }
@@ -259,7 +259,7 @@ impl Trainer {
             &dynamics.geometry,
             time,
         )?;
-        self.ctx.queue.submit([encoder.finish()]);
+        self.ctx.submit(encoder.finish());
         // The next step deforms afresh.
         dynamics.deformed_at = None;
         dynamics.geometry.read_into(&self.ctx, &mut model)?;

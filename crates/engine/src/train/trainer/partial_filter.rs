@@ -101,7 +101,7 @@ impl Trainer {
                     );
                 }
                 drop(base);
-                self.ctx.queue.submit([encoder.finish()]);
+                self.ctx.submit(encoder.finish());
                 match self.renderer.sync_capacity(&self.ctx) {
                     Ok(report) if !report.overflowed => break,
                     // The capacity has grown to fit: render the view again.

@@ -1,0 +1,37 @@
+//! How many Gaussians densification may grow a scene to, when its config does not say.
+//!
+//! The 3DGS recipe bounds growth only by its gradient threshold and its schedule, tuned on
+//! captures of a few hundred views. On a sparse capture that grows the model far past what its
+//! pixels constrain: the figurine (20 training views) at 256 px grew to 76k Gaussians in 3000
+//! steps and lost 1.7 dB held out against 1000 steps with 9k, while 3000 steps without any
+//! densification kept 19.7 dB (issue 38). Extra Gaussians there fit one view's pixels and float
+//! in front of the others. So the budget follows what the training views can pin down, their
+//! pixels at the training resolution, in the spirit of DashGaussian's primitive budget and
+//! Taming 3DGS's: a fixed number of Gaussians per training pixel, never below the initial
+//! model. Densification fills it with the highest-gradient candidates
+//! ([`crate::densify::plan_densification`]'s `max_new`). Figures: docs/benchmarks.md,
+//! "The Gaussian budget".
+
+/// Gaussians per training pixel (all training views, at the training resolution).
+pub const GAUSSIANS_PER_TRAINING_PIXEL: f64 = 0.01;
+
+/// The default budget of a scene whose training views hold `training_pixels` pixels, starting
+/// from `initial` Gaussians.
+pub fn scene_gaussian_budget(training_pixels: u64, initial: usize) -> usize {
+    let by_pixels = (training_pixels as f64 * GAUSSIANS_PER_TRAINING_PIXEL).round() as usize;
+    by_pixels.max(initial)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_budget_follows_the_pixels_and_never_shrinks_the_start() {
+        // 20 views at 256 x 168 and at 1000 x 658.
+        assert_eq!(scene_gaussian_budget(20 * 256 * 168, 2_443), 8_602);
+        assert_eq!(scene_gaussian_budget(20 * 1000 * 658, 2_443), 131_600);
+        // A start larger than the budget is kept (nothing grows, nothing is cut).
+        assert_eq!(scene_gaussian_budget(1_000, 5_000), 5_000);
+    }
+}
