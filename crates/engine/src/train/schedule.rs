@@ -235,17 +235,24 @@ impl TrainSchedule {
     }
 
     /// This schedule for a sparse capture (fewer than [`SPARSE_CAPTURE_VIEWS`] training views):
-    /// no opacity reset unless the config sets `opacity_reset_interval` (`configured`).
-    /// Oversized splats are still pruned from where the first reset would have been. The reset
-    /// is what made longer training worse on the figurine (20 views, 256 px, Gaussian budget
-    /// 8.6k): 3000 steps with one reset reached 17.9 dB held out, 5000 with two 17.8, while
-    /// 3000 without any held 19.5 dB at steps 1000, 2000 and 3000 (docs/benchmarks.md, "The
-    /// Gaussian budget and steps from the scene"). After a reset every Gaussian is nearly
-    /// transparent, and with few views the opacities grow back wherever one view's pixels ask,
-    /// as floaters in front of the others.
-    pub fn for_sparse_capture(mut self, configured: Option<u32>) -> Self {
+    /// no opacity reset unless the config sets `opacity_reset_interval` (`configured`), and,
+    /// for a scene from sparse points (`from_points`), no pruning of oversized splats either,
+    /// which the recipe ties to the first reset (a scene from random points keeps
+    /// [`Self::for_random_init`]'s early pruning, which is what removes its floaters). Both
+    /// made longer training worse on the figurine (20 views, 256 px, Gaussian budget 8.6k):
+    /// 3000 steps with a reset and pruning from step 1000 reached 17.9 dB held out, 4000 steps
+    /// with the pruning alone fell from 19.6 dB at step 1000 to 13.3 at 2000 and 17.0 at the
+    /// end, while 3000 steps with neither held 19.5 dB at steps 1000, 2000 and 3000
+    /// (docs/benchmarks.md, "The Gaussian budget and steps from the scene"). After a reset every
+    /// Gaussian is nearly transparent and with few views the opacities grow back wherever one
+    /// view's pixels ask, as floaters in front of the others; and the figurine's large
+    /// far-background splats are real.
+    pub fn for_sparse_capture(mut self, configured: Option<u32>, from_points: bool) -> Self {
         if configured.is_none() {
             self.opacity_reset_interval = 0;
+            if from_points {
+                self.prune_oversized_after = 0;
+            }
         }
         self
     }
@@ -447,25 +454,28 @@ mod tests {
     }
 
     #[test]
-    fn a_sparse_capture_resets_no_opacity_unless_asked_and_still_prunes_oversized_splats() {
+    fn a_sparse_capture_resets_no_opacity_and_keeps_its_large_splats_unless_asked() {
         let schedule = defaults(5_000);
         assert_eq!(schedule.reset_steps().count(), 2);
-        let sparse = schedule.for_sparse_capture(None);
+        let sparse = schedule.for_sparse_capture(None, true);
         assert_eq!(sparse.reset_steps().count(), 0);
         assert_eq!(
             sparse.densify_steps().count(),
             schedule.densify_steps().count()
         );
-        assert!(!sparse.prunes_oversized_at(1_000) && sparse.prunes_oversized_at(1_001));
+        assert!(!sparse.prunes_oversized_at(4_000));
+        // From random points the early pruning stays: it is what removes their floaters.
+        let random = schedule.for_random_init().for_sparse_capture(None, false);
+        assert_eq!(random.reset_steps().count(), 0);
+        assert!(!random.prunes_oversized_at(500) && random.prunes_oversized_at(501));
         let asked = TrainSchedule::resolve(&TrainConfig {
             steps: 5_000,
             opacity_reset_interval: Some(1_000),
             ..TrainConfig::default()
         });
-        assert_eq!(
-            asked.for_sparse_capture(Some(1_000)).reset_steps().count(),
-            2
-        );
+        let kept = asked.for_sparse_capture(Some(1_000), true);
+        assert_eq!(kept.reset_steps().count(), 2);
+        assert!(kept.prunes_oversized_at(1_001));
     }
 
     #[test]

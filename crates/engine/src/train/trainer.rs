@@ -246,7 +246,8 @@ impl Trainer {
             schedule.coarse_halvings,
         )?;
         if views.train.len() < SPARSE_CAPTURE_VIEWS {
-            schedule = schedule.for_sparse_capture(config.opacity_reset_interval);
+            schedule = schedule
+                .for_sparse_capture(config.opacity_reset_interval, has_sparse_points(scene));
         }
 
         let [max_width, max_height] = views.max_size();
