@@ -51,7 +51,7 @@ pub struct TrainConfig {
     /// Upper bound on Gaussians: densification stops growing past it.
     pub max_gaussians: usize,
     /// Gaussians densification may grow the model to; `None` sizes it from the scene (its
-    /// training pixels, [`crate::train::budget`]), so a sparse capture is not grown into
+    /// training pixels, at least twice the start, [`crate::train::budget`]), so a sparse capture is not grown into
     /// floaters that fit each training view and no other. Always within `max_gaussians`.
     pub gaussian_budget: Option<usize>,
     /// Random initial Gaussians when the dataset has no sparse points.
