@@ -340,6 +340,29 @@ impl GpuGaussians {
         Ok(gaussians)
     }
 
+    /// Room for `capacity` Gaussians holding none yet: the target a GPU pass fills (the
+    /// densification re-layout) before [`Self::set_count`].
+    pub fn allocate(ctx: &GpuContext, capacity: usize) -> Result<Self, ModelError> {
+        Ok(Self {
+            parameters: GaussianParameterBuffers::new(ctx, "gaussians", capacity)?,
+            object_ids: create_per_gaussian(ctx, "gaussians.object_ids", 3, capacity)?,
+            count: 0,
+            capacity,
+        })
+    }
+
+    /// Declares the first `count` rows live, after a GPU pass wrote them.
+    pub fn set_count(&mut self, count: usize) -> Result<(), ModelError> {
+        if count > self.capacity {
+            return Err(ModelError::OverCapacity {
+                count,
+                capacity: self.capacity,
+            });
+        }
+        self.count = count;
+        Ok(())
+    }
+
     /// Replaces the live Gaussians with `model` (count becomes `model.len()`).
     pub fn write(&mut self, ctx: &GpuContext, model: &GaussianModel) -> Result<(), ModelError> {
         model.validate()?;

@@ -4,6 +4,7 @@
 use bytemuck::{Pod, Zeroable};
 
 use crate::densify::DensifyStats;
+use crate::densify::gpu::StatBuffers;
 use segsplat_gpu::kernel::{Kernel, workgroups_2d, workgroups_for};
 use segsplat_gpu::{GpuContext, GpuError};
 
@@ -106,6 +107,15 @@ impl DensifyAccumulators {
             &bind_group,
             workgroups_2d(groups, ctx.limits.max_compute_workgroups_per_dimension),
         );
+    }
+
+    /// The accumulators, for the densification pass that reads them.
+    pub fn buffers(&self) -> StatBuffers<'_> {
+        StatBuffers {
+            gradient_sums: &self.gradient_sums,
+            visible_counts: &self.visible_counts,
+            max_radii: &self.max_radii,
+        }
     }
 
     pub fn encode_clear(&self, encoder: &mut wgpu::CommandEncoder) {

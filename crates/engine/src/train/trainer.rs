@@ -4,8 +4,8 @@
 //! loss, backward render, densification statistics, and one Adam update per parameter group. It
 //! is submitted without waiting; nothing is read back inside a step. CPU round trips happen only
 //! (a) every `sync_every` steps to read the loss and the renderer's intersection peak (capacity
-//! growth), and (b) at densification / opacity reset, which re-lays out every per-Gaussian buffer
-//! on the CPU (every 100 steps; see `crate::densify`).
+//! growth), and (b) at densification (every 100 steps), which re-lays out every per-Gaussian
+//! buffer in GPU kernels and reads back only counts (`crate::densify::gpu`).
 //!
 //! This file holds the step loop; each other concern has its own file under `trainer/`: the
 //! Adam update (`adam_step`), densification within the Gaussian budget (`densification`),
@@ -33,6 +33,7 @@ use crate::adam::{Adam, AdamError, AdamSettings};
 use crate::background_shell::{append_points, background_shell_points};
 use crate::checkpoint::CheckpointError;
 use crate::densify::PruneGuard;
+use crate::densify::gpu::GpuDensifier;
 use crate::init::gaussians_from_points;
 use crate::loss::{LossError, LossImages, LossOutputs, RenderLoss};
 use crate::model::{
@@ -147,6 +148,7 @@ pub struct Trainer {
     first_moments: GaussianParameterBuffers,
     second_moments: GaussianParameterBuffers,
     accumulators: DensifyAccumulators,
+    densifier: GpuDensifier,
     renderer: Renderer,
     loss: RenderLoss,
     adam: Adam,
@@ -271,6 +273,7 @@ impl Trainer {
             first_moments: GaussianParameterBuffers::new(ctx, "adam.m", capacity)?,
             second_moments: GaussianParameterBuffers::new(ctx, "adam.v", capacity)?,
             accumulators: DensifyAccumulators::new(ctx, capacity)?,
+            densifier: GpuDensifier::new(ctx)?,
             renderer: Renderer::new(ctx)?,
             loss,
             adam: Adam::new(ctx, AdamSettings::default())?,

@@ -1,9 +1,12 @@
 //! The trainer's adaptive density control: densification within the Gaussian budget and the
-//! opacity reset, read back and re-laid out on the CPU (every `densify_interval` steps), and
-//! the upload of a new model with its optimiser moments.
+//! opacity reset on the GPU (every `densify_interval` steps), and the upload of a new model
+//! with its optimiser moments (a resumed checkpoint).
 
 use super::{TrainError, Trainer, grown_capacity};
-use crate::densify::{self, DensifyPlan, DensifyStats, PruneGuard};
+use rand::Rng;
+
+use crate::densify::gpu::{DensifyInput, DensifyRequest};
+use crate::densify::{DensifyStats, PruneGuard};
 use crate::model::{
     GaussianModel, GaussianParameterBuffers, GpuGaussianGrads, GpuGaussians,
     max_gaussians_for_adapter,
@@ -25,49 +28,69 @@ impl Trainer {
         self.gaussian_budget
     }
 
-    /// Densification and/or opacity reset: read back, re-lay out on the CPU, upload.
+    /// Densification and/or opacity reset, on the GPU ([`crate::densify::gpu`]): the host
+    /// reads back four counts; the accumulators start again from zero.
     pub(super) fn densify_and_reset(&mut self, step: u32) -> Result<(), TrainError> {
         let ctx = self.ctx.clone();
-        let count = self.gaussians.count();
-        let mut model = self.gaussians.download(&ctx)?;
-        let mut first = self.first_moments.download(&ctx, count)?;
-        let mut second = self.second_moments.download(&ctx, count)?;
         if self.schedule.densifies_at(step) {
-            let stats = self.accumulators.download(&ctx, count)?;
             let mut config = self.config.densify.clone();
             if self.schedule.prunes_oversized_at(step) {
                 config.max_world_scale_fraction.get_or_insert(0.1);
                 config.max_screen_radius_fraction.get_or_insert(0.15);
             }
             // Grow only into what is left of the budget; pruning still runs at full budget.
-            let room = self.gaussian_limit().saturating_sub(count);
-            let plan = densify::plan_densification(
-                &model,
-                &stats,
-                &config,
-                self.scene_extent,
-                self.prune_guard.as_deref().map(|g| g as &dyn PruneGuard),
-                Some(room),
-                &mut self.rng,
-            );
+            let room = self.gaussian_limit().saturating_sub(self.gaussians.count());
+            let ceiling = self.config.max_gaussians.min(self.gaussian_budget);
+            let request = DensifyRequest {
+                config: &config,
+                scene_extent: self.scene_extent,
+                guard: self.prune_guard.as_deref().map(|g| g as &dyn PruneGuard),
+                max_new: Some(room),
+                seed: self.rng.random(),
+            };
+            let input = DensifyInput {
+                gaussians: &self.gaussians,
+                first_moments: &self.first_moments,
+                second_moments: &self.second_moments,
+                stats: self.accumulators.buffers(),
+            };
+            let densified = self.densifier.densify(&ctx, &input, &request, |needed| {
+                grown_capacity(&ctx, needed, ceiling)
+            })?;
+            let summary = densified.summary;
             tracing::debug!(
                 step,
-                cloned = plan.cloned,
-                split = plan.split,
-                pruned = plan.pruned,
-                spared = plan.spared,
+                cloned = summary.cloned,
+                split = summary.split,
+                pruned = summary.pruned,
+                spared = summary.spared,
                 "densified"
             );
-            model = plan.apply(&model, config.split_children);
-            first = gather_fresh_zero(&plan, &first);
-            second = gather_fresh_zero(&plan, &second);
+            let capacity = densified.gaussians.capacity();
+            if capacity > self.grads.capacity() {
+                self.grads = GpuGaussianGrads::new(&ctx, capacity)?;
+                self.accumulators = DensifyAccumulators::new(&ctx, capacity)?;
+            }
+            self.gaussians = densified.gaussians;
+            self.first_moments = densified.first_moments;
+            self.second_moments = densified.second_moments;
         }
         if self.schedule.resets_opacity_at(step) {
-            densify::reset_opacity_logits(&mut model.opacity_logits, 0.01);
-            first.opacity_logits.iter_mut().for_each(|m| *m = 0.0);
-            second.opacity_logits.iter_mut().for_each(|v| *v = 0.0);
+            self.densifier.reset_opacity(
+                &ctx,
+                &self.gaussians,
+                &self.first_moments,
+                &self.second_moments,
+                0.01,
+            );
         }
-        self.replace_state(&model, &first, &second, &DensifyStats::default())?;
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("densify clear"),
+            });
+        self.accumulators.encode_clear(&mut encoder);
+        ctx.submit(encoder.finish());
         Ok(())
     }
 
@@ -108,17 +131,5 @@ impl Trainer {
             self.accumulators.upload(&ctx, stats);
         }
         Ok(())
-    }
-}
-
-/// Optimiser moments re-laid out by `plan`: kept rows keep theirs, new rows start at zero.
-fn gather_fresh_zero(plan: &DensifyPlan, rows: &GaussianModel) -> GaussianModel {
-    GaussianModel {
-        means: plan.gather(&rows.means, |_| [0.0; 3]),
-        log_scales: plan.gather(&rows.log_scales, |_| [0.0; 3]),
-        rotations: plan.gather(&rows.rotations, |_| [0.0; 4]),
-        opacity_logits: plan.gather(&rows.opacity_logits, |_| 0.0),
-        sh_coefficients: plan.gather(&rows.sh_coefficients, |_| Default::default()),
-        object_ids: Vec::new(),
     }
 }

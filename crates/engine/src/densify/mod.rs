@@ -2,17 +2,25 @@
 //! accumulated screen-space gradient is high, prune transparent or oversized ones, with a hook
 //! ([`PruneGuard`]) that lets the caller veto pruning (Segment then Splat's per-object floor).
 //!
-//! Decisions are made once per densification interval from statistics the GPU accumulated, on the
-//! CPU: it is a few hundred thousand comparisons every 100 steps, and the resulting re-layout of
-//! every per-Gaussian buffer is a gather that [`DensifyPlan::gather`] applies uniformly to
-//! parameters and optimiser moments alike. Children inherit all three object ids.
+//! Two implementations of one rule. [`plan_densification`] is the reference: it decides on the
+//! CPU and returns the new order as origins, which [`DensifyPlan::gather`] applies uniformly to
+//! parameters and optimiser moments alike. [`gpu::GpuDensifier`] is what training runs: the same
+//! decisions in kernels (classify, rank, scan, scatter), so only counts come back to the host.
+//! Both compare the same stored values against the same thresholds ([`DensifyThresholds`]) and
+//! draw split offsets from the same counter-based generator ([`split_draw`]), so they agree
+//! Gaussian for Gaussian (tests/gpu_densify.rs). Children inherit all three object ids.
 
-use glam::{Quat, Vec3};
+pub mod gpu;
+mod guard;
+pub mod split_draw;
+
+pub use guard::{GuardInputs, ObjectFloor, PruneGuard};
+
+use glam::Vec3;
 use rand::Rng;
-use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
-use crate::model::{GaussianModel, OBJECT_NONE};
+use crate::model::GaussianModel;
 
 /// Thresholds (3DGS defaults, with the absolute-gradient threshold of the released
 /// Segment-then-Splat code).
@@ -59,6 +67,68 @@ pub struct DensifyStats {
     pub max_radii: Vec<f32>,
 }
 
+/// One densification's thresholds in the form both implementations compare against: scale
+/// limits as logs, the opacity floor as a logit, computed once on the CPU. Comparing stored
+/// log-scales and logits directly (instead of exponentials on each side) keeps the CPU plan and
+/// the GPU kernels from disagreeing at a boundary over an ulp of `exp`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DensifyThresholds {
+    /// Densify when gradient_sum >= gradient * visible_count.
+    pub gradient: f32,
+    /// Clone when the largest log-scale is at most this, split above it.
+    pub log_dense_limit: f32,
+    /// Prune when the opacity logit is below this.
+    pub min_opacity_logit: f32,
+    /// Prune when the largest projected radius (fraction of the longer side) exceeds this.
+    pub screen_radius: f32,
+    /// Prune when the largest log-scale exceeds this.
+    pub log_world_scale: f32,
+}
+
+impl DensifyThresholds {
+    pub fn new(config: &DensifyConfig, scene_extent: f32) -> Self {
+        let opacity = config.min_opacity;
+        Self {
+            gradient: config.gradient_threshold,
+            log_dense_limit: (config.percent_dense * scene_extent).ln(),
+            min_opacity_logit: (opacity / (1.0 - opacity)).ln(),
+            // f32::MAX rather than infinity: shader compilers may assume no infinities.
+            screen_radius: config.max_screen_radius_fraction.unwrap_or(f32::MAX),
+            log_world_scale: config
+                .max_world_scale_fraction
+                .map_or(f32::MAX, |fraction| (fraction * scene_extent).ln()),
+        }
+    }
+
+    /// Whether Gaussian `i` grows, and whether it is a pruning candidate.
+    fn classify(&self, model: &GaussianModel, stats: &DensifyStats, i: usize) -> (Growth, bool) {
+        let visible = stats.visible_counts.get(i).copied().unwrap_or(0);
+        let gradient_sum = stats.gradient_sums.get(i).copied().unwrap_or(0.0);
+        let max_log_scale = model.log_scales[i].iter().copied().fold(f32::MIN, f32::max);
+        let growth = if gradient_sum >= self.gradient * visible as f32 {
+            if max_log_scale <= self.log_dense_limit {
+                Growth::Clone
+            } else {
+                Growth::Split
+            }
+        } else {
+            Growth::None
+        };
+        let max_radius = stats.max_radii.get(i).copied().unwrap_or(0.0);
+        let prune = model.opacity_logits[i] < self.min_opacity_logit
+            || max_radius > self.screen_radius
+            || max_log_scale > self.log_world_scale;
+        // A pruning candidate does not grow: its copies would be pruned with it (they inherit
+        // its opacity and size), and under a growth bound it would take room from one that
+        // stays. Spared by a guard, it stays as it is.
+        if prune {
+            (Growth::None, true)
+        } else {
+            (growth, false)
+        }
+    }
+}
+
 /// Where each output Gaussian comes from.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Origin {
@@ -75,63 +145,6 @@ impl Origin {
         match *self {
             Origin::Keep(i) | Origin::Clone(i) => i,
             Origin::Split { parent, .. } => parent,
-        }
-    }
-}
-
-/// Can veto pruning: set `prune[i] = false` to keep Gaussian `i`.
-pub trait PruneGuard {
-    fn spare(&self, model: &GaussianModel, prune: &mut [bool], survivors_after_split: &[u32]);
-}
-
-/// Never lets an object (per level) fall below `floors[level]` Gaussians, or below its current
-/// count if that is smaller: pruning candidates of a starving object are spared, most opaque
-/// first. This is the persistence rule the released Segment-then-Splat code intended.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ObjectFloor {
-    pub floors: [usize; 3],
-}
-
-impl PruneGuard for ObjectFloor {
-    fn spare(&self, model: &GaussianModel, prune: &mut [bool], survivors_after_split: &[u32]) {
-        use std::collections::HashMap;
-        for level in 0..3 {
-            let floor = self.floors[level];
-            if floor == 0 {
-                continue;
-            }
-            // Per object: Gaussians now, Gaussians that would remain, and its prune candidates.
-            let mut current: HashMap<u32, usize> = HashMap::new();
-            let mut remaining: HashMap<u32, usize> = HashMap::new();
-            let mut candidates: HashMap<u32, Vec<usize>> = HashMap::new();
-            for (index, ids) in model.object_ids.iter().enumerate() {
-                let id = ids[level];
-                if id == OBJECT_NONE {
-                    continue;
-                }
-                *current.entry(id).or_default() += 1;
-                if prune[index] {
-                    candidates.entry(id).or_default().push(index);
-                } else {
-                    *remaining.entry(id).or_default() += survivors_after_split[index] as usize;
-                }
-            }
-            for (id, mut indices) in candidates {
-                let wanted = floor.min(current[&id]);
-                let mut kept = remaining.get(&id).copied().unwrap_or(0);
-                if kept >= wanted {
-                    continue;
-                }
-                indices
-                    .sort_by(|&a, &b| model.opacity_logits[b].total_cmp(&model.opacity_logits[a]));
-                for index in indices {
-                    if kept >= wanted {
-                        break;
-                    }
-                    prune[index] = false;
-                    kept += survivors_after_split[index] as usize;
-                }
-            }
         }
     }
 }
@@ -182,15 +195,12 @@ impl DensifyPlan {
     }
 }
 
-fn sigmoid(x: f32) -> f32 {
-    1.0 / (1.0 + (-x).exp())
-}
-
 /// Decides clones, splits and prunes. `scene_extent` as in [`crate::schedule::scene_extent`].
 /// `max_new` bounds the Gaussians the plan adds (a clone adds one, a split `children - 1`):
-/// when more candidates pass the threshold, those with the highest mean gradient grow, so a
-/// budget fills with the Gaussians the loss asks for most (ties by index, so the plan is
-/// deterministic). `None`: no bound.
+/// when more candidates pass the threshold, they grow in order of their mean gradient, highest
+/// first (ties by index), until the first that does not fit, so a budget fills with the
+/// Gaussians the loss asks for most. `None`: no bound. Draws one seed from `rng` for the split
+/// offsets ([`split_draw`]).
 pub fn plan_densification<R: Rng>(
     model: &GaussianModel,
     stats: &DensifyStats,
@@ -202,48 +212,25 @@ pub fn plan_densification<R: Rng>(
 ) -> DensifyPlan {
     let count = model.len();
     let children = config.split_children.max(1);
+    let seed: u32 = rng.random();
+    let thresholds = DensifyThresholds::new(config, scene_extent);
     let mut growth = vec![Growth::None; count];
     let mut prune = vec![false; count];
-    // Gaussians each index turns into if kept: 2 for a clone pair, `children` for a split.
-    let mut survivors = vec![1u32; count];
-    let dense_limit = config.percent_dense * scene_extent;
     for i in 0..count {
-        let visible = stats.visible_counts.get(i).copied().unwrap_or(0);
-        let gradient = if visible > 0 {
-            stats.gradient_sums.get(i).copied().unwrap_or(0.0) / visible as f32
-        } else {
-            0.0
-        };
-        let max_scale = model.log_scales[i]
-            .iter()
-            .copied()
-            .fold(f32::MIN, f32::max)
-            .exp();
-        if gradient >= config.gradient_threshold {
-            if max_scale <= dense_limit {
-                growth[i] = Growth::Clone;
-                survivors[i] = 2;
-            } else {
-                growth[i] = Growth::Split;
-                survivors[i] = children;
-            }
-        }
-        let too_big_on_screen = config
-            .max_screen_radius_fraction
-            .is_some_and(|limit| stats.max_radii.get(i).copied().unwrap_or(0.0) > limit);
-        let too_big_in_world = config
-            .max_world_scale_fraction
-            .is_some_and(|fraction| max_scale > fraction * scene_extent);
-        prune[i] = sigmoid(model.opacity_logits[i]) < config.min_opacity
-            || too_big_on_screen
-            || too_big_in_world;
+        (growth[i], prune[i]) = thresholds.classify(model, stats, i);
     }
     if let Some(max_new) = max_new {
-        limit_growth(&mut growth, &mut survivors, stats, max_new);
+        limit_growth(&mut growth, stats, children, max_new);
     }
+    // Gaussians each index turns into if kept: 2 for a clone pair, `children` for a split.
+    let survivors: Vec<u32> = growth.iter().map(|g| g.outputs(children)).collect();
     let candidates = prune.iter().filter(|&&p| p).count();
     if let Some(guard) = guard {
-        guard.spare(model, &mut prune, &survivors);
+        let inputs = GuardInputs {
+            object_ids: &model.object_ids,
+            opacity_logits: &model.opacity_logits,
+        };
+        guard.spare(inputs, &mut prune, &survivors);
     }
     let mut plan = DensifyPlan {
         pruned: prune.iter().filter(|&&p| p).count(),
@@ -263,18 +250,17 @@ pub fn plan_densification<R: Rng>(
                 plan.cloned += 1;
             }
             Growth::Split => {
-                let scale = Vec3::from_array(model.log_scales[i].map(f32::exp));
-                let [w, x, y, z] = model.rotations[i];
-                let rotation = Quat::from_xyzw(x, y, z, w).normalize();
-                for _ in 0..children {
-                    let sample = Vec3::new(
-                        StandardNormal.sample(rng),
-                        StandardNormal.sample(rng),
-                        StandardNormal.sample(rng),
-                    ) * scale;
+                for child in 0..children {
+                    let offset = split_draw::split_offset(
+                        seed,
+                        index,
+                        child,
+                        model.log_scales[i],
+                        model.rotations[i],
+                    );
                     plan.origins.push(Origin::Split {
                         parent: index,
-                        offset: (rotation * sample).to_array(),
+                        offset,
                     });
                 }
                 plan.split += 1;
@@ -284,39 +270,38 @@ pub fn plan_densification<R: Rng>(
     plan
 }
 
-/// Keeps the growth of the highest-gradient candidates whose additions fit in `max_new`; the
-/// rest stay as they are.
-fn limit_growth(
-    growth: &mut [Growth],
-    survivors: &mut [u32],
-    stats: &DensifyStats,
-    max_new: usize,
-) {
-    let added = |survivors: &[u32], i: usize| survivors[i].saturating_sub(1) as usize;
-    let wanted: usize = (0..growth.len()).map(|i| added(survivors, i)).sum();
+/// The mean gradient a growth bound ranks candidates by.
+pub fn mean_gradient(stats: &DensifyStats, i: usize) -> f32 {
+    let visible = stats.visible_counts.get(i).copied().unwrap_or(0).max(1);
+    stats.gradient_sums.get(i).copied().unwrap_or(0.0) / visible as f32
+}
+
+/// Keeps the growth of candidates in order of mean gradient (highest first, ties by index) up
+/// to the first whose additions no longer fit in `max_new`; that one and every later one stay
+/// as they are. (With two children per split every candidate adds one, so this is simply the
+/// `max_new` highest; the GPU pass computes it as a prefix sum over the sorted candidates.)
+fn limit_growth(growth: &mut [Growth], stats: &DensifyStats, children: u32, max_new: usize) {
+    let wanted: usize = growth.iter().map(|g| g.added(children) as usize).sum();
     if wanted <= max_new {
         return;
     }
-    let mean_gradient = |i: usize| {
-        let visible = stats.visible_counts.get(i).copied().unwrap_or(0).max(1);
-        stats.gradient_sums.get(i).copied().unwrap_or(0.0) / visible as f32
-    };
     let mut candidates: Vec<usize> = (0..growth.len())
         .filter(|&i| growth[i] != Growth::None)
         .collect();
     candidates.sort_by(|&a, &b| {
-        mean_gradient(b)
-            .total_cmp(&mean_gradient(a))
+        mean_gradient(stats, b)
+            .total_cmp(&mean_gradient(stats, a))
             .then(a.cmp(&b))
     });
-    let mut room = max_new;
+    let mut added = 0usize;
+    let mut full = false;
     for i in candidates {
-        let adds = added(survivors, i);
-        if adds <= room {
-            room -= adds;
-        } else {
+        let adds = growth[i].added(children) as usize;
+        full = full || added + adds > max_new;
+        if full {
             growth[i] = Growth::None;
-            survivors[i] = 1;
+        } else {
+            added += adds;
         }
     }
 }
@@ -326,6 +311,22 @@ enum Growth {
     None,
     Clone,
     Split,
+}
+
+impl Growth {
+    /// Gaussians this one becomes if it is kept.
+    fn outputs(self, children: u32) -> u32 {
+        match self {
+            Growth::None => 1,
+            Growth::Clone => 2,
+            Growth::Split => children,
+        }
+    }
+
+    /// Gaussians it adds to the model.
+    fn added(self, children: u32) -> u32 {
+        self.outputs(children).saturating_sub(1)
+    }
 }
 
 /// 3DGS's periodic opacity reset: every opacity above `max_opacity` is lowered to it, so
@@ -341,6 +342,11 @@ pub fn reset_opacity_logits(opacity_logits: &mut [f32], max_opacity: f32) {
 mod tests {
     use super::*;
     use crate::init::logit;
+    use crate::model::OBJECT_NONE;
+
+    fn sigmoid(x: f32) -> f32 {
+        1.0 / (1.0 + (-x).exp())
+    }
     use rand::SeedableRng;
 
     fn model_with(scales: &[f32], opacities: &[f32], ids: &[[u32; 3]]) -> GaussianModel {
