@@ -18,7 +18,7 @@ pack_dir=${SEGSPLAT_GPU_PACK:-$repo/.gpu-pack}
 limit_bytes=$((64 * 1024 * 1024))
 # The test binaries that need an adapter: the engine's kernels against their CPU references,
 # training on synthetic scenes, and the Segment-then-Splat end-to-end tests.
-gpu_tests=(raster_gpu render_bands_gpu object_batch_gpu gpu_adam gpu_loss gpu_scan gpu_sort
+gpu_tests=(raster_gpu render_bands_gpu object_batch_gpu gpu_adam gpu_loss gpu_scan gpu_sort gpu_densify
   deform_gpu object_step_batched train_synthetic train_dynamic segment_then_splat_synthetic
   segment_then_splat_association)
 # The Vulkan loader and the GL dispatch libraries NVIDIA's Vulkan driver links against; the GPU
