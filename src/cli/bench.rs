@@ -449,6 +449,10 @@ struct KernelProfileReport {
     gpu_ms_per_step: f64,
     /// Wall time per step over the same steps (submission and waits included).
     wall_ms_per_step: f64,
+    /// `gpu_ms_per_step / wall_ms_per_step`: the share of the wall time the GPU spent inside
+    /// the step's compute passes (issue 38's target is at least 0.9). A lower bound: gaps
+    /// between passes inside one submission count as idle.
+    gpu_busy_fraction: f64,
     kernels: Vec<KernelTime>,
 }
 
@@ -482,6 +486,7 @@ fn profile_kernels(
         steps,
         gpu_ms_per_step: per_step(profile.total_ms),
         wall_ms_per_step,
+        gpu_busy_fraction: per_step(profile.total_ms) / wall_ms_per_step.max(1e-9),
         kernels: profile
             .kernels
             .into_iter()
