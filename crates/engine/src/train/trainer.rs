@@ -249,7 +249,8 @@ impl Trainer {
         )?;
         if views.train.len() < SPARSE_CAPTURE_VIEWS {
             schedule = schedule
-                .for_sparse_capture(config.opacity_reset_interval, has_sparse_points(scene));
+                .for_sparse_capture(config.opacity_reset_interval, has_sparse_points(scene))
+                .until_budget_full(config.densify_until);
         }
 
         let [max_width, max_height] = views.max_size();
