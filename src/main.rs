@@ -182,7 +182,7 @@ fn run_service(
         .context("invalid configuration")?;
     init_logging(&config)?;
     let runtime = tokio::runtime::Runtime::new().context("cannot start the async runtime")?;
-    runtime.block_on(async move {
+    let served = runtime.block_on(async move {
         let service = ServiceBuilder::new(config)
             .handler(std::sync::Arc::new(
                 segsplat_service::job_kinds::ReconstructHandler,
@@ -196,8 +196,18 @@ fn run_service(
             .context("cannot start segsplat")?;
         service.run_until_signal().await;
         Ok(())
-    })
+    });
+    // Dropping a runtime waits for every blocking task, and a job's stage that did not stop
+    // within the shutdown grace (its job already handed back) would hold the process until the
+    // stage ended: minutes after "segsplat stopped", until Kubernetes' SIGKILL. The service has
+    // stopped by now; what is left may take only a moment.
+    runtime.shutdown_timeout(BLOCKING_WORK_AT_EXIT);
+    served
 }
+
+/// How long a stopped service waits for blocking work still running (a job stage that ignored
+/// the stop past its grace, a blocking read) before the process exits anyway.
+const BLOCKING_WORK_AT_EXIT: std::time::Duration = std::time::Duration::from_secs(2);
 
 /// Mesa's Vulkan device-select layer connects to the Wayland display to learn which GPU drives
 /// it; on a headless host that makes libwayland print `XDG_RUNTIME_DIR is invalid or not set`

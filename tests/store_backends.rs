@@ -46,6 +46,20 @@ fn postgres_config() -> DatabaseConfig {
     }
 }
 
+/// A test config for `dir` on a fresh database of `cluster`, with `database`'s other settings.
+fn config_on(
+    cluster: &PrivateCluster,
+    dir: &std::path::Path,
+    database: DatabaseConfig,
+) -> segsplat_service::config::Config {
+    let mut config = test_config(dir);
+    config.database = DatabaseConfig {
+        url: Some(create_database(&cluster.url())),
+        ..database
+    };
+    config
+}
+
 /// (table, column) -> (portable type, nullable), whatever the backend calls the type.
 type Schema = BTreeMap<(String, String), (String, bool)>;
 
@@ -250,11 +264,7 @@ async fn losing_postgres_gives_503_with_the_reason_loses_nothing_and_recovers() 
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let mut config = test_config(dir.path());
-    config.database = DatabaseConfig {
-        url: Some(create_database(&cluster.url())),
-        ..postgres_config()
-    };
+    let config = config_on(&cluster, dir.path(), postgres_config());
     let handler = StepsHandler::new();
     let service = TestService::start(config, vec![Arc::new(handler.clone())]).await;
     let scene_id = service.upload_test_scene().await;
@@ -304,6 +314,45 @@ async fn losing_postgres_gives_503_with_the_reason_loses_nothing_and_recovers() 
         .create_job(&scene_id, STEPS_KIND, json!({"steps": 2}))
         .await;
     service.wait_for_state(&after, "succeeded", WAIT).await;
+    service.shutdown().await;
+}
+
+/// `/readyz` with PostgreSQL down answers within a second, under the Kubernetes probes' 5 s
+/// timeout, with the reason: the ping that waits `acquire_timeout_secs` (5 s, the default) for
+/// a connection runs on in the background. Before issue 39's fix the endpoint awaited it and
+/// then the cluster summary, 10 s in all, and the probe timed out instead of reading why.
+#[tokio::test]
+async fn readyz_answers_within_a_second_while_postgres_is_down() {
+    let Some(cluster) = PrivateCluster::start("readyz_answers_within_a_second") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let waits = DatabaseConfig {
+        acquire_timeout_secs: 5,
+        ..postgres_config()
+    };
+    let mut config = config_on(&cluster, dir.path(), waits);
+    // No workers here, so readiness is the database's and the blob store's.
+    config.workers.enabled = false;
+    let service = TestService::start(config, vec![]).await;
+    let (status, body) = service.get_json("/readyz").await;
+    assert_eq!(status, 200, "{body}");
+
+    cluster.stop_server();
+    for probe in 0..2 {
+        let asked = Instant::now();
+        let (status, body) = service.get_json("/readyz").await;
+        let took = asked.elapsed();
+        println!("readyz {probe} with PostgreSQL down: {status} in {took:?}");
+        let database = &body["checks"]["database"];
+        let reason = body["reasons"][0].as_str().unwrap_or_default();
+        assert_eq!((status, &database["ok"]), (503, &json!(false)), "{body}");
+        assert!(reason.starts_with("database: "), "{body}");
+        // Half the acquire timeout: the answer did not wait for it.
+        assert!(took < Duration::from_millis(2500), "took {took:?}: {body}");
+    }
+    cluster.start_server();
+    wait_for_status(&service, "/readyz", 200).await;
     service.shutdown().await;
 }
 

@@ -252,6 +252,7 @@ fn serve_failure_status(failure: ServeFailure) -> Status {
         ServeFailure::StaticScene(_) => Status::invalid_argument(message),
         ServeFailure::Blobs(_) => Status::unavailable(message),
         ServeFailure::DeadlineExceeded => Status::deadline_exceeded(message),
+        ServeFailure::CallerGone => Status::cancelled(message),
         ServeFailure::Serving(error) => match error {
             ServingError::FrameOutOfRange { .. } | ServingError::BadView(_) => {
                 Status::invalid_argument(message)

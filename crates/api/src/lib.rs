@@ -18,6 +18,7 @@ mod openapi_shared;
 mod ops;
 mod params;
 pub mod query;
+mod readiness;
 mod router;
 mod scenes;
 mod schema_names;

@@ -39,6 +39,12 @@ impl From<ServeFailure> for ApiError {
             ServeFailure::DeadlineExceeded => {
                 ApiError::new(StatusCode::GATEWAY_TIMEOUT, "deadline_exceeded", message)
             }
+            // Nobody reads it: the client disconnected. nginx's "client closed request".
+            ServeFailure::CallerGone => ApiError::new(
+                StatusCode::from_u16(499).unwrap_or(StatusCode::REQUEST_TIMEOUT),
+                "caller_gone",
+                message,
+            ),
             ServeFailure::Serving(error) => match error {
                 ServingError::FrameOutOfRange { .. } | ServingError::BadView(_) => {
                     ApiError::bad_request(message)

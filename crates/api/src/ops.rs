@@ -8,7 +8,9 @@ use serde::Serialize;
 use utoipa::ToSchema;
 
 use super::metrics::{refresh_cluster_gauges, refresh_queue_gauges};
+use super::readiness::{ANSWER_WITHIN, Reading};
 use super::state::AppState;
+use segsplat_service::core::ServiceCore;
 use segsplat_service::usecases::workers::{cluster_workers, summarize};
 
 #[derive(Debug, Serialize, ToSchema)]
@@ -44,7 +46,7 @@ pub struct ReadinessResponse {
     pub cluster: ClusterWorkers,
 }
 
-#[derive(Debug, Default, Serialize, ToSchema)]
+#[derive(Debug, Default, Clone, Serialize, ToSchema)]
 pub struct ClusterWorkers {
     pub busy: usize,
     pub idle: usize,
@@ -52,8 +54,8 @@ pub struct ClusterWorkers {
     pub silent: usize,
 }
 
-async fn cluster_summary(state: &AppState) -> ClusterWorkers {
-    match cluster_workers(&state.core).await {
+async fn cluster_summary(core: &ServiceCore) -> ClusterWorkers {
+    match cluster_workers(core).await {
         Ok(statuses) => {
             let summary = summarize(&statuses);
             ClusterWorkers {
@@ -84,31 +86,36 @@ pub async fn healthz() -> Json<HealthResponse> {
     responses((status = 200, description = "ready", body = ReadinessResponse),
         (status = 503, description = "not ready; `reasons` says why", body = ReadinessResponse)))]
 pub async fn readyz(State(state): State<AppState>) -> impl IntoResponse {
-    let database = match state.core.database.ping().await {
-        Ok(()) => ReadinessCheck {
-            ok: true,
-            detail: "reachable".to_string(),
-        },
-        Err(error) => ReadinessCheck {
-            ok: false,
-            detail: error.to_string(),
-        },
-    };
-    let store = state.core.blobs.clone();
-    let listed = tokio::task::spawn_blocking(move || store.list_prefix("readyz-probe")).await;
-    let blobs = match listed {
-        Ok(Ok(_)) => ReadinessCheck {
-            ok: true,
-            detail: "reachable".to_string(),
-        },
-        Ok(Err(error)) => ReadinessCheck {
-            ok: false,
-            detail: error.to_string(),
-        },
-        Err(error) => ReadinessCheck {
-            ok: false,
-            detail: format!("the check crashed: {error}"),
-        },
+    // Every check gets the same budget; one that cannot answer in it is reported as such,
+    // with its last answer, and keeps running for the next probe.
+    let until = std::time::Instant::now() + ANSWER_WITHIN;
+    let probes = &state.readiness;
+    let core = &state.core;
+    let (database, blobs, cluster) = tokio::join!(
+        probes.database.read(until, || {
+            let database = core.database.clone();
+            async move { database.ping().await.map_err(|error| error.to_string()) }
+        }),
+        probes.blobs.read(until, || {
+            let store = core.blobs.clone();
+            async move {
+                match tokio::task::spawn_blocking(move || store.list_prefix("readyz-probe")).await {
+                    Ok(Ok(_)) => Ok(()),
+                    Ok(Err(error)) => Err(error.to_string()),
+                    Err(error) => Err(format!("the check crashed: {error}")),
+                }
+            }
+        }),
+        probes.cluster.read(until, || {
+            let core = core.clone();
+            async move { cluster_summary(&core).await }
+        }),
+    );
+    let database = reachability(database);
+    let blobs = reachability(blobs);
+    let cluster = match cluster {
+        Reading::Fresh(cluster) => cluster,
+        Reading::Pending { last, .. } => last.map(|last| last.value).unwrap_or_default(),
     };
     let workers = &state.workers;
     let adapters = if !workers.enabled {
@@ -167,7 +174,7 @@ pub async fn readyz(State(state): State<AppState>) -> impl IntoResponse {
             models,
         },
         adapters: workers.adapters.clone(),
-        cluster: cluster_summary(&state).await,
+        cluster,
     };
     let status = if ready {
         StatusCode::OK
@@ -175,6 +182,39 @@ pub async fn readyz(State(state): State<AppState>) -> impl IntoResponse {
         StatusCode::SERVICE_UNAVAILABLE
     };
     (status, Json(body))
+}
+
+/// A reachability check as `/readyz` reports it. One still running after the budget is not
+/// ready ("no answer within ..."), with its last answer and how long ago that came.
+fn reachability(reading: Reading<Result<(), String>>) -> ReadinessCheck {
+    match reading {
+        Reading::Fresh(Ok(())) => ReadinessCheck {
+            ok: true,
+            detail: "reachable".to_string(),
+        },
+        Reading::Fresh(Err(detail)) => ReadinessCheck { ok: false, detail },
+        Reading::Pending { running_for, last } => {
+            let last = match last {
+                Some(last) => format!(
+                    "; its last answer, {:.1} s ago: {}",
+                    last.at.elapsed().as_secs_f64(),
+                    match last.value {
+                        Ok(()) => "reachable".to_string(),
+                        Err(error) => error,
+                    }
+                ),
+                None => String::new(),
+            };
+            ReadinessCheck {
+                ok: false,
+                detail: format!(
+                    "no answer within {} ms (the check has run for {:.1} s){last}",
+                    ANSWER_WITHIN.as_millis(),
+                    running_for.as_secs_f64()
+                ),
+            }
+        }
+    }
 }
 
 /// Prometheus metrics in the text exposition format.

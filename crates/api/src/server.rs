@@ -270,6 +270,7 @@ impl ServiceBuilder {
             models,
             metrics,
             shutdown: shutdown.clone(),
+            readiness: Default::default(),
         };
         let (http, grpc) = match self.mode {
             ServiceMode::All => {

@@ -19,6 +19,8 @@ pub struct AppState {
     pub metrics: PrometheusHandle,
     /// Cancelled when the service stops; long-lived responses (SSE) end then.
     pub shutdown: CancellationToken,
+    /// `/readyz`'s checks, each run in the background at most once at a time.
+    pub readiness: Arc<crate::readiness::ReadinessProbes>,
 }
 
 /// What `/readyz` reports about GPU workers, fixed at start.

@@ -11,6 +11,8 @@
 //! and inside the image, which cannot tell occluded points apart. See [`AssociationOptions`] for
 //! the rules and their thresholds.
 
+use std::ops::ControlFlow;
+
 use image::RgbImage;
 use rayon::prelude::*;
 
@@ -44,6 +46,9 @@ pub enum AssociationError {
     },
     #[error("associating masks across views needs sparse points; the scene has none")]
     NoSparsePoints,
+    /// The caller's `view_done` asked to stop (a cancelled job, a stopping service).
+    #[error("mask generation stopped on request after {views_done} view(s)")]
+    Stopped { views_done: usize },
 }
 
 /// The rules of association; every default is a choice stated here.
@@ -115,25 +120,34 @@ pub fn generated_view_masks(
     max_side: Option<u32>,
     options: &AssociationOptions,
 ) -> Result<(ViewMaskSet, AssociationReport), AssociationError> {
-    generated_view_masks_with_progress(scene, frames, generator, max_side, options, |_| {})
+    generated_view_masks_with_progress(scene, frames, generator, max_side, options, |_| {
+        ControlFlow::Continue(())
+    })
 }
 
 /// [`generated_view_masks`], calling `view_done` with the number of views segmented so far
-/// after each one (generation is most of the stage's time).
+/// before the first view and after each one (generation is most of the stage's time). A
+/// `Break` from it stops the stage there with [`AssociationError::Stopped`]: one view is the
+/// longest a stop waits.
 pub fn generated_view_masks_with_progress(
     scene: &Scene,
     frames: &[usize],
     generator: &mut MaskGenerator,
     max_side: Option<u32>,
     options: &AssociationOptions,
-    mut view_done: impl FnMut(usize),
+    mut view_done: impl FnMut(usize) -> ControlFlow<()>,
 ) -> Result<(ViewMaskSet, AssociationReport), AssociationError> {
     let mut done = 0;
+    if view_done(done).is_break() {
+        return Err(AssociationError::Stopped { views_done: done });
+    }
     associate_frame_masks(scene, frames, max_side, options, |frame_index| {
         let image = frame_rgb8(scene, frame_index, max_side)?;
         let masks = generator.generate(&image, frame_index)?;
         done += 1;
-        view_done(done);
+        if view_done(done).is_break() {
+            return Err(AssociationError::Stopped { views_done: done });
+        }
         Ok(masks)
     })
 }

@@ -4,6 +4,7 @@
 
 pub mod reconstruct;
 pub mod segment_then_splat;
+pub mod stop_aware;
 pub mod training;
 
 pub use reconstruct::ReconstructHandler;

@@ -11,11 +11,13 @@
 //! `object_embeddings` tables.
 
 use std::collections::{BTreeMap, HashSet};
+use std::ops::ControlFlow;
 use std::sync::Arc;
 
 use futures::future::BoxFuture;
 use serde::{Deserialize, Serialize};
 
+use crate::job_kinds::stop_aware::{StopAware, StopSignal, stop_or};
 use crate::job_kinds::training::{
     TrainingStageReport, fatal, load_resume_point, report, report_evaluation, retryable,
     store_outputs, train_failure, train_with_checkpoints,
@@ -218,6 +220,8 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
     // Stage 1 runs again on a resumed attempt: every mask source is deterministic, and the
     // masks are cheaper to rebuild than to store.
     let (masks, segmented) = view_masks_for(ctx, &scene, &config, &frames)?;
+    // Between stages too: building the trainer uploads and sorts every view's masks.
+    ctx.stop_requested()?;
     let options = SegmentedTrainingOptions {
         object_floors: config.object_floors,
         background_shell: config.train.background_shell,
@@ -230,6 +234,7 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
                 .map_err(fatal)?
         }
     };
+    ctx.stop_requested()?;
     let training =
         train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?;
     let objects = finish(ctx, &scene, &mut trainer, training, segmented)?;
@@ -309,7 +314,10 @@ fn masks_from(
                 fatal("masks: \"automatic\" needs a SAM-family model in models.dir")
             })?;
             MaskGenerator::Automatic {
-                segmenter: Box::new(SamPredictor::new(model)),
+                segmenter: Box::new(StopAware::new(
+                    SamPredictor::new(model),
+                    StopSignal::of(ctx),
+                )),
                 config: AutomaticConfig::default(),
             }
         }
@@ -322,16 +330,27 @@ fn masks_from(
         }
     };
     tracing::info!(?source, views = frames.len(), "generating masks");
-    // One report per view segmented (the progress reporter estimates the stage's ETA).
+    // One report per view segmented (the progress reporter estimates the stage's ETA), and a
+    // stop noticed between views (and between a SAM model's batches, by `StopAware`).
+    let stop = StopSignal::of(ctx);
     let (masks, association) = generated_view_masks_with_progress(
         scene,
         frames,
         &mut generator,
         max_side,
         &AssociationOptions::default(),
-        |done| report(ctx, "segment", done as u64, views, &[]),
+        |done| {
+            if done > 0 {
+                report(ctx, "segment", done as u64, views, &[]);
+            }
+            if stop.requested() {
+                ControlFlow::Break(())
+            } else {
+                ControlFlow::Continue(())
+            }
+        },
     )
-    .map_err(fatal)?;
+    .map_err(|error| stop_or(ctx, error, JobFailure::Fatal))?;
     let objects = association.levels.map(|level| level.objects);
     merge_and_report(ctx, scene, config, masks, objects, &[])
 }
@@ -389,9 +408,13 @@ fn propagated_masks(
     // Masks are carried in video order (by time, camera by camera for a rig); the views go back
     // to the training order afterwards, which the object targets follow.
     let order = video_order(scene, frames);
-    let mut segmenter = SamPredictor::new(model.clone());
+    // Both models refuse work once a stop is asked, so the stage ends within one batch.
+    let mut segmenter = StopAware::new(SamPredictor::new(model.clone()), StopSignal::of(ctx));
     let mut generator = MaskGenerator::Automatic {
-        segmenter: Box::new(SamPredictor::new(model)),
+        segmenter: Box::new(StopAware::new(
+            SamPredictor::new(model),
+            StopSignal::of(ctx),
+        )),
         config: AutomaticConfig::default(),
     };
     let (mut masks, propagation) = propagated_view_masks(
@@ -402,7 +425,7 @@ fn propagated_masks(
         config.train.max_resolution,
         &PropagationOptions::default(),
     )
-    .map_err(fatal)?;
+    .map_err(|error| stop_or(ctx, error, JobFailure::Fatal))?;
     let position: std::collections::HashMap<usize, usize> =
         frames.iter().enumerate().map(|(i, &f)| (f, i)).collect();
     masks.views.sort_by_key(|view| {

@@ -241,7 +241,9 @@ impl SceneCache {
     }
 
     /// Renders each object's mask from `camera` (and its visible part when `visible_too`), at
-    /// `time` for a dynamic scene (see [`LoadedScene::effective_time`]).
+    /// `time` for a dynamic scene (see [`LoadedScene::effective_time`]). `None` when `wanted`
+    /// says no once this call holds the renderer (renders wait there behind one another) or
+    /// before an object's render: its caller has left, and the GPU goes to the next one.
     pub fn render_masks(
         &self,
         scene: &LoadedScene,
@@ -249,9 +251,13 @@ impl SceneCache {
         objects: &[(Level, u32)],
         visible_too: bool,
         time: Option<f32>,
-    ) -> Result<Vec<ObjectMasks>, ServingError> {
+        wanted: &dyn Fn() -> bool,
+    ) -> Result<Option<Vec<ObjectMasks>>, ServingError> {
         let gpu = self.gpu()?;
         let mut renderer = lock(&gpu.renderer);
+        if !wanted() {
+            return Ok(None);
+        }
         let mut motion = scene.motion.as_ref().map(lock);
         let gaussians = match (motion.as_deref_mut(), time) {
             (Some(motion), Some(time)) => motion.at(&gpu.ctx, &scene.gaussians, time)?,
@@ -273,6 +279,9 @@ impl SceneCache {
         objects
             .iter()
             .map(|&(level, object_id)| {
+                if !wanted() {
+                    return Ok(None);
+                }
                 let layer = render(
                     &mut renderer,
                     ObjectFilter::Object {
@@ -284,12 +293,12 @@ impl SceneCache {
                     Some(whole) => Some(to_mask(visible_mask(&layer, whole))?),
                     None => None,
                 };
-                Ok(ObjectMasks {
+                Ok(Some(ObjectMasks {
                     level,
                     object_id,
                     full: to_mask(full_mask(&layer))?,
                     visible,
-                })
+                }))
             })
             .collect()
     }

@@ -59,6 +59,10 @@ pub enum ServeFailure {
     /// The client's deadline passed before the render started; it was skipped.
     #[error("the call's deadline passed before the masks were rendered")]
     DeadlineExceeded,
+    /// The client left (a REST client disconnected, a gRPC call was dropped) before the render
+    /// started; it was skipped.
+    #[error("the caller left before the masks were rendered")]
+    CallerGone,
 }
 
 /// One object's encoded masks.
@@ -234,17 +238,35 @@ impl Serving {
             let scene = self.load_job(job).await?;
             let cache = Arc::clone(&self.cache);
             let max_mask_side = self.max_mask_side;
-            // Renders queue for the GPU: one whose caller has given up is not started.
+            // Renders queue for the GPU: one whose caller has given up (its deadline passed, or
+            // it left and dropped this future) is not started, checked when the thread starts
+            // and again once it holds the renderer, after waiting behind other renders.
             let deadline = super::observe::deadline();
+            let presence = CallerPresence::default();
+            let caller_here = presence.watch();
             let masks = blocking(move || {
-                if super::observe::deadline_passed(deadline) {
-                    return Err(ServeFailure::DeadlineExceeded);
+                let gone = || {
+                    if super::observe::deadline_passed(deadline) {
+                        Some(ServeFailure::DeadlineExceeded)
+                    } else if !caller_here.present() {
+                        Some(ServeFailure::CallerGone)
+                    } else {
+                        None
+                    }
+                };
+                if let Some(failure) = gone() {
+                    return Err(failure);
                 }
                 let camera = view.render_camera(&scene.cameras, max_mask_side)?;
                 let time = scene.effective_time(time, view.frame_time(&scene.cameras));
-                Ok(cache.render_masks(&scene, &camera, &objects, visible_too, time)?)
+                let wanted = || gone().is_none();
+                match cache.render_masks(&scene, &camera, &objects, visible_too, time, &wanted)? {
+                    Some(masks) => Ok(masks),
+                    None => Err(gone().unwrap_or(ServeFailure::CallerGone)),
+                }
             })
             .await?;
+            drop(presence);
             Ok(masks)
         })
         .await
@@ -473,6 +495,32 @@ fn trained_file_failure(error: BlobError, file: &str, job_id: &str) -> ServeFail
         },
         unavailable @ BlobError::Unavailable { .. } => ServeFailure::Blobs(unavailable),
         other => ServeFailure::Worker(other.to_string()),
+    }
+}
+
+/// Held by a call while its blocking work runs: dropped with the call's future (a REST client
+/// that disconnected, a gRPC call past its deadline), it tells the work its caller is gone.
+#[derive(Default)]
+struct CallerPresence(Arc<std::sync::atomic::AtomicBool>);
+
+/// The blocking side of a [`CallerPresence`].
+struct CallerWatch(Arc<std::sync::atomic::AtomicBool>);
+
+impl CallerPresence {
+    fn watch(&self) -> CallerWatch {
+        CallerWatch(Arc::clone(&self.0))
+    }
+}
+
+impl Drop for CallerPresence {
+    fn drop(&mut self) {
+        self.0.store(true, std::sync::atomic::Ordering::Release);
+    }
+}
+
+impl CallerWatch {
+    fn present(&self) -> bool {
+        !self.0.load(std::sync::atomic::Ordering::Acquire)
     }
 }
 
