@@ -8,6 +8,7 @@ pub mod handlers;
 pub mod models_support;
 pub mod object_store;
 pub mod postgres;
+pub mod s3rver;
 pub mod segsplat_bin;
 
 use std::path::{Path, PathBuf};
