@@ -80,6 +80,12 @@ impl OwnS3rver {
         }
     }
 
+    /// Where the server keeps its objects, one file (or folder) per key: what it stores can be
+    /// watched without a request.
+    pub fn data_dir(&self) -> &std::path::Path {
+        self.data.path()
+    }
+
     /// Kills the server with SIGKILL (every connection drops, nothing is flushed).
     pub fn kill(&mut self) {
         if let Some(mut child) = self.child.take() {
