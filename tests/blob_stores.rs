@@ -9,6 +9,7 @@ use std::io::Write;
 use std::sync::Arc;
 
 use common::object_store::{s3_blobs, unreachable_s3_blobs};
+use common::s3rver::OwnS3rver;
 use segsplat_service::store::{BlobError, BlobStore, LocalBlobStore, ObjectBlobStore};
 
 fn check_contract(store: &dyn BlobStore) {
@@ -110,4 +111,39 @@ fn an_unreachable_store_is_unavailable() {
         store.list_prefix("scenes"),
         Err(BlobError::Unavailable { .. })
     ));
+}
+
+/// A file whose upload fails at its final request (the one PUT of a small file, or the parts and
+/// completion of a multipart one) while the server is down is an `Unavailable` error, not a
+/// crashed client (object_store's writer panics when aborted after a failed shutdown), and the
+/// store works again once the server is back.
+#[test]
+fn a_failed_final_put_is_unavailable_not_a_crash() {
+    let Some(mut server) = OwnS3rver::start("a_failed_final_put_is_unavailable_not_a_crash") else {
+        return;
+    };
+    let config = server.blobs("final-put");
+    let url = config.url.clone().unwrap();
+    let store = ObjectBlobStore::open(&config, &url).unwrap();
+    let mut small = tempfile::NamedTempFile::new().unwrap();
+    small.write_all(b"a checkpoint").unwrap();
+    small.flush().unwrap();
+    let mut large = tempfile::NamedTempFile::new().unwrap();
+    large.write_all(&vec![7u8; 9 << 20]).unwrap();
+    large.flush().unwrap();
+    store.put_file("jobs/j/small", small.path()).unwrap();
+
+    server.kill();
+    for (key, file) in [("jobs/j/small", &small), ("jobs/j/large", &large)] {
+        let error = store.put_file(key, file.path()).unwrap_err();
+        assert!(matches!(&error, BlobError::Unavailable { .. }), "{error:?}");
+        assert!(!error.to_string().contains("crashed"), "{key}: {error}");
+    }
+
+    server.restart();
+    store.put_file("jobs/j/large", large.path()).unwrap();
+    assert_eq!(
+        store.list_prefix("jobs/j").unwrap(),
+        vec!["jobs/j/large", "jobs/j/small"]
+    );
 }

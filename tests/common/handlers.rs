@@ -1,6 +1,6 @@
 //! A CPU-only job kind for exercising the queue: counts steps with progress, checkpoints after
-//! each step (so a resumed attempt continues), honours cancel and shutdown between steps, and can
-//! fail its first attempts on request.
+//! each step (so a resumed attempt continues; a blob-store outage is `JobFailure::Unavailable`),
+//! honours cancel and shutdown between steps, and can fail its first attempts on request.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -96,14 +96,13 @@ impl JobHandler for StepsHandler {
             let resume_from = match ctx.load_checkpoint("step", decode_step) {
                 Ok(Some(step)) => step,
                 Ok(None) => 0,
-                Err(error) => return Err(JobFailure::Retryable(error.to_string())),
+                Err(error) => return Err(JobFailure::from(error)),
             };
             for step in resume_from..config.steps {
                 ctx.stop_requested()?;
                 tokio::time::sleep(Duration::from_millis(config.step_ms)).await;
                 stats.steps_executed.fetch_add(1, Ordering::SeqCst);
-                ctx.save_checkpoint("step", &(step + 1).to_le_bytes())
-                    .map_err(|error| JobFailure::Retryable(error.to_string()))?;
+                ctx.save_checkpoint("step", &(step + 1).to_le_bytes())?;
                 let mut progress = Progress {
                     stage: "count".to_string(),
                     step: step + 1,

@@ -8,6 +8,7 @@ pub mod handlers;
 pub mod models_support;
 pub mod object_store;
 pub mod postgres;
+pub mod s3rver;
 pub mod segsplat_bin;
 
 use std::path::{Path, PathBuf};
@@ -72,12 +73,8 @@ impl TestService {
         data_dir: &Path,
         configure: impl FnOnce(&mut Config),
     ) -> Option<TestService> {
-        if segsplat_gpu::GpuContext::new_default().is_err() {
-            if std::env::var("SEGSPLAT_SKIP_GPU_TESTS").is_ok() {
-                eprintln!("skipping: no GPU adapter");
-                return None;
-            }
-            panic!("no GPU adapter (lavapipe is installed by scripts/bootstrap.sh)");
+        if !gpu_or_skip("this test") {
+            return None;
         }
         let mut config = test_config(data_dir);
         config.workers.cpu_slots = 0;
@@ -234,6 +231,19 @@ impl TestService {
     pub async fn shutdown(self) {
         self.service.shutdown().await;
     }
+}
+
+/// Whether a GPU adapter opens; `false` (skip, with the reason) without one when
+/// `SEGSPLAT_SKIP_GPU_TESTS` is set; without that variable a missing adapter fails.
+pub fn gpu_or_skip(test: &str) -> bool {
+    if segsplat_gpu::GpuContext::new_default().is_ok() {
+        return true;
+    }
+    if std::env::var("SEGSPLAT_SKIP_GPU_TESTS").is_ok() {
+        eprintln!("skipping {test}: no GPU adapter");
+        return false;
+    }
+    panic!("no GPU adapter (lavapipe is installed by scripts/bootstrap.sh)");
 }
 
 /// Every file under `dir`, relative, sorted (empty when `dir` does not exist).

@@ -21,19 +21,31 @@ pub fn s3_blobs(test: &str) -> Option<BlobsConfig> {
     };
     let credential = |name: &str| std::env::var(name).unwrap_or_else(|_| "S3RVER".to_string());
     Some(BlobsConfig {
-        url: Some(format!(
-            "s3://{bucket}/{test}-{}",
-            uuid::Uuid::new_v4().simple()
-        )),
-        endpoint: Some(endpoint),
-        region: Some("us-east-1".to_string()),
         access_key_id: Some(credential("SEGSPLAT_TEST_S3_ACCESS_KEY_ID")),
         secret_access_key: Some(credential("SEGSPLAT_TEST_S3_SECRET_ACCESS_KEY")),
-        allow_http: true,
         request_timeout_secs: 30.0,
         max_retries: 2,
-        ..BlobsConfig::default()
+        ..s3rver_blobs(
+            &endpoint,
+            &format!("s3://{bucket}/{test}-{}", uuid::Uuid::new_v4().simple()),
+        )
     })
+}
+
+/// Blob settings for s3rver at `endpoint` (its default credentials) and the bucket and prefix
+/// `url` names; requests give up within 2 s and are not retried.
+pub fn s3rver_blobs(endpoint: &str, url: &str) -> BlobsConfig {
+    BlobsConfig {
+        url: Some(url.to_string()),
+        endpoint: Some(endpoint.to_string()),
+        region: Some("us-east-1".into()),
+        access_key_id: Some("S3RVER".into()),
+        secret_access_key: Some("S3RVER".into()),
+        allow_http: true,
+        request_timeout_secs: 2.0,
+        max_retries: 0,
+        ..BlobsConfig::default()
+    }
 }
 
 /// Blob settings for an S3 endpoint where nothing listens: every request fails fast.
@@ -44,14 +56,8 @@ pub fn unreachable_s3_blobs() -> BlobsConfig {
         .unwrap()
         .port();
     BlobsConfig {
-        url: Some("s3://nowhere/prefix".into()),
-        endpoint: Some(format!("http://127.0.0.1:{port}")),
-        region: Some("us-east-1".into()),
         access_key_id: Some("key".into()),
         secret_access_key: Some("secret".into()),
-        allow_http: true,
-        request_timeout_secs: 2.0,
-        max_retries: 0,
-        ..BlobsConfig::default()
+        ..s3rver_blobs(&format!("http://127.0.0.1:{port}"), "s3://nowhere/prefix")
     }
 }

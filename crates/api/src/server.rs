@@ -27,6 +27,7 @@ use segsplat_service::jobs::{
     WorkerPool, WorkerPoolOptions, WorkerSlot, forward_remote_wakeups, open_adapters,
     sweep_leftovers,
 };
+use segsplat_service::store::blob_deletions::run_blob_deletion_sweeps;
 use segsplat_service::store::{BlobStore, Database, StoreError, open_blob_store};
 use segsplat_service::usecases::serving::Serving;
 use segsplat_vision::language::SharedTextEncoder;
@@ -202,6 +203,11 @@ impl ServiceBuilder {
                 .map_or("none", |adapter| adapter.name.as_str()),
         );
 
+        tokio::spawn(run_blob_deletion_sweeps(
+            database.clone(),
+            blobs.clone(),
+            shutdown.clone(),
+        ));
         spawn_periodic_sweep(
             places,
             database.clone(),

@@ -2,6 +2,7 @@
 //! training that honours cancel and shutdown at step boundaries.
 
 use crate::jobs::{JobContext, JobFailure, Progress};
+use crate::store::BlobError;
 use segsplat_engine::GaussianModel;
 use segsplat_engine::checkpoint::Checkpoint;
 use segsplat_engine::model::ModelError;
@@ -90,7 +91,7 @@ pub fn load_resume_point(
         .load_checkpoint(name, |bytes| {
             Checkpoint::<TrainerMeta>::from_bytes(bytes).map_err(|error| error.to_string())
         })
-        .map_err(retryable)?;
+        .map_err(JobFailure::from)?;
     if let Some(checkpoint) = &checkpoint {
         tracing::info!(step = checkpoint.meta.step, "resuming from checkpoint");
         if let Err(error) = ctx
@@ -103,12 +104,26 @@ pub fn load_resume_point(
     Ok(checkpoint)
 }
 
+/// Saves the trainer's checkpoint. While the blob store is unreachable the checkpoint waits:
+/// training goes on with a `warning` job event, and the next checkpoint tries again (a crash
+/// meanwhile costs the steps since the last saved one, as always).
 fn save_checkpoint(ctx: &JobContext, name: &str, trainer: &Trainer) -> Result<(), JobFailure> {
     let bytes = trainer
         .checkpoint()
         .and_then(|c| Ok(c.to_bytes()?))
         .map_err(train_failure)?;
-    ctx.save_checkpoint(name, &bytes).map_err(retryable)
+    match ctx.save_checkpoint(name, &bytes) {
+        Err(error @ BlobError::Unavailable { .. }) => {
+            let message = format!(
+                "{error}; checkpoint at step {} skipped, training goes on",
+                trainer.step()
+            );
+            tracing::warn!(job = %ctx.job_id, "{message}");
+            ctx.progress.warn_detached("train", &message);
+            Ok(())
+        }
+        other => other.map_err(JobFailure::from),
+    }
 }
 
 /// How this attempt's training stage went (`training` in a job's metrics.json): its time, and
@@ -222,15 +237,18 @@ pub fn store_outputs(
 ) -> Result<(), JobFailure> {
     write_scene_files(model, scene, &ctx.work_dir).map_err(retryable)?;
     let prefix = ctx.output_prefix();
+    // The training is done: an outage of the store is waited out rather than losing it.
     for file in [SCENE_FILE, LABELS_FILE, CAMERAS_FILE] {
-        ctx.blobs
-            .put_file(&format!("{prefix}/{file}"), &ctx.work_dir.join(file))
-            .map_err(retryable)?;
+        let key = format!("{prefix}/{file}");
+        ctx.while_blobs_unavailable(&format!("storing {key}"), || {
+            ctx.blobs.put_file(&key, &ctx.work_dir.join(file))
+        })?;
     }
     for (file, bytes) in documents {
-        ctx.blobs
-            .put_bytes(&format!("{prefix}/{file}"), bytes)
-            .map_err(retryable)?;
+        let key = format!("{prefix}/{file}");
+        ctx.while_blobs_unavailable(&format!("storing {key}"), || {
+            ctx.blobs.put_bytes(&key, bytes)
+        })?;
     }
     Ok(())
 }

@@ -14,6 +14,9 @@ use segsplat_vision::models::ModelsStatus;
 /// falls back to when the newest is torn.
 pub const KEPT_CHECKPOINT_GENERATIONS: usize = 2;
 
+/// How often a wait for the blob store looks for cancel and shutdown.
+const STOP_POLL: std::time::Duration = std::time::Duration::from_millis(100);
+
 /// Digits of a checkpoint generation in its key, zero-padded so keys sort by generation.
 const GENERATION_DIGITS: usize = 12;
 
@@ -133,6 +136,34 @@ impl JobContext {
             self.blobs.delete_prefix(key)?;
         }
         Ok(())
+    }
+
+    /// Runs a blob-store operation (blocking), and again while the store is unreachable, with
+    /// backoff and a `warning` job event each time: for writes that must not be lost, such as a
+    /// finished job's outputs. Stops waiting when the job is cancelled or the service stops.
+    pub fn while_blobs_unavailable<T>(
+        &self,
+        what: &str,
+        mut operation: impl FnMut() -> Result<T, BlobError>,
+    ) -> Result<T, JobFailure> {
+        let mut backoff = super::outage::Backoff::new();
+        loop {
+            let reason = match operation() {
+                Err(error @ BlobError::Unavailable { .. }) => error.to_string(),
+                other => return other.map_err(JobFailure::from),
+            };
+            let wait = backoff.next_wait();
+            let message = format!("{reason}; trying {what} again in {} s", wait.as_secs_f64());
+            tracing::warn!(job = %self.job_id, "{message}");
+            self.progress.warn_detached("outage", &message);
+            let deadline = std::time::Instant::now() + wait;
+            while std::time::Instant::now() < deadline {
+                self.stop_requested()?;
+                std::thread::sleep(
+                    STOP_POLL.min(deadline.saturating_duration_since(std::time::Instant::now())),
+                );
+            }
+        }
     }
 
     /// The newest saved checkpoint of that name that `decode` accepts, if any (blocking I/O).

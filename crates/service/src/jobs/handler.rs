@@ -6,6 +6,7 @@ use std::sync::Arc;
 use futures::future::BoxFuture;
 
 use super::JobContext;
+use crate::store::BlobError;
 
 /// Why a handler stopped without finishing.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -23,6 +24,22 @@ pub enum JobFailure {
     /// Might work on another attempt (device lost, out of memory, I/O hiccup).
     #[error("{0}")]
     Retryable(String),
+    /// A dependency is down (the blob store cannot be reached): not the job's fault. The worker
+    /// keeps the claim, waits with backoff and runs the handler again, which resumes from its
+    /// last checkpoint; no attempt is spent.
+    #[error("{0}")]
+    Unavailable(String),
+}
+
+impl From<BlobError> for JobFailure {
+    /// An unreachable store is [`JobFailure::Unavailable`]; any other blob error might pass on
+    /// another attempt.
+    fn from(error: BlobError) -> Self {
+        match error {
+            BlobError::Unavailable { .. } => JobFailure::Unavailable(error.to_string()),
+            other => JobFailure::Retryable(other.to_string()),
+        }
+    }
 }
 
 /// One job kind (e.g. `reconstruct`, `segment_then_splat`). Handlers must be idempotent per step:

@@ -5,7 +5,9 @@
 mod context;
 mod events;
 mod handler;
+mod handler_run;
 mod identity;
+mod outage;
 mod pool;
 mod progress;
 mod remote_wakeups;

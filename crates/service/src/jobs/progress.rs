@@ -2,6 +2,7 @@
 //! announced to SSE subscribers, with an ETA estimated from the current stage's step rate.
 
 use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -42,6 +43,8 @@ pub struct ProgressReporter {
     clock: Arc<Mutex<Option<StageClock>>>,
     /// The last reported (stage, step), to count steps done for `segsplat_job_steps_total`.
     last_step: Arc<Mutex<Option<(String, u64)>>>,
+    /// Whether steps done under this lease were noted in the job's row already.
+    steps_noted: Arc<AtomicBool>,
 }
 
 impl ProgressReporter {
@@ -58,6 +61,7 @@ impl ProgressReporter {
             lease_owner,
             clock: Arc::new(Mutex::new(None)),
             last_step: Arc::new(Mutex::new(None)),
+            steps_noted: Arc::new(AtomicBool::new(false)),
         }
     }
 
@@ -93,6 +97,12 @@ impl ProgressReporter {
             _ => 0,
         };
         *last = Some((progress.stage.clone(), progress.step));
+        // Steps past this run's first report are progress, as a checkpoint is: a crash of the
+        // process after them is not counted as an attempt (issue 39: a host that crashes
+        // between checkpoints must not starve a job that trains on each life).
+        if done > 0 && !self.steps_noted.swap(true, Ordering::Relaxed) {
+            self.note_checkpoint();
+        }
         metrics::counter!("segsplat_job_steps_total", "worker" => self.lease_owner.clone(),
             "stage" => progress.stage.clone())
         .increment(done);
@@ -149,8 +159,9 @@ impl ProgressReporter {
         });
     }
 
-    /// Notes in the job's row that this lease holder saved a checkpoint, so a lease expiry
-    /// after it counts as progress rather than an attempt. Fire and forget, callable from async
+    /// Notes in the job's row that this lease holder made progress (saved a checkpoint, or
+    /// reported steps past its first report), so a lease expiry after it counts as progress
+    /// rather than an attempt. Fire and forget, callable from async
     /// and blocking code alike: the note is an optimisation of retry accounting, and a lost one
     /// only means that expiry counts as an attempt.
     pub fn note_checkpoint(&self) {

@@ -10,6 +10,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
+use super::JobFailure;
 use crate::store::BlobStore;
 use crate::store::blob::TEMP_MARKER;
 use crate::store::process_tag::process_tag;
@@ -49,12 +50,13 @@ impl SceneFileCache {
     }
 
     /// The scene's files on local disk, fetched from `blobs` (`scenes/{id}/files/...`) unless a
-    /// complete copy is here already. Blocking.
+    /// complete copy is here already. Blocking. A store that cannot be reached is
+    /// [`JobFailure::Unavailable`] (the worker waits for it); local trouble is retryable.
     pub fn checkout(
         self: &Arc<Self>,
         blobs: &dyn BlobStore,
         scene_id: &str,
-    ) -> Result<CachedScene, String> {
+    ) -> Result<CachedScene, JobFailure> {
         self.hold(scene_id);
         let held = CachedScene {
             dir: self.root.join(scene_id),
@@ -71,7 +73,8 @@ impl SceneFileCache {
         Ok(held)
     }
 
-    fn fetch(&self, blobs: &dyn BlobStore, scene_id: &str, dir: &Path) -> Result<(), String> {
+    fn fetch(&self, blobs: &dyn BlobStore, scene_id: &str, dir: &Path) -> Result<(), JobFailure> {
+        let local = |message: String| JobFailure::Retryable(message);
         let prefix = format!("scenes/{scene_id}/files");
         // Named after this process, so a sweep knows when its fetcher is gone.
         let temp = self.root.join(format!(
@@ -81,26 +84,21 @@ impl SceneFileCache {
         ));
         let result = (|| {
             std::fs::create_dir_all(&temp)
-                .map_err(|error| format!("cannot create {}: {error}", temp.display()))?;
-            for key in blobs
-                .list_prefix(&prefix)
-                .map_err(|error| error.to_string())?
-            {
+                .map_err(|error| local(format!("cannot create {}: {error}", temp.display())))?;
+            for key in blobs.list_prefix(&prefix)? {
                 let relative = key
                     .strip_prefix(&prefix)
                     .unwrap_or(&key)
                     .trim_start_matches('/');
-                blobs
-                    .get_to_path(&key, &temp.join(relative))
-                    .map_err(|error| error.to_string())?;
+                blobs.get_to_path(&key, &temp.join(relative))?;
             }
             std::fs::write(temp.join(COMPLETE), b"")
-                .map_err(|error| format!("cannot finish {}: {error}", temp.display()))?;
+                .map_err(|error| local(format!("cannot finish {}: {error}", temp.display())))?;
             match std::fs::rename(&temp, dir) {
                 Ok(()) => Ok(()),
                 // Another worker of this process finished the same scene first.
                 Err(_) if dir.join(COMPLETE).is_file() => Ok(()),
-                Err(error) => Err(format!("cannot place {}: {error}", dir.display())),
+                Err(error) => Err(local(format!("cannot place {}: {error}", dir.display()))),
             }
         })();
         let _ = std::fs::remove_dir_all(&temp);

@@ -1,6 +1,6 @@
 //! One worker slot: lease a job, run its handler with a heartbeat alongside, record the outcome.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -8,8 +8,10 @@ use tokio::sync::Notify;
 use tokio_util::sync::CancellationToken;
 use tracing::{Instrument, info, info_span, warn};
 
-use super::scene_cache::{CachedScene, SceneFileCache};
-use super::{HandlerRegistry, JobContext, JobEventBus, JobFailure, ProgressReporter};
+use super::handler_run::HandlerRun;
+use super::outage::run_through_outages;
+use super::scene_cache::SceneFileCache;
+use super::{HandlerRegistry, JobEventBus, JobFailure};
 use crate::config::JobsConfig;
 use crate::store::jobs::{AttemptOutcome, HeartbeatOutcome, JobRecord, JobState};
 use crate::store::workers::WorkerState;
@@ -213,35 +215,26 @@ impl Worker {
             .shared
             .scratch_dir
             .join(format!("job-{}-{}", job.id, job.attempts));
-        // Held to the end of the attempt, so the scene's local copy stays.
-        let (scene_dir, _scene_copy) = match self.prepare_dirs(job, &work_dir).await {
-            Ok(prepared) => prepared,
-            Err(message) => return Some(AttemptOutcome::Retry(message)),
-        };
         let cancel = CancellationToken::new();
         let handler_shutdown = CancellationToken::new();
-        let context = JobContext {
-            job_id: job.id.clone(),
-            scene_id: job.scene_id.clone(),
-            kind: job.kind.clone(),
-            attempt: job.attempts,
-            scene_dir,
-            work_dir: work_dir.clone(),
-            config: job.config.clone(),
+        let run = HandlerRun {
+            shared: self.shared.clone(),
+            job: job.clone(),
+            handler,
             gpu: self.gpu.clone(),
-            blobs: self.shared.blobs.clone(),
-            models: self.shared.models.clone(),
-            database: self.shared.database.clone(),
-            progress: ProgressReporter::new(
-                self.shared.database.clone(),
-                self.shared.bus.clone(),
-                job.id.clone(),
-                self.name.clone(),
-            ),
+            lease_owner: self.name.clone(),
+            work_dir: work_dir.clone(),
             cancel: cancel.clone(),
             shutdown: handler_shutdown.clone(),
         };
-        let mut handler_task = tokio::spawn(handler.run(context).in_current_span());
+        // Runs the handler, and again after each outage of the blob store, inside this claim.
+        let mut handler_task = tokio::spawn(
+            async move {
+                let progress = run.progress();
+                run_through_outages(|| run.once(), &progress, &run.cancel, &run.shutdown).await
+            }
+            .in_current_span(),
+        );
         let heartbeat_every = Duration::from_secs_f64(self.shared.jobs.heartbeat_secs);
         let lease_ms = (self.shared.jobs.lease_secs * 1000.0).ceil() as i64;
         let mut heartbeat = tokio::time::interval(heartbeat_every);
@@ -316,7 +309,9 @@ impl Worker {
             Some(Ok(Err(JobFailure::Cancelled))) => AttemptOutcome::Cancelled,
             Some(Ok(Err(JobFailure::Interrupted))) => AttemptOutcome::HandBack,
             Some(Ok(Err(JobFailure::Fatal(message)))) => AttemptOutcome::Failed(message),
-            Some(Ok(Err(JobFailure::Retryable(message)))) => AttemptOutcome::Retry(message),
+            Some(Ok(Err(JobFailure::Retryable(message) | JobFailure::Unavailable(message)))) => {
+                AttemptOutcome::Retry(message)
+            }
             Some(Err(join_error)) => {
                 AttemptOutcome::Retry(format!("job handler crashed: {join_error}"))
             }
@@ -334,31 +329,5 @@ impl Worker {
             Ok(Err(error)) => warn!(%error, "cannot delete the finished job's checkpoints"),
             Err(error) => warn!(%error, "deleting the finished job's checkpoints crashed"),
         }
-    }
-
-    /// Creates the scratch folder and finds the scene's files: in place in a local blob store,
-    /// else in this host's scene cache (fetched on first use).
-    async fn prepare_dirs(
-        &self,
-        job: &JobRecord,
-        work_dir: &Path,
-    ) -> Result<(PathBuf, Option<CachedScene>), String> {
-        let blobs = self.shared.blobs.clone();
-        let cache = self.shared.scene_cache.clone();
-        let scene_id = job.scene_id.clone();
-        let work_dir = work_dir.to_path_buf();
-        tokio::task::spawn_blocking(move || {
-            std::fs::create_dir_all(&work_dir)
-                .map_err(|error| format!("cannot create {}: {error}", work_dir.display()))?;
-            if let Some(local) = blobs.local_path(&format!("scenes/{scene_id}/files"))
-                && local.is_dir()
-            {
-                return Ok((local, None));
-            }
-            let copy = cache.checkout(blobs.as_ref(), &scene_id)?;
-            Ok((copy.dir.clone(), Some(copy)))
-        })
-        .await
-        .map_err(|error| format!("preparing the job's folders crashed: {error}"))?
     }
 }

@@ -41,6 +41,11 @@ const SQLITE_MIGRATIONS: Migrations = &[
         "workers",
         include_str!("../../migrations/sqlite/0004_workers.sql"),
     ),
+    (
+        5,
+        "blob deletions",
+        include_str!("../../migrations/sqlite/0005_blob_deletions.sql"),
+    ),
 ];
 
 const POSTGRES_MIGRATIONS: Migrations = &[
@@ -63,6 +68,11 @@ const POSTGRES_MIGRATIONS: Migrations = &[
         4,
         "workers",
         include_str!("../../migrations/postgres/0004_workers.sql"),
+    ),
+    (
+        5,
+        "blob deletions",
+        include_str!("../../migrations/postgres/0005_blob_deletions.sql"),
     ),
 ];
 

@@ -3,8 +3,9 @@
 //! host), which need not wait for the lease to run out.
 //!
 //! A reaped job is re-queued, or fails for good past its bounds: an expiry after the holder
-//! saved a checkpoint counts against `max_lease_expiries` (the job progressed; the process, not
-//! the job, failed), any other against `max_attempts`. A pending cancel cancels it.
+//! made progress (saved a checkpoint, or reported steps past its first report;
+//! `checkpointed_this_attempt`) counts against `max_lease_expiries` (the process, not the job,
+//! failed), any other against `max_attempts`. A pending cancel cancels it.
 
 use super::jobs::{COLUMNS, ExpiredLease, insert_state_event, job_from_row};
 use super::sql::query;
@@ -70,7 +71,7 @@ impl Database {
                                 ELSE 'queued' END, \
                    error = CASE WHEN cancel_requested THEN NULL \
                                 WHEN checkpointed_this_attempt \
-                                  THEN ? || ' after the job saved a checkpoint; ' || \
+                                  THEN ? || ' after the job made progress (steps or a checkpoint); ' || \
                                        CASE WHEN lease_expiries + 1 >= max_lease_expiries \
                                             THEN 'that happened ' || (lease_expiries + 1) || \
                                                  ' times (jobs.max_lease_expiries = ' || \

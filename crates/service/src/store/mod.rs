@@ -3,6 +3,7 @@
 //! worker processes stay stateless.
 
 pub mod blob;
+pub mod blob_deletions;
 mod database;
 mod error;
 pub mod events;

@@ -220,26 +220,32 @@ impl BlobStore for ObjectBlobStore {
             // visible once completed, and aborted on any error.
             let mut writer = BufWriter::with_capacity(store, location, PART_BYTES)
                 .with_max_concurrency(PARTS_IN_FLIGHT);
+            let unavailable = |error: std::io::Error| BlobError::Unavailable {
+                key: owned_key.clone(),
+                reason: error.to_string(),
+            };
             let mut buffer = vec![0u8; READ_CHUNK];
             let copied: std::io::Result<()> = async {
                 loop {
                     let read = input.read(&mut buffer).await?;
                     if read == 0 {
-                        break;
+                        return Ok(());
                     }
                     writer.write_all(&buffer[..read]).await?;
                 }
-                writer.shutdown().await
             }
             .await;
             if let Err(error) = copied {
+                // Parts may be in the store: abort the multipart upload (a no-op while the
+                // writer still buffers).
                 let _ = writer.abort().await;
-                return Err(BlobError::Unavailable {
-                    key: owned_key,
-                    reason: error.to_string(),
-                });
+                return Err(unavailable(error));
             }
-            Ok(())
+            // The final request: the one PUT, or the last part and the completion, which
+            // aborts the multipart upload itself when it fails. The writer is shut down either
+            // way and must not be aborted again: object_store's `BufWriter::abort` panics
+            // ("Already shut down") after `shutdown`.
+            writer.shutdown().await.map_err(unavailable)
         })?
     }
 

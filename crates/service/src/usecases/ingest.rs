@@ -1,5 +1,5 @@
 //! The blocking half of a scene upload: unpack the archive, detect and validate the dataset, and
-//! copy its files into the blob store. On any error everything written so far is removed.
+//! copy its files into the blob store. On any error the caller removes what was written.
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -52,19 +52,10 @@ pub struct IngestRequest {
     pub blob_prefix: String,
 }
 
-/// Unpacks, validates and stores; on error removes whatever reached the blob store.
+/// Unpacks, validates and stores. On error, files may have reached the blob store under
+/// `blob_prefix`: the caller removes them, or records their removal when the store is down
+/// (`store::blob_deletions::remove_or_record`).
 pub fn ingest_scene(request: &IngestRequest) -> Result<SceneSummary, IngestError> {
-    let result = unpack_validate_store(request);
-    if result.is_err()
-        && let Err(error) = request.blobs.delete_prefix(&request.blob_prefix)
-    {
-        tracing::error!(%error, prefix = %request.blob_prefix,
-            "cannot remove the blobs of a failed upload");
-    }
-    result
-}
-
-fn unpack_validate_store(request: &IngestRequest) -> Result<SceneSummary, IngestError> {
     let unpack_dir = tempfile::Builder::new()
         // Named after this process, so a restart's sweep knows when its writer is gone.
         .prefix(&format!("unpack-{}-", process_tag()))

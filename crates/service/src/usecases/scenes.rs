@@ -5,7 +5,8 @@
 //! handler's future when the client disconnects, and a dropped future would leave the blocking
 //! ingest writing files that no scene row ever points at. The task always ends with either a
 //! recorded scene or nothing of the upload left in the blob store, whether or not anyone still
-//! waits for it.
+//! waits for it: files the store cannot delete at that moment (it is down) are recorded in the
+//! database and removed by the sweep once it is back (`store::blob_deletions`).
 
 use tempfile::NamedTempFile;
 
@@ -13,8 +14,12 @@ use segsplat_scene::{InputErrorClass, LoadOptions, PixelLimits, UnpackLimits};
 
 use super::ingest::{IngestError, IngestRequest, ingest_scene};
 use crate::core::ServiceCore;
+use crate::store::blob_deletions::remove_or_record;
 use crate::store::scenes::{DeleteSceneError, SceneRecord};
 use crate::store::{BlobError, Caller, StoreError, now_ms};
+
+/// Why a failed upload's files are removed, as recorded when the store cannot take it at once.
+const FAILED_UPLOAD: &str = "a failed upload";
 
 #[derive(Debug, thiserror::Error)]
 pub enum SceneFailure {
@@ -78,29 +83,32 @@ async fn ingest_and_record(
         blobs: core.blobs.clone(),
         blob_prefix: blob_prefix.clone(),
     };
-    let summary = tokio::task::spawn_blocking(move || ingest_scene(&ingest))
+    let ingested = tokio::task::spawn_blocking(move || ingest_scene(&ingest))
         .await
-        .map_err(|error| SceneFailure::Internal(format!("scene ingest crashed: {error}")))?
-        .map_err(|error| {
-            metrics::counter!("segsplat_scene_uploads_total", "outcome" => "rejected").increment(1);
-            if let IngestError::Blob(blob @ BlobError::Unavailable { .. }) = error {
-                return SceneFailure::Blob(blob);
-            }
-            match error.class() {
-                // The details name server paths; they go to the log, not to the client.
-                InputErrorClass::Internal => {
-                    tracing::error!(%error, %scene_id, "storing an upload failed");
-                    SceneFailure::Internal(format!(
-                        "the server could not store the upload (its log has the details under \
+        .map_err(|error| SceneFailure::Internal(format!("scene ingest crashed: {error}")))?;
+    if ingested.is_err() {
+        remove_or_record(&core.database, &core.blobs, &blob_prefix, FAILED_UPLOAD).await;
+    }
+    let summary = ingested.map_err(|error| {
+        metrics::counter!("segsplat_scene_uploads_total", "outcome" => "rejected").increment(1);
+        if let IngestError::Blob(blob @ BlobError::Unavailable { .. }) = error {
+            return SceneFailure::Blob(blob);
+        }
+        match error.class() {
+            // The details name server paths; they go to the log, not to the client.
+            InputErrorClass::Internal => {
+                tracing::error!(%error, %scene_id, "storing an upload failed");
+                SceneFailure::Internal(format!(
+                    "the server could not store the upload (its log has the details under \
                          upload {scene_id})"
-                    ))
-                }
-                class => SceneFailure::Rejected {
-                    class,
-                    message: error.to_string(),
-                },
+                ))
             }
-        })?;
+            class => SceneFailure::Rejected {
+                class,
+                message: error.to_string(),
+            },
+        }
+    })?;
     drop(archive);
 
     let record = SceneRecord {
@@ -112,8 +120,9 @@ async fn ingest_and_record(
         tenant,
     };
     if let Err(error) = core.database.insert_scene(&record).await {
-        let blobs = core.blobs.clone();
-        let _ = tokio::task::spawn_blocking(move || blobs.delete_prefix(&blob_prefix)).await;
+        // With the database down the record of the removal may not land either; then the
+        // files stay, as the log says.
+        remove_or_record(&core.database, &core.blobs, &blob_prefix, FAILED_UPLOAD).await;
         return Err(error.into());
     }
     metrics::counter!("segsplat_scene_uploads_total", "outcome" => "stored").increment(1);
