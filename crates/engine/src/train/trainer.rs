@@ -250,7 +250,7 @@ impl Trainer {
         if views.train.len() < SPARSE_CAPTURE_VIEWS {
             schedule = schedule
                 .for_sparse_capture(config.opacity_reset_interval, has_sparse_points(scene))
-                .until_budget_full(config.densify_until);
+                .densify_within_passes(config.densify_until, views.train.len());
         }
 
         let [max_width, max_height] = views.max_size();

@@ -22,14 +22,6 @@ impl Trainer {
             .min(max_gaussians_for_adapter(&self.ctx))
     }
 
-    /// Whether densification is over because the model fills its budget (within 1%; only
-    /// where the schedule says so: [`crate::train::TrainSchedule::until_budget_full`]). Read
-    /// from the count, so a resumed job decides the same.
-    fn budget_filled(&self) -> bool {
-        self.schedule.densify_until_full
-            && self.gaussians.count() * 100 >= self.gaussian_limit() * 99
-    }
-
     /// The Gaussian budget of this job (the config's, or the scene's:
     /// [`crate::train::budget::scene_gaussian_budget`]).
     pub fn gaussian_budget(&self) -> usize {
@@ -40,7 +32,7 @@ impl Trainer {
     /// reads back four counts; the accumulators start again from zero.
     pub(super) fn densify_and_reset(&mut self, step: u32) -> Result<(), TrainError> {
         let ctx = self.ctx.clone();
-        if self.schedule.densifies_at(step) && !self.budget_filled() {
+        if self.schedule.densifies_at(step) {
             let mut config = self.config.densify.clone();
             if self.schedule.prunes_oversized_at(step) {
                 config.max_world_scale_fraction.get_or_insert(0.1);
