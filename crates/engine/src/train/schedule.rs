@@ -506,7 +506,11 @@ mod tests {
         assert_eq!(schedule.densify_until, 5_000);
         let sparse = schedule.densify_within_passes(None, 20);
         assert_eq!(sparse.densify_until, 1_000);
-        assert_eq!(sparse.densify_steps().last(), Some(900), "before densify_until");
+        assert_eq!(
+            sparse.densify_steps().last(),
+            Some(900),
+            "before densify_until"
+        );
         assert_eq!(schedule.densify_within_passes(Some(5_000), 20), schedule);
         // A short job keeps the recipe's earlier end.
         let short = defaults(2_000);
