@@ -146,3 +146,29 @@ fn prometheus_scrapes_the_services_metrics_path_and_port() {
         }
     }
 }
+
+/// Every API and worker process exports the same cluster-wide gauges read from the shared
+/// database (`segsplat_jobs`, `segsplat_cluster_workers`), so an expression that sums them over
+/// the scraped processes multiplies the queue by their count (2x in compose, 5x in the example
+/// overlay: issue 39). They must be aggregated with `max` (or `min`) wherever they appear.
+#[test]
+fn cluster_gauges_are_not_summed_over_processes() {
+    let cluster_gauges = ["segsplat_jobs", "segsplat_cluster_workers"];
+    let mut expressions = dashboard_expressions();
+    expressions.extend(alert_expressions());
+    for expression in &expressions {
+        let compact: String = expression.split_whitespace().collect::<Vec<_>>().join(" ");
+        for gauge in cluster_gauges {
+            for summed in [
+                format!("sum({gauge}"),
+                format!("sum by (state) ({gauge}"),
+            ] {
+                let named = compact.match_indices(&summed).any(|(at, _)| {
+                    let after = compact[at + summed.len()..].chars().next();
+                    !after.is_some_and(|c| c.is_ascii_alphanumeric() || c == '_')
+                });
+                assert!(!named, "{gauge} summed over processes in {expression:?}");
+            }
+        }
+    }
+}
