@@ -159,10 +159,7 @@ fn cluster_gauges_are_not_summed_over_processes() {
     for expression in &expressions {
         let compact: String = expression.split_whitespace().collect::<Vec<_>>().join(" ");
         for gauge in cluster_gauges {
-            for summed in [
-                format!("sum({gauge}"),
-                format!("sum by (state) ({gauge}"),
-            ] {
+            for summed in [format!("sum({gauge}"), format!("sum by (state) ({gauge}")] {
                 let named = compact.match_indices(&summed).any(|(at, _)| {
                     let after = compact[at + summed.len()..].chars().next();
                     !after.is_some_and(|c| c.is_ascii_alphanumeric() || c == '_')
