@@ -328,14 +328,7 @@ impl GpuGaussians {
                 capacity,
             });
         }
-        let parameters = GaussianParameterBuffers::new(ctx, "gaussians", capacity)?;
-        let object_ids = create_per_gaussian(ctx, "gaussians.object_ids", 3, capacity)?;
-        let mut gaussians = Self {
-            parameters,
-            object_ids,
-            count: 0,
-            capacity,
-        };
+        let mut gaussians = Self::allocate(ctx, capacity)?;
         gaussians.write(ctx, model)?;
         Ok(gaussians)
     }

@@ -21,11 +21,10 @@ use segsplat_gpu::sort::RadixSort;
 use segsplat_gpu::{GpuContext, GpuError};
 use wgpu::util::DeviceExt;
 
-use super::{DensifyConfig, DensifyThresholds, GuardInputs, PruneGuard};
+use super::{DensifyConfig, DensifyThresholds, GuardInputs, PruneGuard, flag_outputs};
 use crate::model::{GaussianParameterBuffers, GpuGaussians, ModelError};
 
 const WORKGROUP: u32 = 256;
-const GROWTH_MASK: u32 = 3;
 const PRUNE_BIT: u32 = 4;
 const COMMON: &str = include_str!("shaders/densify_common.wgsl");
 
@@ -259,7 +258,7 @@ impl GpuDensifier {
             opacity_ceiling: 0.0,
         };
         let scratch = Scratch::new(ctx, &rules)?;
-        self.decide(ctx, input, &scratch, request.max_new.is_some())?;
+        self.decide(ctx, input, &scratch, count, request.max_new.is_some())?;
         let spared = match request.guard {
             Some(guard) => spare_guarded(ctx, input, &scratch, guard, children)?,
             None => 0,
@@ -286,7 +285,7 @@ impl GpuDensifier {
             input,
             &scratch,
             &new_rules,
-            rules.new_count,
+            [count, rules.new_count],
             &densified,
         );
         densified.gaussians.set_count(summary.count)?;
@@ -299,9 +298,9 @@ impl GpuDensifier {
         ctx: &GpuContext,
         input: &DensifyInput<'_>,
         scratch: &Scratch,
+        count: u32,
         bounded: bool,
     ) -> Result<(), GpuError> {
-        let count = input.gaussians.count() as u32;
         let parameters = &input.gaussians.parameters;
         let stats = input.stats;
         let mut encoder = encoder(ctx, "densify decide");
@@ -421,10 +420,9 @@ impl GpuDensifier {
         input: &DensifyInput<'_>,
         scratch: &Scratch,
         rules: &wgpu::Buffer,
-        new_count: u32,
+        [count, new_count]: [u32; 2],
         out: &Densified,
     ) {
-        let count = input.gaussians.count() as u32;
         let origin_bytes = u64::from(new_count.max(1)) * 4;
         // Origins live only for this submission; the output count was checked to fit a
         // binding when the new buffers were allocated.
@@ -571,14 +569,7 @@ fn spare_guarded(
         .collect();
     let mut opacity_logits: Vec<f32> = ctx.read_vec(&input.gaussians.parameters.opacity_logits)?;
     opacity_logits.truncate(count);
-    let survivors: Vec<u32> = flags
-        .iter()
-        .map(|f| match f & GROWTH_MASK {
-            1 => 2,
-            2 => children,
-            _ => 1,
-        })
-        .collect();
+    let survivors: Vec<u32> = flags.iter().map(|&f| flag_outputs(f, children)).collect();
     guard.spare(
         GuardInputs {
             object_ids: &object_ids,

@@ -271,7 +271,7 @@ pub fn plan_densification<R: Rng>(
 }
 
 /// The mean gradient a growth bound ranks candidates by.
-pub fn mean_gradient(stats: &DensifyStats, i: usize) -> f32 {
+fn mean_gradient(stats: &DensifyStats, i: usize) -> f32 {
     let visible = stats.visible_counts.get(i).copied().unwrap_or(0).max(1);
     stats.gradient_sums.get(i).copied().unwrap_or(0.0) / visible as f32
 }
@@ -306,6 +306,11 @@ fn limit_growth(growth: &mut [Growth], stats: &DensifyStats, children: u32, max_
     }
 }
 
+/// Gaussians a densification flag word (densify_common.wgsl) becomes if kept.
+fn flag_outputs(flag: u32, children: u32) -> u32 {
+    Growth::from_flag(flag).outputs(children)
+}
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Growth {
     None,
@@ -314,6 +319,15 @@ enum Growth {
 }
 
 impl Growth {
+    /// The growth a GPU flag word encodes in its low two bits (densify_common.wgsl).
+    fn from_flag(flag: u32) -> Self {
+        match flag & 3 {
+            1 => Growth::Clone,
+            2 => Growth::Split,
+            _ => Growth::None,
+        }
+    }
+
     /// Gaussians this one becomes if it is kept.
     fn outputs(self, children: u32) -> u32 {
         match self {
