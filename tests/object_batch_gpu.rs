@@ -133,7 +133,7 @@ fn separate(ctx: &GpuContext, variant: RasterVariant, case: &Case) -> (Vec<Vec<[
             .unwrap();
         outputs.push(output);
     }
-    ctx.queue.submit([encoder.finish()]);
+    ctx.submit(encoder.finish());
     assert!(!renderer.sync_capacity(ctx).unwrap().overflowed);
     let images = outputs[1..]
         .iter()
@@ -176,7 +176,7 @@ fn batched(ctx: &GpuContext, variant: RasterVariant, case: &Case) -> (Vec<Vec<[f
     renderer
         .backward_projection(ctx, &mut encoder, &gaussians, &base, &mut grads)
         .unwrap();
-    ctx.queue.submit([encoder.finish()]);
+    ctx.submit(encoder.finish());
     assert!(!renderer.sync_capacity(ctx).unwrap().overflowed);
     let images = batch.read_images(ctx).unwrap();
     assert_occupancy_marks_coloured_squares(ctx, &batch, &images);
@@ -406,7 +406,7 @@ fn mask_iou_counts_match_the_overlap_of_the_read_back_renders() {
     counts.encode_batch(&ctx, &mut encoder, &batch, ids, first_pair);
     counts.encode_clear(&mut encoder, first_pair, case.slots.len());
     counts.encode_batch(&ctx, &mut encoder, &batch, ids, first_pair);
-    ctx.queue.submit([encoder.finish()]);
+    ctx.submit(encoder.finish());
     assert!(!renderer.sync_capacity(&ctx).unwrap().overflowed);
     let images = batch.read_images(&ctx).unwrap();
     let ious = counts.read_ious(&ctx).unwrap();

@@ -107,7 +107,7 @@ fn gpu_gradients_with(
             )
             .unwrap();
     }
-    ctx.queue.submit([encoder.finish()]);
+    ctx.submit(encoder.finish());
     assert!(!renderer.sync_capacity(ctx).unwrap().overflowed);
     grads.download(ctx, model.len()).unwrap()
 }
@@ -361,7 +361,7 @@ fn gpu_intersection_overflow_is_reported_and_grown() {
     let output = renderer
         .forward(&ctx, &mut encoder, &gaussians, &camera, &settings)
         .unwrap();
-    ctx.queue.submit([encoder.finish()]);
+    ctx.submit(encoder.finish());
     let (needed, held) = output.read_intersection_count(&ctx).unwrap();
     drop(output);
     assert!(

@@ -121,6 +121,21 @@ async fn reconstruct_job_trains_and_stores_artifacts() {
         serde_json::from_slice(&blobs.get_bytes(&format!("{prefix}/metrics.json")).unwrap())
             .unwrap();
     assert_eq!(metrics["steps"], 60);
+    // The host's side of the steps, and how busy the GPU was where the adapter times passes.
+    let training = &metrics["training"];
+    for field in ["bind_groups_created_per_step", "buffers_created_per_step"] {
+        assert!(training[field].is_number(), "{field} missing: {training}");
+    }
+    let timestamps = segsplat_gpu::GpuContext::new_default()
+        .map(|gpu| gpu.report.timestamp_queries)
+        .unwrap_or(false);
+    if timestamps {
+        let busy = training["gpu_busy_fraction"].as_f64();
+        assert!(
+            busy.is_some_and(|busy| busy > 0.0 && busy <= 1.0),
+            "gpu_busy_fraction: {training}"
+        );
+    }
     // A succeeded job's checkpoint goes (jobs.keep_final_checkpoint is off), just after the
     // state is recorded.
     let started = std::time::Instant::now();

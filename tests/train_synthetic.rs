@@ -133,6 +133,35 @@ fn densification_stays_within_the_gaussian_budget() {
     scene_sized.run_until(1, |_| true).unwrap();
 }
 
+/// Once every view has been trained on, a step allocates nothing and creates no bind group: the
+/// kernels' parameters go into the context's uniform ring and their bind groups come from the
+/// cache (issue 38, item 4). Counted, not timed.
+#[test]
+fn steady_steps_create_no_buffers_and_no_bind_groups() {
+    let Some(ctx) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let scene = synthetic_scene(dir.path());
+    let steady = TrainConfig {
+        densify_from: Some(10_000),
+        ..config(200)
+    };
+    let mut trainer = Trainer::new(&ctx, &scene, steady, None).unwrap();
+    let views = trainer.views().train.len() as u32;
+    // The coarse half, then two passes over the views at full resolution.
+    let warm = 100 + 2 * views;
+    trainer.run_until(warm, |_| true).unwrap();
+    let before = ctx.host_costs.reading();
+    let measured = views;
+    trainer.run_until(warm + measured, |_| true).unwrap();
+    let during = ctx.host_costs.reading().since(&before);
+    eprintln!(
+        "{measured} steady steps: {} bind groups and {} buffers created",
+        during.bind_groups_created, during.buffers_created
+    );
+    assert_eq!(during.bind_groups_created, 0);
+    assert_eq!(during.buffers_created, 0);
+}
+
 /// The coarse steps (the first half by default) train on each view filtered down to half
 /// resolution through the same camera at half the pixel grid, and the job ends as well trained as
 /// one at full resolution throughout.

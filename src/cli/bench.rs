@@ -372,6 +372,8 @@ impl TimedRun {
             host_ms_per_step: (self.seconds - waited - submitted) * 1e3 / steps,
             wait_ms_per_step: waited * 1e3 / steps,
             submit_ms_per_step: submitted * 1e3 / steps,
+            bind_groups_created_per_step: self.host.bind_groups_created as f64 / steps,
+            buffers_created_per_step: self.host.buffers_created as f64 / steps,
         }
     }
 }
@@ -388,6 +390,10 @@ struct HostCostReport {
     host_ms_per_step: f64,
     wait_ms_per_step: f64,
     submit_ms_per_step: f64,
+    /// Bind groups made a step (the rest come from the cache; see docs/engine.md).
+    bind_groups_created_per_step: f64,
+    /// Buffers made a step for kernel parameters or slot tables (0 in a steady step).
+    buffers_created_per_step: f64,
 }
 
 /// Trains each of `trainers` to its last step, timing each. With more than one they take turns

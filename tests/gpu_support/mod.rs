@@ -55,7 +55,7 @@ pub fn new_encoder(ctx: &GpuContext) -> wgpu::CommandEncoder {
 }
 
 pub fn submit(ctx: &GpuContext, encoder: wgpu::CommandEncoder) {
-    ctx.queue.submit([encoder.finish()]);
+    ctx.submit(encoder.finish());
 }
 
 pub fn seeded_rng(seed: u64) -> rand_chacha::ChaCha8Rng {

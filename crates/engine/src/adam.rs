@@ -10,8 +10,6 @@
 
 mod groups;
 
-use wgpu::util::DeviceExt;
-
 use segsplat_gpu::kernel::{wgsl_u32_constants, workgroups_2d};
 use segsplat_gpu::validation::validated;
 use segsplat_gpu::{GpuContext, GpuError, Kernel};
@@ -210,17 +208,10 @@ impl Adam {
             element_count,
             _pad: [0; 2],
         };
-        let params = ctx
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("adam params"),
-                contents: bytemuck::bytes_of(&params),
-                usage: wgpu::BufferUsages::UNIFORM,
-            });
-        let bind_group = self.kernel.bind(
+        let bind_group = self.kernel.bind_params(
             ctx,
+            bytemuck::bytes_of(&params),
             &[
-                &params,
                 buffers.params,
                 buffers.grads,
                 buffers.first_moment,

@@ -27,7 +27,7 @@ use wgpu::util::DeviceExt;
 
 use segsplat_gpu::kernel::wgsl_u32_constants;
 use segsplat_gpu::validation::validated;
-use segsplat_gpu::{GpuContext, GpuError, Kernel};
+use segsplat_gpu::{GpuContext, GpuError, Kernel, UniformParams};
 
 /// Weight of the L1 term.
 pub const L1_WEIGHT: f32 = 0.8;
@@ -557,7 +557,7 @@ impl RenderLoss {
             first_loss_slot: outputs.loss_slot,
             slots: &[],
         }
-        .uniform_buffer(ctx);
+        .uniform_params(ctx);
         let maps = [&self.no_mask; MAX_ID_MAPS];
         let bindings = PassBindings {
             params: &params,
@@ -631,7 +631,7 @@ impl RenderLoss {
                 first_loss_slot: outputs.loss_slot + first,
                 slots: chunk,
             }
-            .uniform_buffer(ctx);
+            .uniform_params(ctx);
             let bindings = PassBindings {
                 params: &params,
                 rendered: images.rendered,
@@ -698,10 +698,10 @@ impl RenderLoss {
                     std::array::from_fn(|index| {
                         content.cell_maps.get(index).copied().unwrap_or(first)
                     });
-                let bind = self.cell_content.bind(
+                let bind = self.cell_content.bind_with(
                     ctx,
+                    bindings.params,
                     &[
-                        bindings.params,
                         content.occupancy,
                         &scratch.tile_content,
                         map_0,
@@ -725,9 +725,11 @@ impl RenderLoss {
             }
             None => {
                 encoder.clear_buffer(&scratch.tile_content, 0, None);
-                let bind = self
-                    .tile_content
-                    .bind(ctx, &with_inputs(bindings, &[&scratch.tile_content]));
+                let bind = self.tile_content.bind_with(
+                    ctx,
+                    bindings.params,
+                    &with_inputs(bindings, &[&scratch.tile_content]),
+                );
                 self.tile_content.dispatch(
                     encoder,
                     &bind,
@@ -742,10 +744,10 @@ impl RenderLoss {
             0,
             std::mem::size_of_val(&EMPTY_WORK_COUNTS) as u64,
         );
-        let bind = self.work_lists.bind(
+        let bind = self.work_lists.bind_with(
             ctx,
+            bindings.params,
             &[
-                bindings.params,
                 &scratch.tile_content,
                 &scratch.tile_distance,
                 &scratch.work_counts,
@@ -766,10 +768,11 @@ impl RenderLoss {
         scratch: &LossScratch,
         bindings: &PassBindings<'_>,
         slots: u32,
-        dispatch: &dyn Fn(&Kernel, &mut wgpu::CommandEncoder, &wgpu::BindGroup, bool),
+        dispatch: &dyn Fn(&Kernel, &mut wgpu::CommandEncoder, &segsplat_gpu::Bound, bool),
     ) {
-        let bind = self.moments_horizontal.bind(
+        let bind = self.moments_horizontal.bind_with(
             ctx,
+            bindings.params,
             &with_inputs(
                 bindings,
                 &[
@@ -780,8 +783,9 @@ impl RenderLoss {
             ),
         );
         dispatch(&self.moments_horizontal, encoder, &bind, false);
-        let bind = self.per_pixel.bind(
+        let bind = self.per_pixel.bind_with(
             ctx,
+            bindings.params,
             &with_inputs(
                 bindings,
                 &[
@@ -794,10 +798,10 @@ impl RenderLoss {
             ),
         );
         dispatch(&self.per_pixel, encoder, &bind, false);
-        let bind = self.partials_horizontal.bind(
+        let bind = self.partials_horizontal.bind_with(
             ctx,
+            bindings.params,
             &[
-                bindings.params,
                 &scratch.ssim_partials,
                 &scratch.row_partials,
                 &scratch.tile_distance,
@@ -805,8 +809,9 @@ impl RenderLoss {
             ],
         );
         dispatch(&self.partials_horizontal, encoder, &bind, true);
-        let bind = self.gradient.bind(
+        let bind = self.gradient.bind_with(
             ctx,
+            bindings.params,
             &with_inputs(
                 bindings,
                 &[
@@ -818,13 +823,10 @@ impl RenderLoss {
             ),
         );
         dispatch(&self.gradient, encoder, &bind, true);
-        let bind = self.reduce.bind(
+        let bind = self.reduce.bind_with(
             ctx,
-            &[
-                bindings.params,
-                &scratch.loss_partials,
-                bindings.loss_values,
-            ],
+            bindings.params,
+            &[&scratch.loss_partials, bindings.loss_values],
         );
         self.reduce.dispatch(encoder, &bind, [slots, 1, 1]);
     }
@@ -834,23 +836,16 @@ impl RenderLoss {
 /// `loss_inputs.wgsl`), then its own.
 fn with_inputs<'b>(bindings: &PassBindings<'b>, own: &[&'b wgpu::Buffer]) -> Vec<&'b wgpu::Buffer> {
     let [map_0, map_1, map_2] = bindings.id_maps;
-    [
-        bindings.params,
-        bindings.rendered,
-        bindings.target,
-        map_0,
-        map_1,
-        map_2,
-    ]
-    .iter()
-    .chain(own)
-    .copied()
-    .collect()
+    [bindings.rendered, bindings.target, map_0, map_1, map_2]
+        .iter()
+        .chain(own)
+        .copied()
+        .collect()
 }
 
 /// The buffers one set of loss dispatches binds, besides its scratch.
 struct PassBindings<'a> {
-    params: &'a wgpu::Buffer,
+    params: &'a UniformParams,
     rendered: &'a wgpu::Buffer,
     target: &'a wgpu::Buffer,
     id_maps: [&'a wgpu::Buffer; MAX_ID_MAPS],
@@ -874,9 +869,10 @@ struct LossDispatch<'a> {
 }
 
 impl LossDispatch<'_> {
-    /// A buffer per set of dispatches (not queue.write_buffer on a shared one), so several
-    /// losses recorded before one submit each keep their own parameters.
-    fn uniform_buffer(&self, ctx: &GpuContext) -> wgpu::Buffer {
+    /// Parameters per set of dispatches, in their own slot of the context's uniform ring (not
+    /// queue.write_buffer on a shared buffer), so several losses recorded before one submit each
+    /// keep their own.
+    fn uniform_params(&self, ctx: &GpuContext) -> UniformParams {
         let tiles_x = self.width.div_ceil(LOSS_TILE);
         let tiles = tiles_x * self.height.div_ceil(LOSS_TILE);
         let mut slots = [[0u32; 4]; MAX_BATCH_SLOTS as usize];
@@ -898,12 +894,7 @@ impl LossDispatch<'_> {
             padding: 0,
             slots,
         };
-        ctx.device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("loss params"),
-                contents: bytemuck::bytes_of(&params),
-                usage: wgpu::BufferUsages::UNIFORM,
-            })
+        ctx.uniform_params(bytemuck::bytes_of(&params))
     }
 }
 

@@ -6,12 +6,15 @@
 //! bindings) and with the optional features the kernels exploit when present: native f32 atomics and
 //! subgroups. Kernels fall back to CAS loops / shared memory when they are absent.
 
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
 
 use serde::Serialize;
 
+use crate::bind_cache::{BindGroupCache, BindKey};
 use crate::kernel_choices::KernelChoices;
+use crate::uniform_ring::{UniformParams, UniformRing};
+use wgpu::util::DeviceExt;
 
 use super::profiler::KernelProfiler;
 
@@ -191,6 +194,18 @@ pub struct GpuContext {
     /// Read-backs and waits of every caller on this context: on a fast GPU the host's waits,
     /// not the kernels, bound a step, so benchmarks and jobs report them.
     pub host_costs: Arc<HostCosts>,
+    /// Kernel parameters, written once per submission (see [`crate::uniform_ring`]).
+    uniforms: Arc<Mutex<UniformRing>>,
+    /// Bind groups reused while their buffers are (see [`crate::bind_cache`]).
+    bind_groups: Arc<Mutex<BindGroupCache>>,
+}
+
+/// A lock that a panic elsewhere did not make unusable: the ring and the cache hold no invariant
+/// a half-finished update could break.
+fn locked<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
+    mutex
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 /// Counters of what the host waited for and read back (see [`GpuContext::host_costs`]).
@@ -200,6 +215,8 @@ pub struct HostCosts {
     read_backs: AtomicU64,
     wait_nanos: AtomicU64,
     submit_nanos: AtomicU64,
+    bind_groups_created: AtomicU64,
+    buffers_created: AtomicU64,
 }
 
 /// A reading of [`HostCosts`]; differences of two readings give what happened in between.
@@ -212,6 +229,11 @@ pub struct HostCostReading {
     /// Time inside [`GpuContext::submit`]: microseconds on a GPU; on a software adapter, whose
     /// queue may run the work before it returns, it holds the arithmetic.
     pub submit_nanos: u64,
+    /// Bind groups created by kernels (not found in the cache).
+    pub bind_groups_created: u64,
+    /// Buffers created for kernel parameters the uniform ring could not take, and by callers
+    /// that count theirs through [`GpuContext::count_buffer_created`].
+    pub buffers_created: u64,
 }
 
 impl HostCosts {
@@ -221,6 +243,8 @@ impl HostCosts {
             read_backs: self.read_backs.load(Ordering::Relaxed),
             wait_nanos: self.wait_nanos.load(Ordering::Relaxed),
             submit_nanos: self.submit_nanos.load(Ordering::Relaxed),
+            bind_groups_created: self.bind_groups_created.load(Ordering::Relaxed),
+            buffers_created: self.buffers_created.load(Ordering::Relaxed),
         }
     }
 }
@@ -233,6 +257,10 @@ impl HostCostReading {
             read_backs: self.read_backs.saturating_sub(earlier.read_backs),
             wait_nanos: self.wait_nanos.saturating_sub(earlier.wait_nanos),
             submit_nanos: self.submit_nanos.saturating_sub(earlier.submit_nanos),
+            bind_groups_created: self
+                .bind_groups_created
+                .saturating_sub(earlier.bind_groups_created),
+            buffers_created: self.buffers_created.saturating_sub(earlier.buffers_created),
         }
     }
 
@@ -242,6 +270,8 @@ impl HostCostReading {
         self.read_backs += other.read_backs;
         self.wait_nanos += other.wait_nanos;
         self.submit_nanos += other.submit_nanos;
+        self.bind_groups_created += other.bind_groups_created;
+        self.buffers_created += other.buffers_created;
     }
 
     pub fn wait_seconds(&self) -> f64 {
@@ -301,7 +331,10 @@ impl GpuContext {
                     source,
                 }
             })?;
+        let uniforms = UniformRing::new(&device, &limits);
         Ok(Self {
+            uniforms: Arc::new(Mutex::new(uniforms)),
+            bind_groups: Arc::new(Mutex::new(BindGroupCache::default())),
             device,
             queue,
             report,
@@ -385,11 +418,99 @@ impl GpuContext {
     /// submissions go through here, so a step's host time can be told from its device time).
     pub fn submit(&self, commands: wgpu::CommandBuffer) {
         let started = std::time::Instant::now();
-        self.queue.submit([commands]);
+        self.submit_untimed(commands);
         let took = u64::try_from(started.elapsed().as_nanos()).unwrap_or(u64::MAX);
         self.host_costs
             .submit_nanos
             .fetch_add(took, Ordering::Relaxed);
+    }
+
+    /// Submits with the kernel parameters pushed so far written first. Every submission of work
+    /// recorded with [`crate::Kernel`]s must come through here (or [`Self::submit`]), never
+    /// `queue.submit`, or it reads parameters that were never written.
+    pub fn submit_untimed(&self, commands: wgpu::CommandBuffer) {
+        locked(&self.uniforms).before_submit(&self.queue);
+        self.queue.submit([commands]);
+        locked(&self.bind_groups).after_submit();
+    }
+
+    /// `bytes` as kernel parameters: appended to the uniform ring (written at the next
+    /// submission), or, when the ring is full, in a buffer of their own (counted).
+    pub fn uniform_params(&self, bytes: &[u8]) -> UniformParams {
+        let mut ring = locked(&self.uniforms);
+        if let Some(slot) = ring.push(&self.queue, bytes) {
+            return UniformParams {
+                buffer: ring.buffer().clone(),
+                slot: Some(slot),
+            };
+        }
+        drop(ring);
+        self.count_buffer_created();
+        let padded = bytes.len().max(16).next_multiple_of(16);
+        let mut contents = bytes.to_vec();
+        contents.resize(padded, 0);
+        UniformParams {
+            buffer: self
+                .device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("kernel parameters"),
+                    contents: &contents,
+                    usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_SRC,
+                }),
+            slot: None,
+        }
+    }
+
+    /// Records a copy of `bytes` into `target` at `offset` in the encoder's order, through the
+    /// uniform ring (no staging buffer): for data several renders in one encoder each need
+    /// their own copy of. `bytes.len()` must be a multiple of 4.
+    pub fn encode_upload(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        bytes: &[u8],
+        target: &wgpu::Buffer,
+        offset: u64,
+    ) {
+        let params = self.uniform_params(bytes);
+        let source_offset = params.slot.map_or(0, |slot| u64::from(slot.offset));
+        encoder.copy_buffer_to_buffer(
+            &params.buffer,
+            source_offset,
+            target,
+            offset,
+            bytes.len() as u64,
+        );
+    }
+
+    /// The cached bind group for `key`, or the one `create` makes.
+    pub(crate) fn cached_bind_group(
+        &self,
+        key: BindKey,
+        create: impl FnOnce(&BindKey) -> wgpu::BindGroup,
+    ) -> wgpu::BindGroup {
+        let mut cache = locked(&self.bind_groups);
+        let before = cache.created();
+        let group = cache.get_or_create(key, create);
+        if cache.created() > before {
+            self.host_costs
+                .bind_groups_created
+                .fetch_add(1, Ordering::Relaxed);
+        }
+        group
+    }
+
+    /// Counts a buffer made on a path that should make none (a training step), so benchmarks
+    /// and tests can see it.
+    pub fn count_buffer_created(&self) {
+        self.host_costs
+            .buffers_created
+            .fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Drops every cached bind group, releasing buffers only they still held: for callers that
+    /// free large buffers and then go idle (no submissions to age the cache).
+    pub fn release_cached_bind_groups(&self) {
+        locked(&self.bind_groups).clear();
     }
 
     /// Blocks until all submitted work is done.
@@ -419,7 +540,7 @@ impl GpuContext {
                 label: Some("readback"),
             });
         encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size_bytes);
-        self.queue.submit([encoder.finish()]);
+        self.submit_untimed(encoder.finish());
         let slice = staging.slice(..);
         let (sender, receiver) = std::sync::mpsc::channel();
         slice.map_async(wgpu::MapMode::Read, move |result| {

@@ -2,13 +2,23 @@
 //! snippets prepended, one pipeline per entry point with an automatic bind-group layout.
 //!
 //! Convention for every kernel: all bindings in `@group(0)`, numbered from 0 in the order the
-//! caller passes buffers to [`Kernel::bind`].
+//! caller passes buffers to [`Kernel::bind`]; a kernel's parameters, when it has any, are a
+//! `var<uniform>` at binding 0, filled by [`Kernel::bind_params`].
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::GpuContext;
+use crate::bind_cache::{BindKey, BoundRange};
+use crate::kernel_layout::{BindingKind, layout_entries, reflect_bindings};
 use crate::profiler::KernelProfiler;
+use crate::uniform_ring::UniformParams;
+
+/// Uniform bindings a kernel may have with dynamic offsets; more keep the automatic layout.
+const MAX_DYNAMIC_UNIFORMS: usize = 4;
+
+/// Tells kernels apart in the bind-group cache.
+static NEXT_KERNEL_ID: AtomicU64 = AtomicU64::new(0);
 
 /// One compute pipeline.
 #[derive(Debug, Clone)]
@@ -17,6 +27,41 @@ pub struct Kernel {
     label: &'static str,
     profiler: Option<Arc<KernelProfiler>>,
     dispatches: Arc<AtomicU64>,
+    layout: wgpu::BindGroupLayout,
+    /// Which bindings are uniforms with a dynamic offset (empty under the automatic layout).
+    dynamic_uniforms: Vec<u32>,
+    id: u64,
+}
+
+/// A bind group with the dynamic offsets of its uniforms: what a dispatch binds.
+#[derive(Debug, Clone)]
+pub struct Bound {
+    group: wgpu::BindGroup,
+    offsets: [u32; MAX_DYNAMIC_UNIFORMS],
+    offset_count: usize,
+}
+
+/// What goes at one binding (see [`Kernel::bind_entries`]).
+#[derive(Debug, Clone, Copy)]
+pub enum Binding<'a> {
+    /// A whole buffer.
+    Whole(&'a wgpu::Buffer),
+    /// `size` bytes of a buffer from `offset` (a window of a buffer larger than a binding).
+    Range {
+        buffer: &'a wgpu::Buffer,
+        offset: u64,
+        size: u64,
+    },
+    /// A uniform's bytes, written to the context's uniform ring.
+    Params(&'a [u8]),
+    /// Parameters already pushed (several kernels binding the same ones).
+    Uniform(&'a UniformParams),
+}
+
+impl Bound {
+    fn dynamic_offsets(&self) -> &[u32] {
+        &self.offsets[..self.offset_count]
+    }
 }
 
 impl Kernel {
@@ -30,17 +75,43 @@ impl Kernel {
         constants: &[(&str, f64)],
     ) -> Self {
         let source = sources.concat();
+        // Read before the source moves into the module.
+        let reflected = reflect_bindings(&source, entry_point).filter(|bindings| {
+            let uniforms = bindings
+                .iter()
+                .filter(|(_, kind)| *kind == BindingKind::Uniform)
+                .count();
+            uniforms <= MAX_DYNAMIC_UNIFORMS
+        });
         let module = ctx
             .device
             .create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some(label),
                 source: wgpu::ShaderSource::Wgsl(source.into()),
             });
+        let explicit = reflected.as_ref().map(|bindings| {
+            let layout = ctx
+                .device
+                .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                    label: Some(label),
+                    entries: &layout_entries(bindings),
+                });
+            let pipeline_layout =
+                ctx.device
+                    .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                        label: Some(label),
+                        bind_group_layouts: &[Some(&layout)],
+                        immediate_size: 0,
+                    });
+            (layout, pipeline_layout)
+        });
         let pipeline = ctx
             .device
             .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                 label: Some(label),
-                layout: None,
+                layout: explicit
+                    .as_ref()
+                    .map(|(_, pipeline_layout)| pipeline_layout),
                 module: &module,
                 entry_point: Some(entry_point),
                 compilation_options: wgpu::PipelineCompilationOptions {
@@ -49,29 +120,121 @@ impl Kernel {
                 },
                 cache: None,
             });
+        let dynamic_uniforms = reflected
+            .iter()
+            .flatten()
+            .filter(|(_, kind)| *kind == BindingKind::Uniform)
+            .map(|(binding, _)| *binding)
+            .collect();
+        let layout = match explicit {
+            Some((layout, _)) => layout,
+            None => pipeline.get_bind_group_layout(0),
+        };
         Self {
             pipeline,
             label,
             profiler: ctx.profiler.clone(),
             dispatches: Arc::clone(&ctx.dispatches),
+            layout,
+            dynamic_uniforms,
+            id: NEXT_KERNEL_ID.fetch_add(1, Ordering::Relaxed),
         }
     }
 
-    /// A bind group with `buffers[i]` (whole buffer) at `@group(0) @binding(i)`.
-    pub fn bind(&self, ctx: &GpuContext, buffers: &[&wgpu::Buffer]) -> wgpu::BindGroup {
-        let entries: Vec<wgpu::BindGroupEntry> = buffers
+    /// `buffers[i]` (whole buffer) at `@group(0) @binding(i)`. The bind group is cached on the
+    /// context until these buffers are no longer bound (see [`crate::bind_cache`]).
+    pub fn bind(&self, ctx: &GpuContext, buffers: &[&wgpu::Buffer]) -> Bound {
+        let bindings: Vec<Binding> = buffers
             .iter()
-            .enumerate()
-            .map(|(index, buffer)| wgpu::BindGroupEntry {
-                binding: index as u32,
-                resource: buffer.as_entire_binding(),
-            })
+            .map(|buffer| Binding::Whole(buffer))
             .collect();
-        ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some(self.label),
-            layout: &self.pipeline.get_bind_group_layout(0),
-            entries: &entries,
-        })
+        self.bind_entries(ctx, &bindings)
+    }
+
+    /// `params` (a uniform's bytes) at binding 0 and `buffers[i]` at binding `i + 1`.
+    pub fn bind_params(&self, ctx: &GpuContext, params: &[u8], buffers: &[&wgpu::Buffer]) -> Bound {
+        let mut bindings = Vec::with_capacity(buffers.len() + 1);
+        bindings.push(Binding::Params(params));
+        bindings.extend(buffers.iter().map(|buffer| Binding::Whole(buffer)));
+        self.bind_entries(ctx, &bindings)
+    }
+
+    /// Parameters pushed earlier (shared by several kernels) at binding 0 and `buffers[i]` at
+    /// binding `i + 1`.
+    pub fn bind_with(
+        &self,
+        ctx: &GpuContext,
+        params: &UniformParams,
+        buffers: &[&wgpu::Buffer],
+    ) -> Bound {
+        let mut bindings = Vec::with_capacity(buffers.len() + 1);
+        bindings.push(Binding::Uniform(params));
+        bindings.extend(buffers.iter().map(|buffer| Binding::Whole(buffer)));
+        self.bind_entries(ctx, &bindings)
+    }
+
+    /// `bindings[i]` at `@group(0) @binding(i)`. Parameters go into the context's uniform ring,
+    /// so nothing is allocated, and the bind group is the cached one whenever the buffers are the
+    /// same as in an earlier call.
+    pub fn bind_entries(&self, ctx: &GpuContext, bindings: &[Binding<'_>]) -> Bound {
+        let mut offsets = [0; MAX_DYNAMIC_UNIFORMS];
+        let mut ranges = Vec::with_capacity(bindings.len());
+        for (index, binding) in bindings.iter().enumerate() {
+            let dynamic = self
+                .dynamic_uniforms
+                .iter()
+                .position(|&uniform| uniform == index as u32);
+            let range = match *binding {
+                Binding::Whole(buffer) => BoundRange {
+                    buffer: buffer.clone(),
+                    offset: 0,
+                    size: None,
+                },
+                Binding::Range {
+                    buffer,
+                    offset,
+                    size,
+                } => BoundRange {
+                    buffer: buffer.clone(),
+                    offset,
+                    size: Some(size),
+                },
+                Binding::Params(bytes) => {
+                    uniform_range(&ctx.uniform_params(bytes), dynamic, &mut offsets)
+                }
+                Binding::Uniform(params) => uniform_range(params, dynamic, &mut offsets),
+            };
+            ranges.push(range);
+        }
+        let key = BindKey {
+            kernel: self.id,
+            ranges,
+        };
+        let group = ctx.cached_bind_group(key, |key| {
+            let entries: Vec<wgpu::BindGroupEntry> = key
+                .ranges
+                .iter()
+                .enumerate()
+                .map(|(index, range)| wgpu::BindGroupEntry {
+                    binding: index as u32,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: &range.buffer,
+                        offset: range.offset,
+                        size: range.size.and_then(wgpu::BufferSize::new),
+                    }),
+                })
+                .collect();
+            ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(self.label),
+                layout: &self.layout,
+                entries: &entries,
+            })
+        });
+        Bound {
+            group,
+            offsets,
+            offset_count: self.dynamic_uniforms.len(),
+        }
     }
 
     fn timestamp_writes(&self) -> Option<wgpu::ComputePassTimestampWrites<'_>> {
@@ -84,7 +247,7 @@ impl Kernel {
     pub fn dispatch(
         &self,
         encoder: &mut wgpu::CommandEncoder,
-        bind_group: &wgpu::BindGroup,
+        bound: &Bound,
         workgroups: [u32; 3],
     ) {
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -92,7 +255,7 @@ impl Kernel {
             timestamp_writes: self.timestamp_writes(),
         });
         pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, bind_group, &[]);
+        pass.set_bind_group(0, &bound.group, bound.dynamic_offsets());
         pass.dispatch_workgroups(workgroups[0], workgroups[1], workgroups[2]);
         self.dispatches.fetch_add(1, Ordering::Relaxed);
     }
@@ -102,7 +265,7 @@ impl Kernel {
     pub fn dispatch_indirect(
         &self,
         encoder: &mut wgpu::CommandEncoder,
-        bind_group: &wgpu::BindGroup,
+        bound: &Bound,
         indirect: &wgpu::Buffer,
         offset: u64,
     ) {
@@ -111,9 +274,38 @@ impl Kernel {
             timestamp_writes: self.timestamp_writes(),
         });
         pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, bind_group, &[]);
+        pass.set_bind_group(0, &bound.group, bound.dynamic_offsets());
         pass.dispatch_workgroups_indirect(indirect, offset);
         self.dispatches.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+/// The range binding `params`: the ring at a dynamic offset when the layout has one there
+/// (stored in `offsets`), else at a fixed offset (a new bind group per slot, still no buffer).
+fn uniform_range(
+    params: &UniformParams,
+    dynamic: Option<usize>,
+    offsets: &mut [u32; MAX_DYNAMIC_UNIFORMS],
+) -> BoundRange {
+    match (params.slot, dynamic) {
+        (Some(slot), Some(dynamic)) => {
+            offsets[dynamic] = slot.offset;
+            BoundRange {
+                buffer: params.buffer.clone(),
+                offset: 0,
+                size: Some(u64::from(slot.size)),
+            }
+        }
+        (Some(slot), None) => BoundRange {
+            buffer: params.buffer.clone(),
+            offset: u64::from(slot.offset),
+            size: Some(u64::from(slot.size)),
+        },
+        (None, _) => BoundRange {
+            buffer: params.buffer.clone(),
+            offset: 0,
+            size: None,
+        },
     }
 }
 

@@ -1,17 +1,21 @@
 //! GPU foundation: adapter discovery, device creation, and (in their own files) the generic compute
 //! primitives the engine is built from. Knows nothing of splats, HTTP or databases.
 
+pub mod bind_cache;
 pub mod context;
 pub mod kernel;
 pub mod kernel_choices;
+pub mod kernel_layout;
 pub mod profiler;
 pub mod scan;
 pub mod sort;
+pub mod uniform_ring;
 pub mod validation;
 
 pub use context::{AdapterFilter, AdapterReport, GpuContext, GpuError, HostCostReading};
-pub use kernel::Kernel;
+pub use kernel::{Binding, Bound, Kernel};
 pub use kernel_choices::{GemmLayout, KernelChoices, RasterLayout};
 pub use profiler::{KernelProfile, KernelProfiler};
 pub use scan::{ExclusiveScan, WorkgroupSum};
 pub use sort::{DEFAULT_SMALL_SORT_LIMIT, RadixSort};
+pub use uniform_ring::UniformParams;

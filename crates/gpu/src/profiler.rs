@@ -125,7 +125,7 @@ impl KernelProfiler {
                 label: Some("kernel profiler resolve"),
             });
         encoder.resolve_query_set(&self.queries, 0..passes * 2, &self.resolved, 0);
-        ctx.queue.submit([encoder.finish()]);
+        ctx.submit_untimed(encoder.finish());
         let ticks: Vec<u64> =
             bytemuck::pod_collect_to_vec(&ctx.read_buffer(&self.resolved, u64::from(passes) * 16)?);
         let ns_per_tick = f64::from(ctx.queue.get_timestamp_period());

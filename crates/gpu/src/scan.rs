@@ -197,6 +197,8 @@ pub struct ExclusiveScan {
     /// Bound as the top level's block-total output, which nothing reads.
     unused_totals: wgpu::Buffer,
     scratch: Mutex<ScanScratch>,
+    /// The level counts of [`ExclusiveScan::encode`], written through the encoder per scan.
+    level_counts: wgpu::Buffer,
 }
 
 impl ExclusiveScan {
@@ -250,6 +252,12 @@ impl ExclusiveScan {
             empty_input: placeholder("scan empty input"),
             unused_totals: placeholder("scan unused totals"),
             scratch: Mutex::new(ScanScratch::default()),
+            level_counts: ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("scan level counts"),
+                size: (LEVEL_COUNTS_LEN * 4) as u64,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
         })
     }
 
@@ -270,13 +278,13 @@ impl ExclusiveScan {
             "scan output needs count + 1 elements"
         );
         let output_counts = level_output_counts(count);
-        let level_counts = ctx
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("scan level counts"),
-                contents: bytemuck::cast_slice(&level_counts_for(count)),
-                usage: wgpu::BufferUsages::STORAGE,
-            });
+        // Through the encoder: several scans recorded before one submission each see theirs.
+        ctx.encode_upload(
+            encoder,
+            bytemuck::cast_slice(&level_counts_for(count)),
+            &self.level_counts,
+            0,
+        );
         // A poisoned lock only means another encode panicked; the scratch buffers are still valid.
         let mut scratch = self
             .scratch
@@ -284,7 +292,7 @@ impl ExclusiveScan {
             .unwrap_or_else(std::sync::PoisonError::into_inner);
         scratch.reserve(ctx, &output_counts);
         let levels = ScanLevels {
-            level_counts: &level_counts,
+            level_counts: &self.level_counts,
             scratch: &scratch,
             dispatch: ScanDispatch::Direct(&output_counts),
         };
@@ -328,7 +336,7 @@ impl ExclusiveScan {
         let max_groups = ctx.limits.max_compute_workgroups_per_dimension;
         let run = |kernel: &Kernel,
                    encoder: &mut wgpu::CommandEncoder,
-                   bind_group: &wgpu::BindGroup,
+                   bind_group: &crate::Bound,
                    level: usize| match dispatch {
             ScanDispatch::Direct(counts) => {
                 let groups = counts[level].div_ceil(SCAN_BLOCK_ELEMENTS);

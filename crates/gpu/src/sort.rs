@@ -15,7 +15,6 @@
 //! depth sort is otherwise 25 dispatches, and each costs more than sorting a few thousand keys.
 
 use std::collections::HashMap;
-use std::num::NonZeroU64;
 
 use wgpu::util::DeviceExt;
 
@@ -25,7 +24,7 @@ use crate::scan::{
     block_constant, level_output_counts_without_total,
 };
 use crate::validation::validated;
-use crate::{ExclusiveScan, GpuContext, GpuError, Kernel};
+use crate::{Binding, ExclusiveScan, GpuContext, GpuError, Kernel};
 
 /// Elements per sort block and key bits per pass, prepended to the sort kernels
 /// (`radix_sort_common.wgsl`) as `SORT_BLOCK` and `RADIX_BITS`.
@@ -315,15 +314,16 @@ impl RadixSort {
     ) {
         let window = CountWindow::new(ctx, count_buffer, count_offset);
         let plan_params = [window.index, capacity, scratch.scan_levels as u32, 0];
-        let plan_params = uniform_words(ctx, "radix sort plan params", &plan_params);
-        let resources = [
-            window.binding(),
-            plan_params.as_entire_binding(),
-            scratch.sort_info.as_entire_binding(),
-            scratch.dispatch_args.as_entire_binding(),
-        ];
-        let bind_group = bind_resources(ctx, "radix sort plan", &self.plan, resources);
-        self.plan.dispatch(encoder, &bind_group, [1, 1, 1]);
+        let bound = self.plan.bind_entries(
+            ctx,
+            &[
+                window.binding(),
+                Binding::Params(bytemuck::cast_slice(&plan_params)),
+                Binding::Whole(&scratch.sort_info),
+                Binding::Whole(&scratch.dispatch_args),
+            ],
+        );
+        self.plan.dispatch(encoder, &bound, [1, 1, 1]);
     }
 
     /// Records the one-workgroup sort of every pass (`radix_sort_small.wgsl`).
@@ -336,17 +336,18 @@ impl RadixSort {
     ) {
         let window = CountWindow::new(ctx, target.count_buffer, target.count_offset);
         let params = [window.index, target.capacity, target.key_bits, 0];
-        let params = uniform_words(ctx, "radix sort small params", &params);
-        let resources = [
-            window.binding(),
-            params.as_entire_binding(),
-            target.keys.as_entire_binding(),
-            target.values.as_entire_binding(),
-            scratch.keys.as_entire_binding(),
-            scratch.values.as_entire_binding(),
-        ];
-        let bind_group = bind_resources(ctx, "radix sort small", &self.small, resources);
-        self.small.dispatch(encoder, &bind_group, [1, 1, 1]);
+        let bound = self.small.bind_entries(
+            ctx,
+            &[
+                window.binding(),
+                Binding::Params(bytemuck::cast_slice(&params)),
+                Binding::Whole(target.keys),
+                Binding::Whole(target.values),
+                Binding::Whole(&scratch.keys),
+                Binding::Whole(&scratch.values),
+            ],
+        );
+        self.small.dispatch(encoder, &bound, [1, 1, 1]);
     }
 }
 
@@ -381,44 +382,13 @@ impl<'a> CountWindow<'a> {
         }
     }
 
-    fn binding(&self) -> wgpu::BindingResource<'a> {
-        wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+    fn binding(&self) -> Binding<'a> {
+        Binding::Range {
             buffer: self.buffer,
             offset: self.offset,
-            size: NonZeroU64::new(self.size),
-        })
+            size: self.size,
+        }
     }
-}
-
-fn uniform_words(ctx: &GpuContext, label: &str, words: &[u32]) -> wgpu::Buffer {
-    ctx.device
-        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(label),
-            contents: bytemuck::cast_slice(words),
-            usage: wgpu::BufferUsages::UNIFORM,
-        })
-}
-
-/// A bind group of `kernel`'s layout with `resources` at bindings 0, 1, ...
-fn bind_resources<'a, const N: usize>(
-    ctx: &GpuContext,
-    label: &str,
-    kernel: &Kernel,
-    resources: [wgpu::BindingResource<'a>; N],
-) -> wgpu::BindGroup {
-    let entries: Vec<wgpu::BindGroupEntry> = resources
-        .into_iter()
-        .enumerate()
-        .map(|(binding, resource)| wgpu::BindGroupEntry {
-            binding: binding as u32,
-            resource,
-        })
-        .collect();
-    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some(label),
-        layout: &kernel.pipeline.get_bind_group_layout(0),
-        entries: &entries,
-    })
 }
 
 /// (shift, digit mask) uniforms for each pass over the low `key_bits` bits; the last pass' mask

@@ -10,8 +10,6 @@
 
 use std::fmt::Write as _;
 
-use wgpu::util::DeviceExt;
-
 use segsplat_gpu::kernel::{wgsl_u32_constants, workgroups_2d};
 use segsplat_gpu::validation::validated;
 use segsplat_gpu::{GpuContext, GpuError, Kernel};
@@ -132,14 +130,7 @@ impl AdamGroupsKernel {
         let Some(most @ 1..) = most else {
             return;
         };
-        let uniform = ctx
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("adam groups params"),
-                contents: bytemuck::bytes_of(&params),
-                usage: wgpu::BufferUsages::UNIFORM,
-            });
-        let mut buffers: Vec<&wgpu::Buffer> = vec![&uniform];
+        let mut buffers: Vec<&wgpu::Buffer> = Vec::with_capacity(4 * groups.len());
         for group in groups {
             buffers.extend([
                 group.buffers.params,
@@ -148,7 +139,7 @@ impl AdamGroupsKernel {
                 group.buffers.second_moment,
             ]);
         }
-        let bind_group = kernel.bind(ctx, &buffers);
+        let bind_group = kernel.bind_params(ctx, bytemuck::bytes_of(&params), &buffers);
         let workgroups = most.div_ceil(ADAM_WORKGROUP);
         let grid = workgroups_2d(workgroups, ctx.limits.max_compute_workgroups_per_dimension);
         kernel.dispatch(encoder, &bind_group, grid);

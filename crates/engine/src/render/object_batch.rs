@@ -28,11 +28,11 @@ use wgpu::util::DeviceExt;
 
 use super::renderer::{RenderError, RenderOutput, Renderer};
 use super::uniforms::RenderUniforms;
-use super::workspace::{RenderWorkspace, WorkspacePool};
+use super::workspace::{RenderWorkspace, SLOT_TABLE_CAPACITY, WorkspacePool};
 use crate::model::GaussianView;
 use crate::{ObjectFilter, RenderCamera, RenderSettings};
 use segsplat_gpu::kernel::{workgroups_2d, workgroups_for};
-use segsplat_gpu::{GpuContext, GpuError};
+use segsplat_gpu::{Binding, GpuContext, GpuError};
 use segsplat_scene::Level;
 
 /// One object of a batch: the Gaussians whose id at `level` is `id`, rendered alone on black.
@@ -63,6 +63,8 @@ pub struct ObjectBatchOutput<'b> {
     pub camera: RenderCamera,
     pub slots: Vec<ObjectSlot>,
     pub gaussian_count: u32,
+    /// The slots as the kernels read them (see [`slot_table`]).
+    slot_table: wgpu::Buffer,
 }
 
 impl Drop for ObjectBatchOutput<'_> {
@@ -74,6 +76,11 @@ impl Drop for ObjectBatchOutput<'_> {
 }
 
 impl ObjectBatchOutput<'_> {
+    /// The batch's slots as the kernels read them.
+    pub fn slot_table(&self) -> &wgpu::Buffer {
+        &self.slot_table
+    }
+
     fn workspace(&self) -> &RenderWorkspace {
         // Only `drop` takes the workspace out.
         self.workspace
@@ -159,6 +166,7 @@ impl Renderer {
         uniforms.mean2d_abs = 0;
         uniforms.mark_occupancy = 1;
         self.upload_uniforms(ctx, encoder, &workspace, &uniforms);
+        let slot_table = upload_slot_table(ctx, encoder, &workspace, slots);
         encoder.clear_buffer(&workspace.tile_ranges, 0, None);
         encoder.clear_buffer(&workspace.occupancy, 0, None);
         if count > 0 {
@@ -168,7 +176,8 @@ impl Renderer {
                 gaussians,
                 base,
                 &workspace,
-                slots,
+                &slot_table,
+                slots.len() as u32,
                 tiles_per_slot,
             );
         }
@@ -198,6 +207,7 @@ impl Renderer {
             camera,
             slots: slots.to_vec(),
             gaussian_count: count,
+            slot_table,
         })
     }
 
@@ -210,26 +220,32 @@ impl Renderer {
         gaussians: GaussianView<'_>,
         base: &RenderOutput,
         workspace: &RenderWorkspace,
-        slots: &[ObjectSlot],
+        slot_table: &wgpu::Buffer,
+        slot_count: u32,
         tiles_per_slot: u32,
     ) {
         let count = base.gaussian_count;
         let shared = base.workspace();
-        let slot_table = slot_table(ctx, slots);
         let per_gaussian = workgroups_2d(
             workgroups_for(count, 256),
             ctx.limits.max_compute_workgroups_per_dimension,
         );
         let k = &self.kernels;
-        let tally = k.object_tile_count.bind(
+        // Exactly the batch's slots: the kernels loop to the binding's `arrayLength`.
+        let slots = Binding::Range {
+            buffer: slot_table,
+            offset: 0,
+            size: u64::from(slot_count) * 8,
+        };
+        let tally = k.object_tile_count.bind_entries(
             ctx,
             &[
-                &workspace.uniforms,
-                &shared.depth_values,
-                &shared.tile_counts,
-                gaussians.object_ids,
-                &slot_table,
-                &workspace.tile_counts_in_depth_order,
+                Binding::Whole(&workspace.uniforms),
+                Binding::Whole(&shared.depth_values),
+                Binding::Whole(&shared.tile_counts),
+                Binding::Whole(gaussians.object_ids),
+                slots,
+                Binding::Whole(&workspace.tile_counts_in_depth_order),
             ],
         );
         k.object_tile_count.dispatch(encoder, &tally, per_gaussian);
@@ -251,22 +267,22 @@ impl Renderer {
             ],
         );
         k.tile_budget.dispatch(encoder, &budget, [1, 1, 1]);
-        let emit = k.object_tile_emit.bind(
+        let emit = k.object_tile_emit.bind_entries(
             ctx,
             &[
-                &workspace.uniforms,
-                &shared.depth_values,
-                &workspace.tile_offsets,
-                &shared.tile_counts,
-                gaussians.object_ids,
-                &slot_table,
-                &shared.projected,
-                &workspace.intersection_tiles,
-                &workspace.intersection_gaussians,
+                Binding::Whole(&workspace.uniforms),
+                Binding::Whole(&shared.depth_values),
+                Binding::Whole(&workspace.tile_offsets),
+                Binding::Whole(&shared.tile_counts),
+                Binding::Whole(gaussians.object_ids),
+                slots,
+                Binding::Whole(&shared.projected),
+                Binding::Whole(&workspace.intersection_tiles),
+                Binding::Whole(&workspace.intersection_gaussians),
             ],
         );
         k.object_tile_emit.dispatch(encoder, &emit, per_gaussian);
-        self.encode_tile_ranges(ctx, encoder, workspace, tiles_per_slot * slots.len() as u32);
+        self.encode_tile_ranges(ctx, encoder, workspace, tiles_per_slot * slot_count);
     }
 
     /// Records the backward of every slot of `batch` given `grad_images` (d loss / d image, slot
@@ -319,12 +335,38 @@ impl Renderer {
     }
 }
 
-/// The slots as the kernels read them: `array<vec2<u32>>` of (level index, id).
-pub fn slot_table(ctx: &GpuContext, slots: &[ObjectSlot]) -> wgpu::Buffer {
-    let table: Vec<[u32; 2]> = slots
+/// The slots in the workspace's table, written through the encoder (no buffer per batch), or
+/// in a table of their own past [`SLOT_TABLE_CAPACITY`].
+fn upload_slot_table(
+    ctx: &GpuContext,
+    encoder: &mut wgpu::CommandEncoder,
+    workspace: &RenderWorkspace,
+    slots: &[ObjectSlot],
+) -> wgpu::Buffer {
+    if slots.len() > SLOT_TABLE_CAPACITY {
+        ctx.count_buffer_created();
+        return slot_table(ctx, slots);
+    }
+    let table = slot_words(slots);
+    ctx.encode_upload(
+        encoder,
+        bytemuck::cast_slice(&table),
+        &workspace.slot_table,
+        0,
+    );
+    workspace.slot_table.clone()
+}
+
+fn slot_words(slots: &[ObjectSlot]) -> Vec<[u32; 2]> {
+    slots
         .iter()
         .map(|slot| [slot.level.index() as u32, slot.id])
-        .collect();
+        .collect()
+}
+
+/// The slots as the kernels read them: `array<vec2<u32>>` of (level index, id).
+pub fn slot_table(ctx: &GpuContext, slots: &[ObjectSlot]) -> wgpu::Buffer {
+    let table = slot_words(slots);
     ctx.device
         .create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("object slots"),

@@ -2,8 +2,6 @@
 
 use std::sync::Arc;
 
-use wgpu::util::DeviceExt;
-
 use super::kernels::{RasterVariant, RenderKernels};
 use super::uniforms::RenderUniforms;
 use super::workspace::{
@@ -303,7 +301,8 @@ impl Renderer {
     }
 
     /// Writes the uniforms and the Gaussian count through the encoder (not `queue.write_buffer`),
-    /// so several renders recorded into one encoder each see their own values.
+    /// so several renders recorded into one encoder each see their own values; the bytes come
+    /// from the context's uniform ring, not a staging buffer per render.
     pub(super) fn upload_uniforms(
         &self,
         ctx: &GpuContext,
@@ -311,26 +310,15 @@ impl Renderer {
         workspace: &RenderWorkspace,
         uniforms: &RenderUniforms,
     ) {
-        let uniform_bytes = std::mem::size_of::<RenderUniforms>() as u64;
         let mut counts = [0u32; COUNT_SLOTS];
         counts[0] = uniforms.gaussian_count;
-        let mut contents = bytemuck::bytes_of(uniforms).to_vec();
-        contents.extend_from_slice(bytemuck::cast_slice(&counts));
-        let staging = ctx
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("render uniforms upload"),
-                contents: &contents,
-                usage: wgpu::BufferUsages::COPY_SRC,
-            });
-        encoder.copy_buffer_to_buffer(&staging, 0, &workspace.uniforms, 0, uniform_bytes);
-        encoder.copy_buffer_to_buffer(
-            &staging,
-            uniform_bytes,
-            &workspace.counts,
+        ctx.encode_upload(
+            encoder,
+            bytemuck::bytes_of(uniforms),
+            &workspace.uniforms,
             0,
-            (COUNT_SLOTS * 4) as u64,
         );
+        ctx.encode_upload(encoder, bytemuck::cast_slice(&counts), &workspace.counts, 0);
     }
 
     /// Steps 1-8 of the module doc: projection to per-tile depth-ordered ranges.
@@ -667,7 +655,7 @@ impl Renderer {
                     label: Some("render"),
                 });
             let output = self.forward(ctx, &mut encoder, gaussians, camera, settings)?;
-            ctx.queue.submit([encoder.finish()]);
+            ctx.submit_untimed(encoder.finish());
             let report = self.sync_capacity(ctx)?;
             if !report.overflowed {
                 return Ok(output);

@@ -57,7 +57,12 @@ pub struct RenderWorkspace {
     /// Per image, a u32 per [`crate::OCCUPANCY_CELL`] square (object renders mark it).
     pub occupancy: wgpu::Buffer,
     pub grad_projected: wgpu::Buffer,
+    /// An object batch's slots (see `slot_table`), written through the encoder per batch.
+    pub slot_table: wgpu::Buffer,
 }
+
+/// Slots a workspace's slot table holds; larger batches get a table of their own.
+pub const SLOT_TABLE_CAPACITY: usize = 64;
 
 fn storage(
     ctx: &GpuContext,
@@ -117,6 +122,7 @@ impl RenderWorkspace {
                 size.tiles * OCCUPANCY_CELLS_PER_TILE * 4,
                 none,
             )?,
+            slot_table: storage(ctx, "object slots", SLOT_TABLE_CAPACITY * 8, none)?,
             grad_projected: storage(
                 ctx,
                 "projected splat gradients",

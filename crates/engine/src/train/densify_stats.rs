@@ -81,15 +81,7 @@ impl DensifyAccumulators {
             half_height: image_size[1] as f32 * 0.5,
             longer_side: image_size[0].max(image_size[1]) as f32,
         };
-        let staging = wgpu::util::DeviceExt::create_buffer_init(
-            &ctx.device,
-            &wgpu::util::BufferInitDescriptor {
-                label: Some("densify_stats.uniforms.staging"),
-                contents: bytemuck::bytes_of(&uniforms),
-                usage: wgpu::BufferUsages::COPY_SRC,
-            },
-        );
-        encoder.copy_buffer_to_buffer(&staging, 0, &self.uniforms, 0, staging.size());
+        ctx.encode_upload(encoder, bytemuck::bytes_of(&uniforms), &self.uniforms, 0);
         let bind_group = self.kernel.bind(
             ctx,
             &[

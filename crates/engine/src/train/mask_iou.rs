@@ -3,9 +3,8 @@
 //! Two u32 per pair leave the GPU instead of each object's image.
 
 use bytemuck::{Pod, Zeroable};
-use wgpu::util::DeviceExt;
 
-use crate::render::{ObjectBatchOutput, slot_table};
+use crate::render::ObjectBatchOutput;
 use segsplat_gpu::kernel::{Kernel, workgroups_for};
 use segsplat_gpu::{GpuContext, GpuError};
 
@@ -67,23 +66,15 @@ impl MaskIouCounts {
             first_pair: first_pair as u32,
             _pad: 0,
         };
-        let uniforms = ctx
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("mask_iou.uniforms"),
-                contents: bytemuck::bytes_of(&uniforms),
-                usage: wgpu::BufferUsages::UNIFORM,
-            });
-        let slots = slot_table(ctx, &batch.slots);
-        let bind_group = self.kernel.bind(
+        let bind_group = self.kernel.bind_params(
             ctx,
+            bytemuck::bytes_of(&uniforms),
             &[
-                &uniforms,
                 batch.images(),
                 ids[0],
                 ids[1],
                 ids[2],
-                &slots,
+                batch.slot_table(),
                 &self.counts,
             ],
         );

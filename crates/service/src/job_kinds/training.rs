@@ -157,7 +157,22 @@ pub struct TrainingStageReport {
     /// Milliseconds a step inside queue submissions (a software adapter runs the work there).
     #[serde(default)]
     pub submit_ms_per_step: f64,
+    /// Bind groups created a step (0 once every view has been seen: they are cached).
+    #[serde(default)]
+    pub bind_groups_created_per_step: f64,
+    /// Buffers created a step on paths that should create none (0 in steady training).
+    #[serde(default)]
+    pub buffers_created_per_step: f64,
+    /// Share of the wall time the GPU spent in the step's compute passes, from timestamp
+    /// queries over [`BUSY_SAMPLE_STEPS`] steps in the middle of the stage; absent where the
+    /// adapter has no timestamp queries or the stage was too short to sample.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gpu_busy_fraction: Option<f64>,
 }
+
+/// Steps timed with timestamp queries for [`TrainingStageReport::gpu_busy_fraction`]: few
+/// enough for the profiler's pass capacity at object-loss steps.
+pub const BUSY_SAMPLE_STEPS: u32 = 10;
 
 /// Trains to the configured end, saving a checkpoint named `checkpoint_name` every
 /// `checkpoint_every` steps (0 = only at the end) and stopping at the next report when the job
@@ -180,20 +195,36 @@ pub fn train_with_checkpoints(
     let mut checkpoint_seconds = 0.0;
     let mut report_seconds = 0.0;
     let mut checkpoint_host = HostCostReading::default();
+    // The busy sample starts halfway through what this attempt trains, past the first steps'
+    // allocations and cache fills.
+    let mut busy_sample_at = (gpu.profiler.is_some() && total - first_step > 2 * BUSY_SAMPLE_STEPS)
+        .then(|| first_step + (total - first_step) / 2);
+    let mut gpu_busy_fraction = None;
     while trainer.step() < total {
         let next_checkpoint = match checkpoint_every {
             0 => total,
             every => (trainer.step() / every + 1) * every,
         };
-        trainer
-            .run_until(next_checkpoint, |progress| {
-                let reporting = std::time::Instant::now();
-                report_training(ctx, progress);
-                let go_on = ctx.stop_requested().is_ok();
-                report_seconds += reporting.elapsed().as_secs_f64();
-                go_on
-            })
-            .map_err(train_failure)?;
+        let mut run_to = |trainer: &mut Trainer, last_step: u32| {
+            trainer
+                .run_until(last_step, |progress| {
+                    let reporting = std::time::Instant::now();
+                    report_training(ctx, progress);
+                    let go_on = ctx.stop_requested().is_ok();
+                    report_seconds += reporting.elapsed().as_secs_f64();
+                    go_on
+                })
+                .map_err(train_failure)
+        };
+        if let Some(at) = busy_sample_at.filter(|&at| at < next_checkpoint) {
+            busy_sample_at = None;
+            run_to(trainer, at)?;
+            ctx.stop_requested()?;
+            gpu_busy_fraction = sample_gpu_busy(&gpu, trainer, |trainer, last| {
+                run_to(trainer, last).map(|_| ())
+            })?;
+        }
+        run_to(trainer, next_checkpoint)?;
         ctx.stop_requested()?;
         let checkpoint_started = std::time::Instant::now();
         let host_at_checkpoint = gpu.host_costs.reading();
@@ -223,7 +254,37 @@ pub fn train_with_checkpoints(
         ),
         wait_ms_per_step: per_step(waited.max(0.0) * 1e3),
         submit_ms_per_step: per_step(submitted.max(0.0) * 1e3),
+        bind_groups_created_per_step: per_step(
+            (host.bind_groups_created - checkpoint_host.bind_groups_created) as f64,
+        ),
+        buffers_created_per_step: per_step(
+            (host.buffers_created - checkpoint_host.buffers_created) as f64,
+        ),
+        gpu_busy_fraction,
     })
+}
+
+/// Trains [`BUSY_SAMPLE_STEPS`] steps with every pass timed and returns the GPU's time in them
+/// over the wall time; `None` when the profiler dropped passes (the fraction would be low).
+fn sample_gpu_busy(
+    gpu: &segsplat_gpu::GpuContext,
+    trainer: &mut Trainer,
+    mut run_to: impl FnMut(&mut Trainer, u32) -> Result<(), JobFailure>,
+) -> Result<Option<f64>, JobFailure> {
+    let Some(profiler) = gpu.profiler.as_ref() else {
+        return Ok(None);
+    };
+    gpu.wait_idle().map_err(retryable)?;
+    profiler.start();
+    let started = std::time::Instant::now();
+    let last = (trainer.step() + BUSY_SAMPLE_STEPS).min(trainer.config().steps);
+    let trained = run_to(trainer, last);
+    // Taken even when training failed, so the profiler is left idle.
+    let profile = profiler.take(gpu).map_err(retryable)?;
+    trained?;
+    let wall_ms = started.elapsed().as_secs_f64() * 1e3;
+    Ok((profile.untimed_passes == 0 && wall_ms > 0.0)
+        .then(|| (profile.total_ms / wall_ms).min(1.0)))
 }
 
 /// Stores a finished job's outputs under its output prefix: the trained scene (`scene.ply`,

@@ -186,7 +186,15 @@ pub fn open_adapters(filter: &AdapterFilter) -> (Vec<Arc<GpuContext>>, Vec<Strin
     for (adapter, report) in adapters {
         log_adapter(&report);
         match GpuContext::from_adapter(&adapter) {
-            Ok(context) => contexts.push(Arc::new(context.with_kernel_choices(filter.kernels))),
+            Ok(mut context) => {
+                // Timestamps for the jobs' gpu_busy_fraction; idle outside its short sample.
+                if report.timestamp_queries
+                    && let Err(error) = context.enable_kernel_profiling()
+                {
+                    warn!(adapter = %report.name, %error, "no kernel timing on this adapter");
+                }
+                contexts.push(Arc::new(context.with_kernel_choices(filter.kernels)))
+            }
             Err(error) => {
                 warn!(adapter = %report.name, %error, "cannot open GPU adapter");
                 problems.push(format!("adapter {}: {error}", report.name));

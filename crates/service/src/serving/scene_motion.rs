@@ -69,7 +69,7 @@ impl SceneMotion {
             self.field
                 .encode_forward(ctx, &mut encoder, gaussians, &self.geometry, time)
                 .map_err(gpu_error)?;
-            ctx.queue.submit([encoder.finish()]);
+            ctx.submit_untimed(encoder.finish());
             self.deformed_at = Some(time);
         }
         Ok(self.geometry.view(gaussians))

@@ -74,6 +74,8 @@ impl Trainer {
             self.gaussians = densified.gaussians;
             self.first_moments = densified.first_moments;
             self.second_moments = densified.second_moments;
+            // The replaced buffers are now held only by cached bind groups: free them now.
+            ctx.release_cached_bind_groups();
         }
         if self.schedule.resets_opacity_at(step) {
             self.densifier.reset_opacity(
@@ -115,6 +117,7 @@ impl Trainer {
             self.first_moments = GaussianParameterBuffers::new(&ctx, "adam.m", capacity)?;
             self.second_moments = GaussianParameterBuffers::new(&ctx, "adam.v", capacity)?;
             self.accumulators = DensifyAccumulators::new(&ctx, capacity)?;
+            ctx.release_cached_bind_groups();
         } else {
             self.gaussians.write(&ctx, model)?;
         }

@@ -46,7 +46,7 @@ impl Trainer {
                 if with_backward {
                     self.encode_projection_backward(&mut encoder, &output)?;
                 }
-                ctx.queue.submit([encoder.finish()]);
+                ctx.submit_untimed(encoder.finish());
                 ctx.wait_idle()?;
                 let secs = started.elapsed().as_secs_f64();
                 if repeat == 0 {
@@ -88,7 +88,7 @@ impl Trainer {
                     &mut encoder,
                     view.time,
                 )?;
-                self.ctx.queue.submit([encoder.finish()]);
+                self.ctx.submit_untimed(encoder.finish());
             }
             let output = self.renderer.render_checked(
                 &self.ctx,

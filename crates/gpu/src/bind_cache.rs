@@ -1,0 +1,90 @@
+//! Bind groups made once and reused while their buffers stay the same.
+//!
+//! A training step binds the same buffers every step (they change only when the model grows or a
+//! scratch buffer is enlarged), so each dispatch creating its bind group anew was pure host cost.
+//! The cache is keyed by the kernel and the exact buffer ranges. An entry holds its buffers
+//! alive, so entries not used for [`KEEP_SUBMISSIONS`] submissions are dropped: replaced model
+//! buffers are freed a few submissions after their last use, not kept by the cache.
+
+use std::collections::HashMap;
+
+/// Submissions an unused bind group survives.
+pub const KEEP_SUBMISSIONS: u64 = 256;
+
+/// One binding of a cached group: a buffer range (size `None`: to the end).
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub struct BoundRange {
+    pub buffer: wgpu::Buffer,
+    pub offset: u64,
+    pub size: Option<u64>,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub struct BindKey {
+    pub kernel: u64,
+    pub ranges: Vec<BoundRange>,
+}
+
+#[derive(Debug)]
+struct Cached {
+    group: wgpu::BindGroup,
+    last_used: u64,
+}
+
+#[derive(Debug, Default)]
+pub struct BindGroupCache {
+    entries: HashMap<BindKey, Cached>,
+    submissions: u64,
+    created: u64,
+}
+
+impl BindGroupCache {
+    /// The cached group for `key`, or the one `create` makes (then cached).
+    pub fn get_or_create(
+        &mut self,
+        key: BindKey,
+        create: impl FnOnce(&BindKey) -> wgpu::BindGroup,
+    ) -> wgpu::BindGroup {
+        let now = self.submissions;
+        if let Some(cached) = self.entries.get_mut(&key) {
+            cached.last_used = now;
+            return cached.group.clone();
+        }
+        let group = create(&key);
+        self.created += 1;
+        self.entries.insert(
+            key,
+            Cached {
+                group: group.clone(),
+                last_used: now,
+            },
+        );
+        group
+    }
+
+    /// Counts a submission and drops the groups unused for [`KEEP_SUBMISSIONS`] of them.
+    pub fn after_submit(&mut self) {
+        self.submissions += 1;
+        let now = self.submissions;
+        self.entries
+            .retain(|_, cached| now - cached.last_used <= KEEP_SUBMISSIONS);
+    }
+
+    /// Drops every cached group (and with them the last references to freed buffers).
+    pub fn clear(&mut self) {
+        self.entries.clear();
+    }
+
+    /// Bind groups created so far (cache misses).
+    pub fn created(&self) -> u64 {
+        self.created
+    }
+
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+}
