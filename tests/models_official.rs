@@ -301,9 +301,41 @@ fn init_refuses_to_overwrite_and_names_what_it_cannot_use() {
     let error = init_model_dir(text_only.path(), &runtime, &InitOptions::default())
         .expect_err("no tokenizer");
     assert!(
-        error.to_string().contains("tokenizer.json is missing"),
+        error.to_string().contains("no tokenizer file is there"),
         "{error}"
     );
+
+    // A tokenizer under another name is found when it is the only one (issue 41, item 12),
+    // and named with --tokenizer when there are several.
+    std::fs::copy(
+        tiny_models_dir().join("tokenizer.json"),
+        text_only.path().join("clip_tokenizer.json"),
+    )
+    .expect("copy");
+    let report = init_model_dir(text_only.path(), &runtime, &InitOptions::default()).expect("init");
+    assert_eq!(report.tokenizer.as_deref(), Some("clip_tokenizer.json"));
+    let manifest: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(text_only.path().join("manifest.json")).expect("manifest"),
+    )
+    .expect("manifest json");
+    assert_eq!(manifest["tokenizer"]["file"], "clip_tokenizer.json");
+    std::fs::copy(
+        tiny_models_dir().join("tokenizer.json"),
+        text_only.path().join("other_tokenizer.json"),
+    )
+    .expect("copy");
+    let overwrite = InitOptions {
+        overwrite: true,
+        ..InitOptions::default()
+    };
+    let error = init_model_dir(text_only.path(), &runtime, &overwrite).expect_err("ambiguous");
+    assert!(error.to_string().contains("--tokenizer"), "{error}");
+    let named = InitOptions {
+        tokenizer: Some("other_tokenizer.json".into()),
+        ..overwrite
+    };
+    let report = init_model_dir(text_only.path(), &runtime, &named).expect("named");
+    assert_eq!(report.tokenizer.as_deref(), Some("other_tokenizer.json"));
 }
 
 #[test]

@@ -227,6 +227,32 @@ fn nerfstudio_missing_focal_length_names_the_field() {
     assert_eq!(error.class(), InputErrorClass::Invalid);
 }
 
+/// instant-ngp's samples written on Windows name their images with backslashes (issue 41, item 6).
+#[test]
+fn transforms_file_paths_with_windows_separators_load() {
+    let dir = tempfile::tempdir().unwrap();
+    synthetic::write_nerfstudio(dir.path(), &spec()).unwrap();
+    let path = dir.path().join("transforms.json");
+    let mut transforms: serde_json::Value =
+        serde_json::from_slice(&fs::read(&path).unwrap()).unwrap();
+    for frame in transforms["frames"].as_array_mut().unwrap() {
+        let file_path = frame["file_path"].as_str().unwrap().replace('/', "\\");
+        frame["file_path"] = serde_json::json!(file_path);
+    }
+    assert!(
+        transforms["frames"][0]["file_path"]
+            .as_str()
+            .unwrap()
+            .contains('\\')
+    );
+    fs::write(&path, serde_json::to_vec(&transforms).unwrap()).unwrap();
+    let scene = load_scene(dir.path(), &LoadOptions::default()).unwrap();
+    assert_eq!(
+        scene.frames[0].image_path,
+        Path::new("images").join("frame_0000.png")
+    );
+}
+
 #[test]
 fn transforms_file_paths_may_not_leave_the_dataset() {
     let dir = tempfile::tempdir().unwrap();
@@ -238,6 +264,43 @@ fn transforms_file_paths_may_not_leave_the_dataset() {
     fs::write(&path, serde_json::to_vec(&transforms).unwrap()).unwrap();
     let error = load_scene(dir.path(), &LoadOptions::default()).unwrap_err();
     assert!(matches!(error, SceneError::Parse { .. }), "{error}");
+}
+
+/// A Blender upload's own test split decides what is held out; with only
+/// `transforms_train.json` every 8th frame is, as for any other format (issue 41, item 4).
+#[test]
+fn blender_held_out_frames_follow_its_test_split_or_every_eighth() {
+    use segsplat_engine::train::views::is_held_out;
+    let spec = SyntheticSpec {
+        frame_count: 16,
+        ..spec()
+    };
+    let dir = tempfile::tempdir().unwrap();
+    synthetic::write_blender(dir.path(), &spec).unwrap();
+    let held_out = |scene: &Scene| -> Vec<String> {
+        (0..scene.frames.len())
+            .filter(|&index| is_held_out(scene, index, 8))
+            .map(|index| scene.frames[index].name.clone())
+            .collect()
+    };
+    let scene = load_scene(dir.path(), &LoadOptions::default()).unwrap();
+    let tests: Vec<String> = scene
+        .frames
+        .iter()
+        .filter(|frame| frame.split == Some(FrameSplit::Test))
+        .map(|frame| frame.name.clone())
+        .collect();
+    assert_eq!(tests.len(), 4);
+    assert_eq!(held_out(&scene), tests);
+    fs::remove_file(dir.path().join("transforms_test.json")).unwrap();
+    fs::remove_dir_all(dir.path().join("test")).unwrap();
+    let train_only = load_scene(dir.path(), &LoadOptions::default()).unwrap();
+    assert_eq!(train_only.frames.len(), 12);
+    let every_eighth: Vec<String> = [0, 8]
+        .iter()
+        .map(|&index| train_only.frames[index].name.clone())
+        .collect();
+    assert_eq!(held_out(&train_only), every_eighth);
 }
 
 #[test]

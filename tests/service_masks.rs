@@ -629,6 +629,43 @@ fn local_commands_read_the_service_data(
         "{report}"
     );
 
+    // A LERF_OVS label of another capture (issue 41, item 5): refused, naming what does not
+    // match, unless forced.
+    let foreign = work.path().join("foreign-labels");
+    std::fs::create_dir_all(&foreign).unwrap();
+    let (width, height) = (
+        cameras[2]["width"].as_u64().unwrap(),
+        cameras[2]["height"].as_u64().unwrap(),
+    );
+    let label = serde_json::json!({
+        "info": {"name": "other_capture_0042.jpg", "width": width, "height": height},
+        "objects": [{
+            "category": "red ball",
+            "segmentation": [[0, 0], [width / 2, 0], [width / 2, height / 2], [0, height / 2]],
+        }],
+    });
+    std::fs::write(
+        foreign.join("frame_00003.json"),
+        serde_json::to_vec(&label).unwrap(),
+    )
+    .unwrap();
+    let foreign = foreign.to_str().unwrap();
+    let foreign_eval = |extra: &[&str]| {
+        let mut args = vec!["eval", scene_id, "--data-dir", data, "--oracle"];
+        args.extend(["--ground-truth", foreign]);
+        args.extend(extra);
+        segsplat(&args)
+    };
+    let output = foreign_eval(&[]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("does not belong") && stderr.contains("other_capture_0042.jpg"),
+        "{stderr}"
+    );
+    let output = foreign_eval(&["--force"]);
+    assert!(output.status.success(), "{output:?}");
+
     // Without CLIP weights the language path says what to do instead.
     let output = eval(&[]);
     assert!(!output.status.success());

@@ -121,11 +121,40 @@ async fn reconstruct_job_trains_and_stores_artifacts() {
         serde_json::from_slice(&blobs.get_bytes(&format!("{prefix}/metrics.json")).unwrap())
             .unwrap();
     assert_eq!(metrics["steps"], 60);
+    // The settings it ran with: the job's `settings` and metrics.json's agree (issue 41, item 1).
+    assert!(
+        metrics["settings"]["gaussian_budget"].as_u64().unwrap() > 0,
+        "{metrics}"
+    );
+    assert_eq!(metrics["settings"]["train"]["steps"], 60, "{metrics}");
+    let (status, finished) = client.get_json(&format!("/v1/jobs/{job_id}")).await;
+    assert_eq!(status, 200);
+    assert_eq!(finished["settings"], metrics["settings"], "{finished}");
+    // The worst held-out view is named as the scene knows it (issue 41, item 3): every 8th
+    // frame is held out, so its frame index is a multiple of 8 and its name the frame's.
+    let held_out = &metrics["held_out"];
+    let worst_frame = held_out["worst_frame_index"].as_u64().unwrap();
+    assert_eq!(worst_frame % 8, 0, "{held_out}");
+    assert_eq!(
+        held_out["worst_frame_name"],
+        format!("frame_{worst_frame:04}.png"),
+        "{held_out}"
+    );
+    assert_eq!(
+        job["progress"]["metrics"]["worst_frame_index"].as_f64(),
+        Some(worst_frame as f64),
+        "{job}"
+    );
     // The host's side of the steps, and how busy the GPU was where the adapter times passes.
     let training = &metrics["training"];
     for field in ["bind_groups_created_per_step", "buffers_created_per_step"] {
         assert!(training[field].is_number(), "{field} missing: {training}");
     }
+    // Checkpoints are encoded and stored beside the step loop, which only takes the snapshot.
+    assert!(
+        training["checkpoint_write_seconds"].as_f64().unwrap() > 0.0,
+        "{training}"
+    );
     let timestamps = segsplat_gpu::GpuContext::new_default()
         .map(|gpu| gpu.report.timestamp_queries)
         .unwrap_or(false);
@@ -195,6 +224,24 @@ async fn segment_then_splat_job_stores_objects_at_three_levels() {
         .wait_for_state(&job_id, "succeeded", Duration::from_secs(240))
         .await;
     assert_eq!(job["progress"]["stage"], "persist", "{job}");
+    // What the job was created with and what it ran with are told apart (issue 41, item 1):
+    // `config` keeps `auto` and the default objects per level, `settings` the classical masks
+    // and the one object per level of a scene this small, and a `settings` event carries them.
+    assert_eq!(job["config"]["masks"], "auto", "{job}");
+    assert_eq!(
+        job["config"]["object_loss"]["objects_per_level"], 3,
+        "{job}"
+    );
+    assert_eq!(job["settings"]["masks"], "classical", "{job}");
+    assert_eq!(job["settings"]["steps"], 10, "{job}");
+    assert_eq!(
+        job["settings"]["object_loss"]["objects_per_level"], 1,
+        "{job}"
+    );
+    let (status, events) = client.get_bytes(&format!("/v1/jobs/{job_id}/events")).await;
+    assert_eq!(status, 200);
+    let events = String::from_utf8_lossy(&events);
+    assert!(events.contains("event: settings"), "{events}");
     // The segmentation stage reports each view as it is segmented, not only its start and end.
     let steps = segment_steps(&client, &job_id).await;
     let train_views = steps.last().copied().unwrap_or_default();

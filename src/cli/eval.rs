@@ -10,8 +10,8 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 use segsplat_eval::{
-    FrameScore, GroundTruthFormat, SegmentationReport, load_ground_truth, oracle_choice,
-    report_table, score_frame, summarize,
+    FrameScore, GroundTruthFormat, SceneFrame, SegmentationReport, load_ground_truth,
+    oracle_choice, report_table, scene_mismatches, score_frame, summarize,
 };
 use segsplat_scene::Level;
 use segsplat_service::serving::{MaskView, SceneCamera};
@@ -50,6 +50,10 @@ pub struct EvalArgs {
     /// Also write the report as JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Score labels that do not match the scene's frames (another name at a frame's index,
+    /// another image shape); without it such labels are refused.
+    #[arg(long)]
+    pub force: bool,
     #[command(flatten)]
     pub store: StoreArgs,
 }
@@ -108,6 +112,37 @@ async fn run_async(args: EvalArgs, config_file: Option<PathBuf>) -> anyhow::Resu
     let frame_names: Vec<String> = cameras.iter().map(|camera| camera.name.clone()).collect();
     let (format, ground_truth) = load_ground_truth(&args.ground_truth, &frame_names)
         .with_context(|| format!("ground truth in {}", args.ground_truth.display()))?;
+    let scene_frames: Vec<SceneFrame> = cameras
+        .iter()
+        .map(|camera| SceneFrame {
+            name: camera.name.clone(),
+            width: camera.width,
+            height: camera.height,
+        })
+        .collect();
+    let problems = scene_mismatches(&ground_truth, &scene_frames);
+    if !problems.is_empty() {
+        let shown: Vec<&str> = problems.iter().take(5).map(String::as_str).collect();
+        let more = problems.len().saturating_sub(shown.len());
+        let listed = format!(
+            "{}{}",
+            shown.join("\n  "),
+            if more > 0 {
+                format!("\n  ... and {more} more")
+            } else {
+                String::new()
+            }
+        );
+        if !args.force {
+            anyhow::bail!(
+                "the ground truth in {} does not belong to scene {}:\n  {listed}\n\
+                 pass --force to score it anyway",
+                args.ground_truth.display(),
+                args.scene
+            );
+        }
+        tracing::warn!("scoring labels that do not match the scene (--force):\n  {listed}");
+    }
     let view = |frame_index: usize| MaskView::Frame {
         index: frame_index,
         max_side: Some(args.max_side),

@@ -43,7 +43,7 @@ pub struct VerifyArgs {
 
 #[derive(Args)]
 pub struct InitArgs {
-    /// Folder with the .onnx files (and tokenizer.json for a CLIP text model).
+    /// Folder with the .onnx files (and the tokenizer file for a CLIP text model).
     pub dir: PathBuf,
     /// CLIP image normalisation mean, three comma-separated values in 0..1 (default: OpenAI's).
     #[arg(long, value_parser = parse_triple)]
@@ -61,6 +61,10 @@ pub struct InitArgs {
     /// Replace an existing manifest.json.
     #[arg(long)]
     pub force: bool,
+    /// The CLIP text model's tokenizer file in DIR (default: tokenizer.json, else the one
+    /// *tokenizer*.json there).
+    #[arg(long)]
+    pub tokenizer: Option<PathBuf>,
     #[arg(long)]
     pub ort_library: Option<PathBuf>,
 }
@@ -167,6 +171,7 @@ fn init(args: InitArgs, config_file: Option<PathBuf>) -> anyhow::Result<bool> {
         clip_image_size: args.clip_image_size,
         sam_family: args.sam_family,
         overwrite: args.force,
+        tokenizer: args.tokenizer,
     };
     let report = init_model_dir(&args.dir, &runtime, &options)?;
     for model in &report.models {

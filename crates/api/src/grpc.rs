@@ -394,6 +394,7 @@ fn job_to_proto(job: JobRecord) -> proto::Job {
         state: job_state_to_proto(job.state) as i32,
         progress: job.progress.as_ref().and_then(progress_to_proto),
         config_json: job.config.to_string(),
+        settings_json: job.settings.as_ref().map(serde_json::Value::to_string),
         id: job.id,
         scene_id: job.scene_id,
         kind: job.kind,

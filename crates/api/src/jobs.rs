@@ -37,8 +37,14 @@ pub struct JobResponse {
     /// queued, running, succeeded, failed or cancelled.
     #[schema(value_type = JobStateName)]
     pub state: String,
+    /// What the job was created with: the fields it gave and the kind's defaults for the rest
+    /// (for `segment_then_splat`, `scene_sized` names the fields the scene decides instead).
     #[schema(value_type = Object)]
     pub config: serde_json::Value,
+    /// The settings the job runs with, once its worker has resolved them from the scene
+    /// (steps, objects per level, background, mask source, Gaussian budget); absent until then.
+    #[schema(value_type = Option<Object>)]
+    pub settings: Option<serde_json::Value>,
     pub attempts: u32,
     pub max_attempts: u32,
     /// Lease expiries after the job had saved a newer checkpoint (the worker's process died
@@ -67,6 +73,7 @@ impl From<JobRecord> for JobResponse {
             kind: job.kind,
             state: job.state.as_str().to_string(),
             config: job.config,
+            settings: job.settings,
             attempts: job.attempts,
             max_attempts: job.max_attempts,
             lease_expiries: job.lease_expiries,

@@ -9,6 +9,7 @@ mod opencv_line;
 pub mod polygon;
 pub mod report_table;
 pub mod resize;
+pub mod scene_match;
 pub mod segmentation_metrics;
 mod three_d_ovs;
 
@@ -16,6 +17,7 @@ pub use error::EvalError;
 pub use ground_truth::{GroundTruthFormat, GroundTruthFrame, GroundTruthQuery, load_ground_truth};
 pub use report_table::report_table;
 pub use resize::resize_nearest;
+pub use scene_match::{SceneFrame, scene_mismatches};
 pub use segmentation_metrics::{
     FrameQueryScore, FrameScore, SegmentationReport, evaluate, mask_iou, oracle_choice,
     score_frame, summarize,

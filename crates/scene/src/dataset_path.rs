@@ -4,10 +4,13 @@
 use std::path::{Component, Path, PathBuf};
 
 /// `path` as plain relative components (`.` dropped), or `None` when it is empty, absolute or
-/// climbs with `..`.
+/// climbs with `..`. A backslash separates components too: transforms.json files written on
+/// Windows (instant-ngp's own samples) name `images\0001.jpg`, and no dataset names a file
+/// with a backslash in it.
 pub fn contained_relative_path(path: &str) -> Option<PathBuf> {
+    let path = path.replace('\\', "/");
     let mut relative = PathBuf::new();
-    for component in Path::new(path).components() {
+    for component in Path::new(&path).components() {
         match component {
             Component::Normal(part) => relative.push(part),
             Component::CurDir => {}
@@ -27,7 +30,23 @@ mod tests {
             contained_relative_path("./images/a.png"),
             Some(PathBuf::from("images/a.png"))
         );
-        for escaping in ["", ".", "/etc/passwd", "../a.png", "images/../../a.png"] {
+        assert_eq!(
+            contained_relative_path("images\\0001.jpg"),
+            Some(PathBuf::from("images/0001.jpg"))
+        );
+        assert_eq!(
+            contained_relative_path(".\\images\\sub/0001.jpg"),
+            Some(PathBuf::from("images/sub/0001.jpg"))
+        );
+        for escaping in [
+            "",
+            ".",
+            "/etc/passwd",
+            "../a.png",
+            "images/../../a.png",
+            "..\\..\\etc\\passwd",
+            "\\etc\\passwd",
+        ] {
             assert_eq!(contained_relative_path(escaping), None, "{escaping:?}");
         }
     }

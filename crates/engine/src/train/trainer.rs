@@ -115,6 +115,12 @@ pub struct EvalReport {
     pub worst_psnr: f64,
     #[serde(default)]
     pub worst_view: usize,
+    /// The worst held-out view as the scene knows it: its frame index among all the scene's
+    /// frames and its name (absent in reports written before they were kept).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub worst_frame_index: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub worst_frame_name: Option<String>,
 }
 
 /// What a checkpoint's header records besides the arrays.

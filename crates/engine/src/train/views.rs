@@ -66,10 +66,15 @@ pub struct Views {
     pub test: Vec<View>,
 }
 
-/// Which frames are held out: the dataset's own split when it has one, else every
-/// `split_every`-th frame in capture order (the first included), as 3DGS does.
+/// Which frames are held out: the dataset's own test (or val) split when it has one (a Blender
+/// upload's `transforms_test.json`; `split_every` is then not used), else every
+/// `split_every`-th frame in capture order (the first included), as 3DGS does. An upload with
+/// only `transforms_train.json` is held out every `split_every`-th frame like any other.
 pub fn is_held_out(scene: &Scene, frame_index: usize, split_every: u32) -> bool {
-    let own_split = scene.frames.iter().any(|f| f.split.is_some());
+    let own_split = scene
+        .frames
+        .iter()
+        .any(|f| matches!(f.split, Some(FrameSplit::Test) | Some(FrameSplit::Val)));
     if own_split {
         return matches!(
             scene.frames[frame_index].split,

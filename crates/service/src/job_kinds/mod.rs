@@ -2,6 +2,7 @@
 //! [`crate::jobs::JobHandler`] that drives the method's stages with checkpoints, progress,
 //! cancellation and stored results.
 
+pub mod checkpoint_writer;
 pub mod reconstruct;
 pub mod segment_then_splat;
 pub mod stop_aware;

@@ -9,8 +9,8 @@ use futures::future::BoxFuture;
 use serde::{Deserialize, Serialize};
 
 use super::training::{
-    TrainingStageReport, fatal, load_resume_point, report_evaluation, store_outputs, train_failure,
-    train_with_checkpoints,
+    TrainingStageReport, fatal, load_resume_point, record_settings, report_evaluation,
+    store_outputs, train_failure, train_with_checkpoints,
 };
 use crate::jobs::{JobContext, JobFailure, JobHandler};
 use segsplat_engine::deform::{DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE};
@@ -92,9 +92,24 @@ fn run_blocking(ctx: &JobContext) -> Result<(), JobFailure> {
         Some(checkpoint) => Trainer::resume(&gpu, &scene, &checkpoint).map_err(train_failure)?,
         None => Trainer::new(&gpu, &scene, config.train.clone(), None).map_err(train_failure)?,
     };
+    let settings = ReconstructSettings {
+        train: trainer.config().clone(),
+        gaussian_budget: trainer.gaussian_budget(),
+        checkpoint_every: config.checkpoint_every,
+    };
+    record_settings(ctx, &settings);
     let training =
         train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?;
-    finish(ctx, &scene, &mut trainer, training)
+    finish(ctx, &scene, &mut trainer, training, settings)
+}
+
+/// What a reconstruct job runs with: the training settings as the trainer resolved them, and
+/// the Gaussian budget it sized from the scene when the config left it out.
+#[derive(Debug, Clone, Serialize)]
+struct ReconstructSettings {
+    train: TrainConfig,
+    gaussian_budget: usize,
+    checkpoint_every: u32,
 }
 
 /// A reconstruct job's metrics.json: the training command's metrics and the training stage's
@@ -104,6 +119,8 @@ struct ReconstructJobMetrics<'a> {
     #[serde(flatten)]
     metrics: &'a ReconstructMetrics,
     training: TrainingStageReport,
+    /// The settings it ran with (also the job's `settings`).
+    settings: ReconstructSettings,
 }
 
 fn finish(
@@ -111,6 +128,7 @@ fn finish(
     scene: &Scene,
     trainer: &mut Trainer,
     training: TrainingStageReport,
+    settings: ReconstructSettings,
 ) -> Result<(), JobFailure> {
     let held_out = trainer.evaluate().map_err(train_failure)?;
     let model = trainer.model().map_err(train_failure)?;
@@ -123,6 +141,7 @@ fn finish(
     let metrics_json = serde_json::to_vec_pretty(&ReconstructJobMetrics {
         metrics: &metrics,
         training,
+        settings,
     })
     .map_err(fatal)?;
     let mut documents = vec![("metrics.json", metrics_json)];

@@ -19,8 +19,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::job_kinds::stop_aware::{StopAware, StopSignal, stop_or};
 use crate::job_kinds::training::{
-    TrainingStageReport, fatal, load_resume_point, report, report_evaluation, retryable,
-    store_outputs, train_failure, train_with_checkpoints,
+    TrainingStageReport, fatal, load_resume_point, record_settings, report, report_evaluation,
+    retryable, store_outputs, train_failure, train_with_checkpoints,
 };
 use crate::jobs::{JobContext, JobFailure, JobHandler, Progress};
 use crate::store::objects::{ObjectEmbedding, ObjectRecord};
@@ -120,6 +120,10 @@ pub struct SegmentThenSplatMetrics {
     pub skipped_pairs: usize,
     /// Stage 1: the mask source used and its figures (as the "segment" stage reported them).
     pub segment: SegmentReport,
+    /// The settings the job ran with (also the job's `settings`; absent in metrics written
+    /// before they were kept).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub settings: Option<SegmentThenSplatConfig>,
 }
 
 /// A skipped (object, view) pair in frame terms.
@@ -217,6 +221,13 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
         dynamic = config.train.deformation.is_some(),
         "training settings"
     );
+    // What the job runs with, `auto` and the scene-sized fields resolved: shown beside the
+    // config it was created with, and kept in metrics.json.
+    let settings = SegmentThenSplatConfig {
+        masks: resolved_mask_source(ctx, &scene, config.masks),
+        ..config.clone()
+    };
+    record_settings(ctx, &settings);
     // Stage 1 runs again on a resumed attempt: every mask source is deterministic, and the
     // masks are cheaper to rebuild than to store.
     let (masks, segmented) = view_masks_for(ctx, &scene, &config, &frames)?;
@@ -237,7 +248,7 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
     ctx.stop_requested()?;
     let training =
         train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?;
-    let objects = finish(ctx, &scene, &mut trainer, training, segmented)?;
+    let objects = finish(ctx, &scene, &mut trainer, training, segmented, settings)?;
     let embeddings = embed_objects(ctx, &scene, &trainer, &masks, &objects)?;
     Ok((objects, embeddings))
 }
@@ -559,6 +570,7 @@ fn finish(
     trainer: &mut Trainer,
     training: TrainingStageReport,
     segment: SegmentReport,
+    settings: SegmentThenSplatConfig,
 ) -> Result<Vec<ObjectRecord>, JobFailure> {
     let held_out = trainer.evaluate().map_err(train_failure)?;
     let model = trainer.model().map_err(train_failure)?;
@@ -590,6 +602,7 @@ fn finish(
         objects: Level::ALL.map(|level| summaries.iter().filter(|s| s.level == level).count()),
         skipped_pairs: skipped.len(),
         segment,
+        settings: Some(settings),
     };
     let documents = [
         (

@@ -1,8 +1,8 @@
 //! What the training job kinds share: failure classification, progress reports, checkpointed
 //! training that honours cancel and shutdown at step boundaries.
 
+use crate::job_kinds::checkpoint_writer::CheckpointWriter;
 use crate::jobs::{JobContext, JobFailure, Progress};
-use crate::store::BlobError;
 use segsplat_engine::GaussianModel;
 use segsplat_engine::checkpoint::Checkpoint;
 use segsplat_engine::model::ModelError;
@@ -104,25 +104,22 @@ pub fn load_resume_point(
     Ok(checkpoint)
 }
 
-/// Saves the trainer's checkpoint. While the blob store is unreachable the checkpoint waits:
-/// training goes on with a `warning` job event, and the next checkpoint tries again (a crash
-/// meanwhile costs the steps since the last saved one, as always).
-fn save_checkpoint(ctx: &JobContext, name: &str, trainer: &Trainer) -> Result<(), JobFailure> {
-    let bytes = trainer
-        .checkpoint()
-        .and_then(|c| Ok(c.to_bytes()?))
-        .map_err(train_failure)?;
-    match ctx.save_checkpoint(name, &bytes) {
-        Err(error @ BlobError::Unavailable { .. }) => {
-            let message = format!(
-                "{error}; checkpoint at step {} skipped, training goes on",
-                trainer.step()
-            );
-            tracing::warn!(job = %ctx.job_id, "{message}");
-            ctx.progress.warn_detached("train", &message);
-            Ok(())
-        }
-        other => other.map_err(JobFailure::from),
+/// Records the settings the job runs with, resolved from the scene, in the job and as a
+/// `settings` event (`GET /v1/jobs/{id}` shows them as `settings`, beside the `config` it was
+/// created with). A store that cannot take them is logged: the job runs all the same.
+pub fn record_settings(ctx: &JobContext, settings: &impl Serialize) {
+    // Through text, so an f32 reads as written (0.0007, not its f64 widening), as in
+    // metrics.json.
+    let recorded = serde_json::to_vec(settings)
+        .and_then(|text| serde_json::from_slice::<serde_json::Value>(&text))
+        .map_err(|error| error.to_string())
+        .and_then(|value| {
+            ctx.progress
+                .settings_blocking(&value)
+                .map_err(|error| error.to_string())
+        });
+    if let Err(error) = recorded {
+        tracing::warn!(job = %ctx.job_id, %error, "cannot record the job's settings");
     }
 }
 
@@ -137,8 +134,12 @@ pub struct TrainingStageReport {
     pub steps: u32,
     /// Gaussians densification could grow to (the config's, or the scene's).
     pub gaussian_budget: usize,
-    /// Wall seconds spent writing checkpoints (inside `seconds`).
+    /// Wall seconds the step loop spent on checkpoints (inside `seconds`): reading the model
+    /// back, and waiting for the writer when a checkpoint came before the last was stored.
     pub checkpoint_seconds: f64,
+    /// Seconds the checkpoint writer spent encoding and storing, beside the step loop.
+    #[serde(default)]
+    pub checkpoint_write_seconds: f64,
     /// Wall seconds spent reporting progress (inside `seconds`).
     #[serde(default)]
     pub report_seconds: f64,
@@ -177,16 +178,50 @@ pub const BUSY_SAMPLE_STEPS: u32 = 10;
 /// Trains to the configured end, saving a checkpoint named `checkpoint_name` every
 /// `checkpoint_every` steps (0 = only at the end) and stopping at the next report when the job
 /// is cancelled or the service shuts down. Returns how this attempt's training went.
+///
+/// The step loop takes each checkpoint's snapshot (the model's read-back) and hands it to a
+/// [`CheckpointWriter`] thread, which encodes and stores it while training goes on; a store
+/// that is unreachable skips that checkpoint with a `warning` job event and the next one tries
+/// again (a crash meanwhile costs the steps since the last stored one, as always).
 pub fn train_with_checkpoints(
     ctx: &JobContext,
     trainer: &mut Trainer,
     checkpoint_name: &str,
     checkpoint_every: u32,
 ) -> Result<TrainingStageReport, JobFailure> {
-    let total = trainer.config().steps;
     if trainer.step() == 0 {
         warn_about_schedule(ctx, trainer);
     }
+    std::thread::scope(|scope| {
+        let mut writer = CheckpointWriter::start(scope, ctx, checkpoint_name);
+        train_stage(ctx, trainer, checkpoint_every, &mut writer)
+            .and_then(|report| finish_writes(report, writer))
+    })
+}
+
+/// Waits for the last checkpoint to be stored, counting the wait as the step loop's.
+fn finish_writes(
+    mut report: TrainingStageReport,
+    writer: CheckpointWriter<'_>,
+) -> Result<TrainingStageReport, JobFailure> {
+    let waited = std::time::Instant::now();
+    report.checkpoint_write_seconds = writer.finish()?;
+    let waited = waited.elapsed().as_secs_f64();
+    report.seconds += waited;
+    report.checkpoint_seconds += waited;
+    report.job_overhead_ratio = report.seconds
+        / (report.seconds - report.checkpoint_seconds - report.report_seconds).max(1e-9);
+    Ok(report)
+}
+
+/// The training loop of [`train_with_checkpoints`], handing snapshots to `writer`.
+fn train_stage(
+    ctx: &JobContext,
+    trainer: &mut Trainer,
+    checkpoint_every: u32,
+    writer: &mut CheckpointWriter<'_>,
+) -> Result<TrainingStageReport, JobFailure> {
+    let total = trainer.config().steps;
     let gpu = trainer.gpu().clone();
     let first_step = trainer.step();
     let dispatches_before = gpu.dispatch_count();
@@ -228,7 +263,8 @@ pub fn train_with_checkpoints(
         ctx.stop_requested()?;
         let checkpoint_started = std::time::Instant::now();
         let host_at_checkpoint = gpu.host_costs.reading();
-        save_checkpoint(ctx, checkpoint_name, trainer)?;
+        let snapshot = trainer.checkpoint().map_err(train_failure)?;
+        writer.write(trainer.step(), snapshot)?;
         checkpoint_seconds += checkpoint_started.elapsed().as_secs_f64();
         checkpoint_host.add(&gpu.host_costs.reading().since(&host_at_checkpoint));
     }
@@ -243,6 +279,7 @@ pub fn train_with_checkpoints(
         steps,
         gaussian_budget: trainer.gaussian_budget(),
         checkpoint_seconds,
+        checkpoint_write_seconds: 0.0,
         report_seconds,
         job_overhead_ratio: seconds / (seconds - checkpoint_seconds - report_seconds).max(1e-9),
         dispatches_per_step: per_step((gpu.dispatch_count() - dispatches_before) as f64),
@@ -316,16 +353,14 @@ pub fn store_outputs(
 
 /// Reports the held-out evaluation as the "evaluate" stage.
 pub fn report_evaluation(ctx: &JobContext, held_out: &EvalReport, gaussians: usize) {
-    report(
-        ctx,
-        "evaluate",
-        1,
-        1,
-        &[
-            ("psnr", held_out.psnr),
-            ("ssim", held_out.ssim),
-            ("worst_psnr", held_out.worst_psnr),
-            ("gaussians", gaussians as f64),
-        ],
-    );
+    let mut metrics = vec![
+        ("psnr", held_out.psnr),
+        ("ssim", held_out.ssim),
+        ("worst_psnr", held_out.worst_psnr),
+        ("gaussians", gaussians as f64),
+    ];
+    if let Some(frame) = held_out.worst_frame_index {
+        metrics.push(("worst_frame_index", frame as f64));
+    }
+    report(ctx, "evaluate", 1, 1, &metrics);
 }

@@ -127,6 +127,20 @@ impl ProgressReporter {
         tokio::runtime::Handle::current().block_on(self.record("resumed", &payload))
     }
 
+    /// Records the settings the job runs with, resolved from the scene, in its record and as a
+    /// `settings` event, from blocking code. Returns false when this worker no longer holds the
+    /// job's lease.
+    pub fn settings_blocking(&self, settings: &serde_json::Value) -> Result<bool, StoreError> {
+        let recorded = tokio::runtime::Handle::current().block_on(
+            self.database
+                .record_settings(&self.job_id, &self.lease_owner, settings),
+        )?;
+        if recorded.is_some() {
+            self.bus.notify(&self.job_id);
+        }
+        Ok(recorded.is_some())
+    }
+
     async fn record(&self, kind: &str, payload: &serde_json::Value) -> Result<bool, StoreError> {
         let recorded = self
             .database

@@ -46,6 +46,11 @@ const SQLITE_MIGRATIONS: Migrations = &[
         "blob deletions",
         include_str!("../../migrations/sqlite/0005_blob_deletions.sql"),
     ),
+    (
+        6,
+        "job settings",
+        include_str!("../../migrations/sqlite/0006_job_settings.sql"),
+    ),
 ];
 
 const POSTGRES_MIGRATIONS: Migrations = &[
@@ -73,6 +78,11 @@ const POSTGRES_MIGRATIONS: Migrations = &[
         5,
         "blob deletions",
         include_str!("../../migrations/postgres/0005_blob_deletions.sql"),
+    ),
+    (
+        6,
+        "job settings",
+        include_str!("../../migrations/postgres/0006_job_settings.sql"),
     ),
 ];
 

@@ -6,6 +6,13 @@ use super::sql::query;
 use super::{Database, StoreError, now_ms};
 use serde::Serialize;
 
+/// A JSON column of `jobs` that an event of the same name also records.
+#[derive(Debug, Clone, Copy)]
+enum JobColumn {
+    Progress,
+    Settings,
+}
+
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct JobEventRecord {
     /// Increasing across all jobs; SSE uses it as the event id.
@@ -26,11 +33,41 @@ impl Database {
         owner: &str,
         payload: &serde_json::Value,
     ) -> Result<Option<i64>, StoreError> {
+        self.record_in_job(job_id, owner, JobColumn::Progress, payload)
+            .await
+    }
+
+    /// Records the settings the job runs with (see [`super::jobs::JobRecord::settings`]) and a
+    /// `settings` event carrying them, if `owner` still holds the job's lease. Returns the event
+    /// id, or `None` when the lease was lost.
+    pub async fn record_settings(
+        &self,
+        job_id: &str,
+        owner: &str,
+        settings: &serde_json::Value,
+    ) -> Result<Option<i64>, StoreError> {
+        self.record_in_job(job_id, owner, JobColumn::Settings, settings)
+            .await
+    }
+
+    /// Stores `payload` in the job's `column` and appends it as an event of the column's kind,
+    /// in one transaction, if `owner` holds the running job's lease.
+    async fn record_in_job(
+        &self,
+        job_id: &str,
+        owner: &str,
+        column: JobColumn,
+        payload: &serde_json::Value,
+    ) -> Result<Option<i64>, StoreError> {
+        let (column_name, kind) = match column {
+            JobColumn::Progress => ("progress_json", "progress"),
+            JobColumn::Settings => ("settings_json", "settings"),
+        };
         let mut transaction = self.begin().await?;
-        let updated = query(
-            "UPDATE jobs SET progress_json = ?, updated_at_ms = ? \
-             WHERE id = ? AND lease_owner = ? AND state = 'running'",
-        )
+        let updated = query(format!(
+            "UPDATE jobs SET {column_name} = ?, updated_at_ms = ? \
+             WHERE id = ? AND lease_owner = ? AND state = 'running'"
+        ))
         .bind(payload.to_string())
         .bind(now_ms())
         .bind(job_id)
@@ -40,7 +77,7 @@ impl Database {
         if updated == 0 {
             return Ok(None);
         }
-        let id = insert_event(&mut transaction, job_id, "progress", payload).await?;
+        let id = insert_event(&mut transaction, job_id, kind, payload).await?;
         transaction.commit().await?;
         Ok(Some(id))
     }

@@ -82,6 +82,9 @@ pub struct JobRecord {
     pub error: Option<String>,
     /// The latest progress event's payload.
     pub progress: Option<serde_json::Value>,
+    /// The settings the job runs with, once its worker has resolved them from the scene
+    /// (`config` keeps what it was created with).
+    pub settings: Option<serde_json::Value>,
     pub created_at_ms: i64,
     pub updated_at_ms: i64,
     pub started_at_ms: Option<i64>,
@@ -140,8 +143,8 @@ pub struct ExpiredLease {
 }
 
 pub(super) const COLUMNS: &str = "id, scene_id, kind, state, config_json, attempts, max_attempts, \
-    lease_expiries, max_lease_expiries, checkpointed_this_attempt, lease_owner, lease_expires_at_ms, cancel_requested, error, progress_json, created_at_ms, \
-    updated_at_ms, started_at_ms, finished_at_ms, tenant";
+    lease_expiries, max_lease_expiries, checkpointed_this_attempt, lease_owner, lease_expires_at_ms, cancel_requested, error, progress_json, settings_json, \
+    created_at_ms, updated_at_ms, started_at_ms, finished_at_ms, tenant";
 
 fn corrupt(job_id: &str, what: &str, message: impl ToString) -> StoreError {
     StoreError::Corrupt {
@@ -163,6 +166,11 @@ pub(super) fn job_from_row(row: &DbRow) -> Result<JobRecord, StoreError> {
         .map(|text| serde_json::from_str(&text))
         .transpose()
         .map_err(|error| corrupt(&id, "progress", error))?;
+    let settings_json: Option<String> = row.try_get("settings_json")?;
+    let settings = settings_json
+        .map(|text| serde_json::from_str(&text))
+        .transpose()
+        .map_err(|error| corrupt(&id, "settings", error))?;
     let attempts: i64 = row.try_get("attempts")?;
     let max_attempts: i64 = row.try_get("max_attempts")?;
     let lease_expiries: i64 = row.try_get("lease_expiries")?;
@@ -182,6 +190,7 @@ pub(super) fn job_from_row(row: &DbRow) -> Result<JobRecord, StoreError> {
         cancel_requested: row.try_get("cancel_requested")?,
         error: row.try_get("error")?,
         progress,
+        settings,
         created_at_ms: row.try_get("created_at_ms")?,
         updated_at_ms: row.try_get("updated_at_ms")?,
         started_at_ms: row.try_get("started_at_ms")?,

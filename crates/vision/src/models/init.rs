@@ -43,6 +43,9 @@ pub struct InitOptions {
     pub sam_family: Option<Family>,
     /// Replace an existing manifest.json.
     pub overwrite: bool,
+    /// The tokenizer file of a CLIP text model, in the model folder (default: `tokenizer.json`,
+    /// else the folder's one `*tokenizer*.json`).
+    pub tokenizer: Option<PathBuf>,
 }
 
 /// One model `init` recognised.
@@ -154,7 +157,7 @@ pub fn init_model_dir(
         ));
     }
     let sam_family = sam_family(&by_role, options);
-    let tokenizer = tokenizer_entry(dir, &by_role)?;
+    let tokenizer = tokenizer_entry(dir, &by_role, options.tokenizer.as_deref())?;
     let mut models = Vec::new();
     let mut entries = Vec::new();
     for graph in by_role.values() {
@@ -187,7 +190,7 @@ pub fn init_model_dir(
     Ok(InitReport {
         manifest: manifest_path,
         models,
-        tokenizer: tokenizer.map(|_| TOKENIZER_FILE.to_string()),
+        tokenizer: tokenizer.and_then(|entry| entry["file"].as_str().map(str::to_string)),
         skipped,
     })
 }
@@ -459,26 +462,74 @@ fn role_outputs(role: Role) -> &'static [&'static str] {
     }
 }
 
-/// The tokenizer entry when `tokenizer.json` is present; a CLIP text model needs one.
+/// The tokenizer file of the folder: the one named, else `tokenizer.json`, else the folder's
+/// only `*tokenizer*.json` (exports name it `clip_tokenizer.json` and the like). `Ok(None)`
+/// when there is none; an error when the choice is ambiguous or the named file is elsewhere.
+fn find_tokenizer(dir: &Path, named: Option<&Path>) -> Result<Option<String>, ModelError> {
+    if let Some(named) = named {
+        let name = named
+            .file_name()
+            .and_then(|name| name.to_str())
+            .map(str::to_string);
+        return match name {
+            Some(name) if dir.join(&name).is_file() => Ok(Some(name)),
+            _ => Err(init_error(
+                dir,
+                format!(
+                    "--tokenizer {}: no such file in {} (the tokenizer must sit beside the models)",
+                    named.display(),
+                    dir.display()
+                ),
+            )),
+        };
+    }
+    if dir.join(TOKENIZER_FILE).is_file() {
+        return Ok(Some(TOKENIZER_FILE.to_string()));
+    }
+    let mut candidates: Vec<String> = std::fs::read_dir(dir)
+        .map_err(|error| init_error(dir, format!("cannot list the folder: {error}")))?
+        .filter_map(|entry| entry.ok()?.file_name().into_string().ok())
+        .filter(|name| {
+            let lower = name.to_lowercase();
+            lower.contains("tokenizer") && lower.ends_with(".json")
+        })
+        .collect();
+    candidates.sort();
+    match candidates.len() {
+        0 => Ok(None),
+        1 => Ok(candidates.pop()),
+        _ => Err(init_error(
+            dir,
+            format!(
+                "several tokenizer files ({}); name the CLIP text model's with --tokenizer",
+                candidates.join(", ")
+            ),
+        )),
+    }
+}
+
+/// The tokenizer entry when the folder has a tokenizer; a CLIP text model needs one.
 fn tokenizer_entry(
     dir: &Path,
     by_role: &BTreeMap<&'static str, Graph>,
+    named: Option<&Path>,
 ) -> Result<Option<Value>, ModelError> {
-    let path = dir.join(TOKENIZER_FILE);
     let text_model = by_role.get(Role::ClipText.as_str());
-    if !path.is_file() {
+    let Some(file) = find_tokenizer(dir, named)? else {
         return match text_model {
             Some(graph) => Err(init_error(
                 dir,
                 format!(
-                    "{} is a CLIP text model but {TOKENIZER_FILE} is missing (the HuggingFace \
-                     tokenizers file of the model's BPE; scripts/export_models.py writes one)",
+                    "{} is a CLIP text model but no tokenizer file is there ({TOKENIZER_FILE} \
+                     or one *tokenizer*.json: the HuggingFace tokenizers file of the model's \
+                     BPE, which scripts/export_models.py writes; --tokenizer names another)",
                     graph.file
                 ),
             )),
             None => Ok(None),
         };
-    }
+    };
+    let path = dir.join(&file);
     let tokenizer =
         tokenizers::Tokenizer::from_file(&path).map_err(|error| ModelError::Tokenizer {
             path: path.clone(),
@@ -496,7 +547,7 @@ fn tokenizer_entry(
         .and_then(|graph| fixed_dim(&graph.inputs, "input_ids", 1))
         .unwrap_or(DEFAULT_CONTEXT_LENGTH as i64);
     Ok(Some(json!({
-        "file": TOKENIZER_FILE,
+        "file": file,
         "sha256": sha256_file(&path)?,
         "size": file_size(&path)?,
         "context_length": context_length,

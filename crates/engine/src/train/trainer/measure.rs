@@ -112,6 +112,8 @@ impl Trainer {
             if report.views == 0 || psnr < report.worst_psnr {
                 report.worst_psnr = psnr;
                 report.worst_view = report.views;
+                report.worst_frame_index = Some(view.frame_index);
+                report.worst_frame_name = Some(view.name.clone());
             }
             report.psnr += psnr;
             report.ssim += crate::image_metrics::ssim(
