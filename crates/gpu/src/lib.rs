@@ -5,6 +5,7 @@ pub mod context;
 pub mod kernel;
 pub mod kernel_choices;
 pub mod profiler;
+pub mod release;
 pub mod scan;
 pub mod sort;
 pub mod validation;
@@ -13,5 +14,6 @@ pub use context::{AdapterFilter, AdapterReport, GpuContext, GpuError, HostCostRe
 pub use kernel::Kernel;
 pub use kernel_choices::{GemmLayout, KernelChoices, RasterLayout};
 pub use profiler::{KernelProfile, KernelProfiler};
+pub use release::{release_context, sole_owner};
 pub use scan::{ExclusiveScan, WorkgroupSum};
 pub use sort::{DEFAULT_SMALL_SORT_LIMIT, RadixSort};
