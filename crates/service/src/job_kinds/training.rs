@@ -1,6 +1,9 @@
 //! What the training job kinds share: failure classification, progress reports, checkpointed
 //! training that honours cancel and shutdown at step boundaries.
 
+use std::sync::Arc;
+
+use super::stop_aware::StopSignal;
 use crate::jobs::{JobContext, JobFailure, Progress};
 use crate::store::BlobError;
 use segsplat_engine::GaussianModel;
@@ -180,6 +183,9 @@ pub fn train_with_checkpoints(
     let mut checkpoint_seconds = 0.0;
     let mut report_seconds = 0.0;
     let mut checkpoint_host = HostCostReading::default();
+    // Heard inside a step's long passes (the partial-mask filter), not only between reports.
+    let stop = StopSignal::of(ctx);
+    trainer.set_stop_check(Arc::new(move || stop.requested()));
     while trainer.step() < total {
         let next_checkpoint = match checkpoint_every {
             0 => total,
@@ -193,7 +199,14 @@ pub fn train_with_checkpoints(
                 report_seconds += reporting.elapsed().as_secs_f64();
                 go_on
             })
-            .map_err(train_failure)?;
+            .map_err(|error| {
+                match error {
+                    // The stop's own failure (cancelled, or handed back at shutdown).
+                    TrainError::Stopped { .. } => ctx.stop_requested().err(),
+                    _ => None,
+                }
+                .unwrap_or_else(|| train_failure(error))
+            })?;
         ctx.stop_requested()?;
         let checkpoint_started = std::time::Instant::now();
         let host_at_checkpoint = gpu.host_costs.reading();
