@@ -9,7 +9,9 @@
 # - openapi-spec-validator and schemathesis (PyPI), which scripts/contract.sh runs against the
 #   REST API's document and a live server;
 # - Chromium (Debian's package) and playwright-core (npm), which scripts/console_e2e.sh uses to
-#   test the web console in a real browser.
+#   test the web console in a real browser;
+# - promtool (Debian's prometheus package, installed without its recommends), which
+#   tests/deploy_observability.rs runs on the alert rules' unit tests.
 # Idempotent: skips what is already there.
 set -euo pipefail
 
@@ -26,6 +28,14 @@ if [ ${#need_apt[@]} -gt 0 ]; then
   [ "$(id -u)" -eq 0 ] || sudo_cmd="sudo"
   $sudo_cmd apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq "${need_apt[@]}"
+fi
+# promtool, from the prometheus package without its recommends (node-exporter and the like: only
+# promtool is used). Checked by the command, so a machine with its own promtool is left alone.
+if ! command -v promtool >/dev/null 2>&1; then
+  sudo_cmd=""
+  [ "$(id -u)" -eq 0 ] || sudo_cmd="sudo"
+  [ ${#need_apt[@]} -gt 0 ] || $sudo_cmd apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq --no-install-recommends prometheus
 fi
 
 if command -v python3 >/dev/null 2>&1; then

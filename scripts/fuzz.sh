@@ -14,11 +14,11 @@ cd "$(dirname "$0")/../fuzz"
 seconds=${1:?usage: scripts/fuzz.sh SECONDS [TARGET...]}
 shift
 if ! cargo +nightly --version >/dev/null 2>&1; then
-    echo "fuzz: skipped, no nightly toolchain (rustup toolchain install nightly)"
+    echo "fuzz: skipped, no nightly toolchain (rustup toolchain install nightly); the corpus replay (tests/fuzz_corpus.rs) ran on stable"
     exit 0
 fi
 if ! cargo fuzz --version >/dev/null 2>&1; then
-    echo "fuzz: skipped, cargo-fuzz is not installed (cargo install cargo-fuzz)"
+    echo "fuzz: skipped, cargo-fuzz is not installed (cargo install --locked cargo-fuzz@0.13.2); the corpus replay (tests/fuzz_corpus.rs) ran on stable"
     exit 0
 fi
 targets=("$@")

@@ -200,7 +200,9 @@ fn run_service(
     // Dropping a runtime waits for every blocking task, and a job's stage that did not stop
     // within the shutdown grace (its job already handed back) would hold the process until the
     // stage ended: minutes after "segsplat stopped", until Kubernetes' SIGKILL. The service has
-    // stopped by now; what is left may take only a moment.
+    // stopped by now; what is left may take only a moment. Its shutdown released the GPU (every
+    // device after its buffers and pipelines, crates/api/src/gpu_release.rs), so returning from
+    // main exits 0 with nothing on the GPU left to the driver's exit handlers.
     runtime.shutdown_timeout(BLOCKING_WORK_AT_EXIT);
     served
 }

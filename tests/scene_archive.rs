@@ -7,6 +7,9 @@ use std::path::{Path, PathBuf};
 use segsplat_scene::{ArchiveError, InputErrorClass, UnpackLimits, UnpackStats, unpack_archive};
 use zip::write::SimpleFileOptions;
 
+#[path = "common/zip_bomb.rs"]
+mod zip_bomb;
+
 fn limits() -> UnpackLimits {
     UnpackLimits {
         max_unpacked_bytes: 1 << 20,
@@ -211,19 +214,79 @@ fn tar_links_and_devices_are_rejected() {
     }
 }
 
+/// Everything under `dest`, for asserting that a refusal wrote nothing.
+fn entries(dest: &Path) -> Vec<PathBuf> {
+    fs::read_dir(dest)
+        .unwrap()
+        .map(|entry| entry.unwrap().path())
+        .collect()
+}
+
+/// Unpacks `bytes`, which must be refused as too large, with `message`, before anything is
+/// written; returns the error.
+fn refused_before_unpacking(bytes: &[u8], limits: &UnpackLimits, message: &str) -> ArchiveError {
+    let (result, workspace) = unpack_with(bytes, limits);
+    let error = result.unwrap_err();
+    assert_eq!(error.to_string(), message);
+    assert_eq!(error.class(), InputErrorClass::TooLarge);
+    assert_eq!(entries(&workspace.dest), Vec::<PathBuf>::new());
+    error
+}
+
+/// A zip bomb is refused from its central directory's declared sizes, before anything is
+/// inflated or written. Before issue 39's fix it was inflated until the byte cap (a 9 GiB bomb
+/// was read to ~8 GiB before its 413), leaving the cap's worth of a file behind.
 #[test]
-fn byte_cap_counts_written_bytes_for_zip_bombs() {
+fn zip_bombs_are_refused_from_the_directory_before_unpacking() {
     // 2 MiB of zeros deflates to a few KiB; the cap is 1 MiB.
     let zeros = vec![0u8; 2 << 20];
     let bytes = zip_of(&[("bomb.bin", &zeros)]);
     assert!(bytes.len() < 64 * 1024);
-    let (result, _) = unpack(&bytes);
+    let error = refused_before_unpacking(
+        &bytes,
+        &limits(),
+        "the zip's directory declares 2097152 bytes unpacked, more than the 1048576 allowed",
+    );
+    assert!(matches!(error, ArchiveError::DeclaresTooManyBytes { .. }));
+
+    // The 9 GiB bomb's shape: zip64 sizes in the directory, against the service's 8 GiB.
+    let bomb = zip_bomb::zip64_declaring("bomb.bin", b"zeros", 9 << 30);
+    let service_limits = UnpackLimits {
+        max_unpacked_bytes: 8 << 30,
+        max_files: 100_000,
+    };
+    refused_before_unpacking(
+        &bomb,
+        &service_limits,
+        "the zip's directory declares 9663676416 bytes unpacked, more than the 8589934592 allowed",
+    );
+}
+
+/// Declared sizes can lie: an entry whose headers understate it is refused once it inflates
+/// past its declared size (the directory's total was what the cap checked), and a tar, which has
+/// no directory, is bounded by the bytes written.
+#[test]
+fn byte_cap_counts_written_bytes_for_lying_headers() {
+    let zeros = vec![0u8; 2 << 20];
+    let mut bytes = zip_of(&[("bomb.bin", &zeros)]);
+    // Patch the uncompressed size (local header +22, central entry +24) down to 1000.
+    let end = bytes.len() - 22;
+    let directory_at = u32::from_le_bytes(bytes[end + 16..end + 20].try_into().unwrap()) as usize;
+    bytes[22..26].copy_from_slice(&1000u32.to_le_bytes());
+    bytes[directory_at + 24..directory_at + 28].copy_from_slice(&1000u32.to_le_bytes());
+    let roomy = UnpackLimits {
+        max_unpacked_bytes: 4 << 20,
+        max_files: 100,
+    };
+    let (result, _) = unpack_with(&bytes, &roomy);
     let error = result.unwrap_err();
     assert!(
-        matches!(error, ArchiveError::TooManyBytes { .. }),
+        error
+            .to_string()
+            .contains("bomb.bin: File is larger than its declared uncompressed size"),
         "{error}"
     );
-    assert_eq!(error.class(), InputErrorClass::TooLarge);
+    assert_eq!(error.class(), InputErrorClass::Malformed);
 
     let tar_bomb = gzip(&tar_of(&[("bomb.bin", tar::EntryType::Regular, &zeros)]));
     let (result, _) = unpack(&tar_bomb);
@@ -233,8 +296,26 @@ fn byte_cap_counts_written_bytes_for_zip_bombs() {
 #[test]
 fn byte_cap_spans_many_files() {
     let chunk = vec![7u8; 300 * 1024];
+    // A zip's directory declares them all: refused from the sum.
     let bytes = zip_of(&[("a", &chunk), ("b", &chunk), ("c", &chunk), ("d", &chunk)]);
     let (result, _) = unpack(&bytes);
+    assert!(
+        matches!(
+            result,
+            Err(ArchiveError::DeclaresTooManyBytes {
+                declared: 1228800,
+                ..
+            })
+        ),
+        "{result:?}"
+    );
+    // A tar has no directory: refused by the bytes written over the files.
+    let names = ["a", "b", "c", "d"];
+    let entries: Vec<(&str, tar::EntryType, &[u8])> = names
+        .iter()
+        .map(|name| (*name, tar::EntryType::Regular, &chunk[..]))
+        .collect();
+    let (result, _) = unpack(&tar_of(&entries));
     assert!(matches!(result, Err(ArchiveError::TooManyBytes { .. })));
 }
 
@@ -249,11 +330,26 @@ fn file_count_is_capped() {
         max_unpacked_bytes: 1 << 20,
         max_files: 5,
     };
-    let (result, _) = unpack_with(&zip_of(&files), &small_limits);
-    assert!(matches!(
-        result,
-        Err(ArchiveError::TooManyFiles { limit: 5 })
-    ));
+    // A zip says how many entries it holds in its end record: refused from that, naming it,
+    // before its directory is read.
+    let zip = zip_of(&files);
+    let error = refused_before_unpacking(
+        &zip,
+        &small_limits,
+        "the zip declares 6 entries, more than the 5 allowed",
+    );
+    assert!(matches!(error, ArchiveError::DeclaresTooManyEntries { .. }));
+    // An end record that understates the count: the directory's entries are counted too.
+    let mut understated = zip;
+    let end = understated.len() - 22;
+    understated[end + 8..end + 12].copy_from_slice(&[1, 0, 1, 0]);
+    let (result, workspace) = unpack_with(&understated, &small_limits);
+    assert!(
+        matches!(result, Err(ArchiveError::TooManyFiles { limit: 5 })),
+        "{result:?}"
+    );
+    assert_eq!(entries(&workspace.dest), Vec::<PathBuf>::new());
+
     let entries: Vec<(&str, tar::EntryType, &[u8])> = names
         .iter()
         .map(|name| (name.as_str(), tar::EntryType::Regular, &b"x"[..]))

@@ -11,7 +11,7 @@ use image::{GrayImage, Luma};
 use segment_then_splat_support::{config, full_truth, gpu, iou, mean, synthetic_scene};
 use segsplat_engine::ObjectFilter;
 use segsplat_engine::render::Renderer;
-use segsplat_engine::train::SkippedPair;
+use segsplat_engine::train::{SkippedPair, TrainError};
 use segsplat_method::segment_then_splat::objects::{
     full_mask, render_layer, summarize_objects, visible_mask,
 };
@@ -162,4 +162,39 @@ fn trained_object_masks_match_held_out_truth() {
         "{} of {pairs} pairs skipped",
         skipped.len()
     );
+}
+
+/// The partial-mask filter, which renders every (object, view) pair inside one training step,
+/// hears a stop between views (issue 39, defect 4's remainder): the step ends with
+/// `TrainError::Stopped` and no pair is left out, so a resumed run filters again.
+#[test]
+fn the_partial_mask_filter_stops_when_asked() {
+    let Some(ctx) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let scene = synthetic_scene(dir.path(), |_| {});
+    // A few steps, no densification: the filter's step comes at once.
+    let mut short = config();
+    short.steps = 20;
+    short.densify_from = Some(1000);
+    let mut trainer = segmented_trainer_from_user_masks(
+        &ctx,
+        &scene,
+        short,
+        &SegmentedTrainingOptions::default(),
+    )
+    .unwrap();
+    let asked = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let counter = std::sync::Arc::clone(&asked);
+    trainer.set_stop_check(std::sync::Arc::new(move || {
+        counter.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        true
+    }));
+    let result = trainer.run(|_| true);
+    assert!(
+        matches!(result, Err(TrainError::Stopped { .. })),
+        "the filter did not stop: {:?}",
+        result.map(|progress| progress.step)
+    );
+    assert_eq!(asked.load(std::sync::atomic::Ordering::Relaxed), 1);
+    assert_eq!(trainer.skipped_pairs(), Vec::<SkippedPair>::new());
 }

@@ -6,7 +6,7 @@ mod common;
 use common::archives::{
     self, colmap_files, dataset_files, gzip, small_spec, tar_of, wrapped, zip_of,
 };
-use common::{TestService, entries_in, files_under, test_config};
+use common::{TestService, entries_in, files_under, test_config, zip_bomb};
 use segsplat_scene::colmap::ColmapEncoding;
 use segsplat_scene::synthetic::{self, SyntheticSpec};
 use segsplat_scene::synthetic_dynamic_formats;
@@ -423,13 +423,33 @@ async fn uploads_over_the_size_limits_get_413() {
     assert_no_trace(&service, dir.path()).await;
     service.shutdown().await;
 
-    // Unpacked size (zip bomb guard).
+    // Unpacked size (zip bomb guard): refused from the zip's directory, naming the setting.
     let dir = tempfile::tempdir().unwrap();
     let mut config = test_config(dir.path());
     config.limits.max_unpacked_bytes = 1000;
     let service = TestService::start(config, vec![]).await;
     let (status, body) = service.upload(archive, "application/zip").await;
     assert_eq!(status, 413, "{body}");
+    let message = body["error"]["message"].as_str().unwrap_or_default();
+    assert!(
+        message.contains("declares") && message.contains("limits.max_unpacked_bytes"),
+        "{body}"
+    );
+    assert_no_trace(&service, dir.path()).await;
+    service.shutdown().await;
+
+    // The 9 GiB bomb of issue 39 (zip64 sizes in its directory) against the default 8 GiB.
+    let dir = tempfile::tempdir().unwrap();
+    let service = TestService::start(test_config(dir.path()), vec![]).await;
+    let bomb = zip_bomb::zip64_declaring("bomb.bin", b"zeros", 9 << 30);
+    let (status, body) = service.upload(bomb, "application/zip").await;
+    assert_eq!(status, 413, "{body}");
+    assert_eq!(
+        body["error"]["message"],
+        "the zip's directory declares 9663676416 bytes unpacked, more than the 8589934592 \
+         allowed (limits.max_unpacked_bytes)",
+        "{body}"
+    );
     assert_no_trace(&service, dir.path()).await;
     service.shutdown().await;
 }

@@ -10,6 +10,7 @@ pub mod object_store;
 pub mod postgres;
 pub mod s3rver;
 pub mod segsplat_bin;
+pub mod zip_bomb;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

@@ -6,6 +6,7 @@ mod console;
 pub mod error;
 mod exports;
 mod extract;
+mod gpu_release;
 mod grpc;
 mod grpc_calls;
 mod jobs;

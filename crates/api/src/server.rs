@@ -14,6 +14,7 @@ use tokio_util::sync::CancellationToken;
 use tracing::{info, warn};
 
 use super::auth::{TokenCheck, grpc_interceptor};
+use super::gpu_release::release_gpus;
 use super::grpc::SceneQueryService;
 use super::grpc_calls::GrpcCallLayer;
 use super::metrics::{prometheus_handle, register_zero_series};
@@ -476,8 +477,9 @@ impl RunningService {
         self.shutdown().await;
     }
 
-    /// Stops listening (in-flight requests finish), hands running jobs back to the queue, and
-    /// closes the database.
+    /// Stops listening (in-flight requests finish), hands running jobs back to the queue,
+    /// releases the GPU (mask renderer, then the workers' devices: [`release_gpus`]), and closes
+    /// the database.
     ///
     /// Boxed for the reason [`ServiceBuilder::start`] is.
     pub fn shutdown(self) -> BoxFuture<'static, ()> {
@@ -491,10 +493,14 @@ impl RunningService {
                 warn!(%error, "server task ended abnormally");
             }
         }
-        if let Some(pool) = self.pool {
-            pool.shutdown().await;
-        }
+        let worker_gpus = match self.pool {
+            Some(pool) => pool.shutdown().await,
+            None => Vec::new(),
+        };
         self.reaper.shutdown().await;
+        // After the listeners (no render starts) and the workers (jobs handed back), before
+        // "segsplat stopped": nothing on the GPU is left for the process's exit.
+        release_gpus(&self.state.core, worker_gpus).await;
         self.database.close().await;
         info!("segsplat stopped");
     }

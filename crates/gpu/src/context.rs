@@ -195,9 +195,9 @@ pub struct GpuContext {
     /// not the kernels, bound a step, so benchmarks and jobs report them.
     pub host_costs: Arc<HostCosts>,
     /// Kernel parameters, written once per submission (see [`crate::uniform_ring`]).
-    uniforms: Arc<Mutex<UniformRing>>,
+    pub(crate) uniforms: Arc<Mutex<UniformRing>>,
     /// Bind groups reused while their buffers are (see [`crate::bind_cache`]).
-    bind_groups: Arc<Mutex<BindGroupCache>>,
+    pub(crate) bind_groups: Arc<Mutex<BindGroupCache>>,
 }
 
 /// A lock that a panic elsewhere did not make unusable: the ring and the cache hold no invariant

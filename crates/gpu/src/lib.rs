@@ -7,6 +7,7 @@ pub mod kernel;
 pub mod kernel_choices;
 pub mod kernel_layout;
 pub mod profiler;
+pub mod release;
 pub mod scan;
 pub mod sort;
 pub mod uniform_ring;
@@ -16,6 +17,7 @@ pub use context::{AdapterFilter, AdapterReport, GpuContext, GpuError, HostCostRe
 pub use kernel::{Binding, Bound, Kernel};
 pub use kernel_choices::{GemmLayout, KernelChoices, RasterLayout};
 pub use profiler::{KernelProfile, KernelProfiler};
+pub use release::{release_context, sole_owner};
 pub use scan::{ExclusiveScan, WorkgroupSum};
 pub use sort::{DEFAULT_SMALL_SORT_LIMIT, RadixSort};
 pub use uniform_ring::UniformParams;

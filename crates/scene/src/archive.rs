@@ -4,13 +4,14 @@
 //! Archives come from untrusted uploads, so every entry name is checked by
 //! [`entry_path::safe_relative_path`] before anything touches the disk, entries are streamed to
 //! disk (never a whole archive in memory), and the byte cap counts bytes actually written, because
-//! declared sizes in zip and tar headers can lie.
+//! declared sizes in zip and tar headers can lie. A zip is refused from its central directory
+//! when that declares more entries or bytes than the limits allow, before anything is unpacked.
 
 mod entry_path;
 mod sink;
 mod sniff;
 mod tar_unpack;
-mod zip_names;
+mod zip_directory;
 mod zip_unpack;
 
 use std::fs::File;
@@ -68,6 +69,14 @@ pub enum ArchiveError {
     TooManyBytes { limit: u64 },
     #[error("archive holds more than {limit} files")]
     TooManyFiles { limit: u64 },
+    /// Read from the zip's central directory, before unpacking.
+    #[error(
+        "the zip's directory declares {declared} bytes unpacked, more than the {limit} allowed"
+    )]
+    DeclaresTooManyBytes { declared: u64, limit: u64 },
+    /// Read from the zip's end record, before the directory.
+    #[error("the zip declares {declared} entries, more than the {limit} allowed")]
+    DeclaresTooManyEntries { declared: u64, limit: u64 },
     #[error("{context}: {source}")]
     Io {
         context: String,
@@ -86,9 +95,10 @@ impl ArchiveError {
             | ArchiveError::BadName(_)
             | ArchiveError::Link { .. }
             | ArchiveError::SpecialFile { .. } => InputErrorClass::Malformed,
-            ArchiveError::TooManyBytes { .. } | ArchiveError::TooManyFiles { .. } => {
-                InputErrorClass::TooLarge
-            }
+            ArchiveError::TooManyBytes { .. }
+            | ArchiveError::TooManyFiles { .. }
+            | ArchiveError::DeclaresTooManyBytes { .. }
+            | ArchiveError::DeclaresTooManyEntries { .. } => InputErrorClass::TooLarge,
             ArchiveError::Io { .. } => InputErrorClass::Internal,
         }
     }
@@ -111,7 +121,7 @@ pub fn unpack_archive(
     let kind = sniff_kind(&mut open()?)?;
     let mut sink = sink::DiskSink::new(dest, limits);
     match kind {
-        ArchiveKind::Zip => zip_unpack::unpack_zip(open()?, &mut sink)?,
+        ArchiveKind::Zip => zip_unpack::unpack_zip(open()?, &mut sink, limits)?,
         ArchiveKind::Tar => tar_unpack::unpack_tar(open()?, &mut sink)?,
         ArchiveKind::TarGz => tar_unpack::unpack_tar_gz(open()?, &mut sink)?,
     }

@@ -13,4 +13,6 @@ pub mod views;
 pub use config::TrainConfig;
 pub use object_loss::{ObjectLossConfig, ObjectTargets, SkippedPair, ViewIdMaps};
 pub use schedule::TrainSchedule;
-pub use trainer::{EvalReport, PartialFilterCost, TrainError, TrainProgress, Trainer, TrainerMeta};
+pub use trainer::{
+    EvalReport, PartialFilterCost, StopCheck, TrainError, TrainProgress, Trainer, TrainerMeta,
+};

@@ -22,6 +22,7 @@ mod object_step;
 mod partial_filter;
 
 use std::collections::BTreeSet;
+use std::sync::Arc;
 use std::time::Instant;
 
 use rand::seq::SliceRandom;
@@ -86,7 +87,13 @@ pub enum TrainError {
     CheckpointMismatch(String),
     #[error("the initial model is empty: the scene has no points and random_init_count is 0")]
     EmptyModel,
+    /// The stop check ([`Trainer::set_stop_check`]) said yes inside a long pass of one step.
+    #[error("training stopped on request inside step {step}")]
+    Stopped { step: u32 },
 }
+
+/// Asked inside the passes of a step that take long (the partial-mask filter); `true` stops.
+pub type StopCheck = Arc<dyn Fn() -> bool + Send + Sync>;
 
 /// Reported every [`SYNC_EVERY`] steps and at the end.
 #[derive(Debug, Clone, Serialize)]
@@ -174,6 +181,8 @@ pub struct Trainer {
     dynamics: Option<dynamics::Dynamics>,
     /// Object renders one by one instead of batched (the reference path).
     separate_object_renders: bool,
+    /// Whoever runs the trainer asks it to stop inside a long pass; see [`StopCheck`].
+    stop_check: Option<StopCheck>,
     object_buffers: object_step::ObjectBuffers,
     /// The training resolution of the last step ([`TrainSchedule::resolution_divisor_at`]).
     resolution_divisor: Option<u32>,
@@ -302,6 +311,7 @@ impl Trainer {
             steps_at_start: 0,
             dynamics: None,
             separate_object_renders: false,
+            stop_check: None,
             object_buffers: object_step::ObjectBuffers::default(),
             resolution_divisor: None,
             gaussian_budget,

@@ -1,6 +1,9 @@
 //! What the training job kinds share: failure classification, progress reports, checkpointed
 //! training that honours cancel and shutdown at step boundaries.
 
+use std::sync::Arc;
+
+use super::stop_aware::StopSignal;
 use crate::job_kinds::checkpoint_writer::CheckpointWriter;
 use crate::jobs::{JobContext, JobFailure, Progress};
 use segsplat_engine::GaussianModel;
@@ -235,6 +238,9 @@ fn train_stage(
     let mut busy_sample_at = (gpu.profiler.is_some() && total - first_step > 2 * BUSY_SAMPLE_STEPS)
         .then(|| first_step + (total - first_step) / 2);
     let mut gpu_busy_fraction = None;
+    // Heard inside a step's long passes (the partial-mask filter), not only between reports.
+    let stop = StopSignal::of(ctx);
+    trainer.set_stop_check(Arc::new(move || stop.requested()));
     while trainer.step() < total {
         let next_checkpoint = match checkpoint_every {
             0 => total,
@@ -249,7 +255,14 @@ fn train_stage(
                     report_seconds += reporting.elapsed().as_secs_f64();
                     go_on
                 })
-                .map_err(train_failure)
+                .map_err(|error| {
+                    match error {
+                        // The stop's own failure (cancelled, or handed back at shutdown).
+                        TrainError::Stopped { .. } => ctx.stop_requested().err(),
+                        _ => None,
+                    }
+                    .unwrap_or_else(|| train_failure(error))
+                })
         };
         if let Some(at) = busy_sample_at.filter(|&at| at < next_checkpoint) {
             busy_sample_at = None;

@@ -48,6 +48,9 @@ pub struct WorkerPoolOptions {
 pub struct WorkerPool {
     shutdown: CancellationToken,
     tasks: Vec<JoinHandle<()>>,
+    /// Each slot's GPU context once (slots of one adapter share it), handed back by
+    /// [`WorkerPool::shutdown`] so the caller releases them last.
+    gpus: Vec<Arc<GpuContext>>,
 }
 
 impl WorkerPool {
@@ -70,6 +73,12 @@ impl WorkerPool {
             shutdown_grace: options.shutdown_grace,
         };
         metrics::gauge!("segsplat_worker_slots").set(options.slots.len() as f64);
+        let mut gpus: Vec<Arc<GpuContext>> = Vec::new();
+        for gpu in options.slots.iter().filter_map(|slot| slot.gpu.as_ref()) {
+            if !gpus.iter().any(|known| Arc::ptr_eq(known, gpu)) {
+                gpus.push(Arc::clone(gpu));
+            }
+        }
         let tasks = options
             .slots
             .into_iter()
@@ -88,7 +97,11 @@ impl WorkerPool {
                 tokio::spawn(worker.run())
             })
             .collect();
-        Self { shutdown, tasks }
+        Self {
+            shutdown,
+            tasks,
+            gpus,
+        }
     }
 
     pub fn slot_count(&self) -> usize {
@@ -96,14 +109,17 @@ impl WorkerPool {
     }
 
     /// Stops claiming, asks running handlers to stop, and waits until every running job is
-    /// finished or handed back to the queue.
-    pub async fn shutdown(self) {
+    /// finished or handed back to the queue. Returns the workers' GPU contexts, for the caller
+    /// to release ([`segsplat_gpu::release_context`]) after everything else on the GPU: a job
+    /// stage that outlived its grace may still hold one, and must drop its buffers first.
+    pub async fn shutdown(self) -> Vec<Arc<GpuContext>> {
         self.shutdown.cancel();
         for task in self.tasks {
             if let Err(error) = task.await {
                 warn!(%error, "worker task ended abnormally");
             }
         }
+        self.gpus
     }
 }
 

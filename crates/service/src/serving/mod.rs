@@ -11,7 +11,7 @@ pub mod view;
 
 pub use mask_encoding::{EncodedMask, EncodedMaskData, MaskFormat, encode_mask, mask_png};
 pub use object_export::{SplatFormat, encode_splats, object_file, object_model};
-pub use scene_cache::{CacheStats, LoadedScene, ObjectMasks, SceneCache};
+pub use scene_cache::{CacheStats, GpuRelease, LoadedScene, ObjectMasks, SceneCache};
 pub use segsplat_method::cameras::{CAMERAS_FILE, SceneCamera, scene_cameras};
 pub use segsplat_method::scene_files::{LABELS_FILE, SCENE_FILE};
 pub use trained_scene::{TrainedScene, parse_cameras};

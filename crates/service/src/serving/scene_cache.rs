@@ -7,7 +7,9 @@
 //! claims an adapter. Renders share one renderer (its buffers grow to the largest view) behind a
 //! mutex: a single GPU queue runs them one after another anyway.
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
 
 use lru::LruCache;
 
@@ -16,7 +18,7 @@ use super::scene_motion::SceneMotion;
 use super::trained_scene::TrainedScene;
 use segsplat_engine::render::Renderer;
 use segsplat_engine::{GaussianModel, GpuGaussians, ObjectFilter, RenderCamera};
-use segsplat_gpu::GpuContext;
+use segsplat_gpu::{GpuContext, release_context, sole_owner};
 use segsplat_method::cameras::SceneCamera;
 use segsplat_method::segment_then_splat::objects::{
     ObjectSummary, full_mask, render_layer, summarize_objects, visible_mask,
@@ -84,6 +86,17 @@ struct Gpu {
     renderer: Mutex<Renderer>,
 }
 
+/// What [`SceneCache::release_gpu`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GpuRelease {
+    /// No mask was rendered: the GPU was never opened.
+    NeverOpened,
+    /// Scenes, renderer, queue and device were dropped, in that order.
+    Released,
+    /// A render still held part of it after the wait; that render drops it when it ends.
+    StillHeld,
+}
+
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
 pub struct CacheStats {
     pub scenes: usize,
@@ -104,6 +117,8 @@ pub struct SceneCache {
     open_gpu: GpuOpener,
     gpu: Mutex<Option<Arc<Gpu>>>,
     resident: Mutex<Resident>,
+    /// Set by [`SceneCache::release_gpu`]: a render arriving after it must not open the GPU again.
+    released: AtomicBool,
 }
 
 impl std::fmt::Debug for SceneCache {
@@ -139,6 +154,7 @@ impl SceneCache {
                 loads: 0,
                 hits: 0,
             }),
+            released: AtomicBool::new(false),
         }
     }
 
@@ -157,6 +173,9 @@ impl SceneCache {
         if let Some(gpu) = slot.as_ref() {
             return Ok(Arc::clone(gpu));
         }
+        if self.released.load(Ordering::Acquire) {
+            return Err(ServingError::NoGpu("the service is stopping".to_string()));
+        }
         let ctx = (self.open_gpu)().map_err(ServingError::NoGpu)?;
         tracing::info!(adapter = %ctx.report.name, "mask rendering GPU ready");
         let renderer = Renderer::new(&ctx).map_err(|error| ServingError::Gpu(error.to_string()))?;
@@ -166,6 +185,47 @@ impl SceneCache {
         });
         *slot = Some(Arc::clone(&gpu));
         Ok(gpu)
+    }
+
+    /// Releases the GPU at shutdown, in order: the resident scenes' buffers, then the renderer's
+    /// pipelines and buffers, then the device and queue ([`release_context`]), each once the
+    /// renders still running (waited for up to `wait` in all) let go of it. Later requests get
+    /// [`ServingError::NoGpu`] instead of opening it again.
+    pub fn release_gpu(&self, wait: Duration) -> GpuRelease {
+        let deadline = Instant::now() + wait;
+        let left = || deadline.saturating_duration_since(Instant::now());
+        let gpu = {
+            let mut slot = lock(&self.gpu);
+            self.released.store(true, Ordering::Release);
+            slot.take()
+        };
+        let scenes: Vec<Arc<LoadedScene>> = {
+            let mut resident = lock(&self.resident);
+            resident.bytes = 0;
+            std::iter::from_fn(|| resident.scenes.pop_lru().map(|(_, scene)| scene)).collect()
+        };
+        metrics::gauge!("segsplat_scene_cache_bytes").set(0.0);
+        metrics::gauge!("segsplat_scene_cache_scenes").set(0.0);
+        let Some(gpu) = gpu else {
+            // Scenes are loaded only through an open GPU: with none there are none either.
+            return GpuRelease::NeverOpened;
+        };
+        let mut all_released = true;
+        for scene in scenes {
+            all_released &= sole_owner(scene, left()).is_ok();
+        }
+        all_released &= match sole_owner(gpu, left()) {
+            Ok(Gpu { ctx, renderer }) => {
+                drop(renderer);
+                release_context(ctx, left()).is_ok()
+            }
+            Err(_) => false,
+        };
+        if all_released {
+            GpuRelease::Released
+        } else {
+            GpuRelease::StillHeld
+        }
     }
 
     /// The scene known as `key` when it is resident, without counting a hit or refreshing it.

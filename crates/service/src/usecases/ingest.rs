@@ -38,6 +38,21 @@ impl IngestError {
             IngestError::Blob(_) | IngestError::Io { .. } => InputErrorClass::Internal,
         }
     }
+
+    /// What the client is told: the error, and for an archive over a limit the setting that
+    /// sets it (the scene crate knows the limits, not the service's names for them).
+    pub fn client_message(&self) -> String {
+        let setting = match self {
+            IngestError::Archive(
+                ArchiveError::TooManyBytes { .. } | ArchiveError::DeclaresTooManyBytes { .. },
+            ) => "limits.max_unpacked_bytes",
+            IngestError::Archive(
+                ArchiveError::TooManyFiles { .. } | ArchiveError::DeclaresTooManyEntries { .. },
+            ) => "limits.max_files",
+            _ => return self.to_string(),
+        };
+        format!("{self} ({setting})")
+    }
 }
 
 pub struct IngestRequest {

@@ -105,7 +105,7 @@ async fn ingest_and_record(
             }
             class => SceneFailure::Rejected {
                 class,
-                message: error.to_string(),
+                message: error.client_message(),
             },
         }
     })?;

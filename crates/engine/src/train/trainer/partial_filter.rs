@@ -1,7 +1,7 @@
 //! The partial-mask filter of Segment-then-Splat: every (object, view) pair rendered alone, once,
 //! near the end of training, batched per view on that view's full render.
 
-use super::{TrainError, Trainer};
+use super::{StopCheck, TrainError, Trainer};
 use crate::render::{ObjectSlot, RENDER_ATTEMPTS, RenderError};
 use crate::train::mask_iou::MaskIouCounts;
 use crate::train::object_loss::{ObjectTargets, SkippedPair};
@@ -16,6 +16,15 @@ const PARTIAL_FILTER_MAX_BATCH: usize = 64;
 const BATCH_IMAGE_SHARE_OF_BINDING: u64 = 2;
 
 impl Trainer {
+    /// Has the partial-mask filter ask `check` between views and end the step with
+    /// [`TrainError::Stopped`] when it says yes: the filter renders every (object, view) pair in
+    /// one step, minutes on a large capture, where a stopping job could not be heard otherwise.
+    /// The stopped step leaves no skipped pairs: a run resumed from the last checkpoint (before
+    /// the filter's step) filters again.
+    pub fn set_stop_check(&mut self, check: StopCheck) {
+        self.stop_check = Some(check);
+    }
+
     /// Whether the partial-mask filter runs after `step`.
     pub(super) fn partial_filter_due(&self, step: u32) -> bool {
         match (&self.config.object_loss, &self.object_targets) {
@@ -54,6 +63,9 @@ impl Trainer {
         // Dynamic scenes: the time the geometry is deformed to (it stays so across submissions).
         let mut deformed_time = None;
         for view_pairs in pairs.chunk_by(|a, b| a.train_view == b.train_view) {
+            if self.stop_check.as_ref().is_some_and(|stop| stop()) {
+                return Err(TrainError::Stopped { step: self.step });
+            }
             let view = &self.views.train[view_pairs[0].train_view];
             let ids = targets.views[view_pairs[0].train_view].ids.each_ref();
             let memory_batch = memory_batch_size(&self.ctx, view.camera.pixel_count());
