@@ -52,6 +52,8 @@ enum Command {
     Eval(cli::eval::EvalArgs),
     /// Benchmark training speed and held-out quality on a dataset (JSON).
     Bench(cli::bench::BenchArgs),
+    /// Measure the adapter's fp32 rate with the deformation field's GEMM kernel (JSON).
+    BenchMatmul(cli::bench::matmul::MatmulArgs),
     /// Check ONNX model directories.
     Models(cli::models::ModelsArgs),
 }
@@ -153,6 +155,9 @@ fn main() -> ExitCode {
         }
         Command::Eval(args) => init_cli_logging().and_then(|()| cli::eval::run(args, cli.config)),
         Command::Bench(args) => init_cli_logging().and_then(|()| cli::bench::run(args)),
+        Command::BenchMatmul(args) => {
+            init_cli_logging().and_then(|()| cli::bench::matmul::run(args))
+        }
         Command::Models(args) => {
             return match init_cli_logging().and_then(|()| cli::models::run(args, cli.config)) {
                 Ok(true) => ExitCode::SUCCESS,

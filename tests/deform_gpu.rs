@@ -8,8 +8,9 @@
 //! Tolerances: forward outputs within 2e-5 relative to their scale; weight gradients within 1e-4
 //! of the largest gradient of their layer (f32 sums over 150 Gaussians).
 //!
-//! Both GEMM kernels are checked on whatever adapter runs the tests: the tiled one hardware GPUs
-//! use and the row-per-invocation one software adapters use.
+//! Every GEMM kernel the adapter can run is checked (`GemmKernel::supported`): the tiled one
+//! hardware GPUs use, the row-per-invocation one, and the subgroup-broadcast one software
+//! adapters with 8-lane subgroups use.
 
 mod gpu_support;
 
@@ -18,7 +19,7 @@ use rand::Rng;
 use segsplat_engine::deform::reference;
 use segsplat_engine::deform::warp::{Pose, warp, warp_backward};
 use segsplat_engine::deform::{
-    DeformationField, DeformedGeometry, FieldShape, GemmKernel, WarpKind,
+    DeformationField, DeformedGeometry, FieldShape, GemmKernel, WarpKind, measure_matmul,
 };
 use segsplat_engine::{GaussianModel, GpuGaussianGrads, GpuGaussians, OBJECT_NONE};
 use segsplat_gpu::GpuContext;
@@ -77,8 +78,6 @@ struct Setup {
     params: Vec<f32>,
 }
 
-const BOTH_KERNELS: [GemmKernel; 2] = [GemmKernel::Tiled, GemmKernel::Rows];
-
 fn setup(ctx: &GpuContext, warp_kind: WarpKind, gemm: GemmKernel) -> Setup {
     let shape = shape(warp_kind);
     let params = parameters(&shape, 11);
@@ -134,14 +133,16 @@ fn check_forward(warp_kind: WarpKind, gemm: GemmKernel) {
 
 #[test]
 fn forward_matches_reference_with_translation() {
-    for gemm in BOTH_KERNELS {
+    let Some(ctx) = gpu_context() else { return };
+    for gemm in GemmKernel::supported(ctx) {
         check_forward(WarpKind::Translation, gemm);
     }
 }
 
 #[test]
 fn forward_matches_reference_with_screw_motion() {
-    for gemm in BOTH_KERNELS {
+    let Some(ctx) = gpu_context() else { return };
+    for gemm in GemmKernel::supported(ctx) {
         check_forward(WarpKind::Screw, gemm);
     }
 }
@@ -233,14 +234,16 @@ fn check_backward(warp_kind: WarpKind, gemm: GemmKernel) {
 
 #[test]
 fn backward_matches_reference_with_translation() {
-    for gemm in BOTH_KERNELS {
+    let Some(ctx) = gpu_context() else { return };
+    for gemm in GemmKernel::supported(ctx) {
         check_backward(WarpKind::Translation, gemm);
     }
 }
 
 #[test]
 fn backward_matches_reference_with_screw_motion() {
-    for gemm in BOTH_KERNELS {
+    let Some(ctx) = gpu_context() else { return };
+    for gemm in GemmKernel::supported(ctx) {
         check_backward(WarpKind::Screw, gemm);
     }
 }
@@ -302,4 +305,30 @@ fn gpu_gradient_matches_central_differences_of_the_gpu_forward() {
         }
     }
     assert_eq!(checked, 3 * layers.len());
+}
+
+/// `measure_matmul` (behind `segsplat bench-matmul` and `bench --deformation`'s `matmul`) times
+/// products that are right: each of the three, for every kernel the adapter runs, matches an
+/// f64 product on sampled outputs, on a shape that is no multiple of any block.
+#[test]
+fn matmul_benchmark_measures_correct_products() {
+    let Some(ctx) = gpu_context() else { return };
+    for gemm in GemmKernel::supported(ctx) {
+        let report = measure_matmul(ctx, gemm, 1100, 72, 1).expect("matmul benchmark");
+        assert_eq!(report.products.len(), 3);
+        for product in &report.products {
+            println!(
+                "{gemm:?} {}: {:.2} GFLOP/s, max error {:.1e}",
+                product.product, product.gflops, product.max_error
+            );
+            assert!(product.gflops > 0.0, "{gemm:?} {}", product.product);
+            assert!(
+                product.max_error < 1e-4,
+                "{gemm:?} {}: error {}",
+                product.product,
+                product.max_error
+            );
+        }
+        assert!(report.gflops > 0.0);
+    }
 }

@@ -206,6 +206,59 @@ fn bench_reports_the_deformation_field_cost() {
     );
     let ratio = rate("static_steps_per_sec") / rate("steps_per_sec");
     assert!((rate("step_time_ratio") - ratio).abs() < 1e-9, "{report}");
+    // The field's arithmetic: its FLOPs a step at 500 Gaussians, the rate it reached, and the
+    // same kernel's rate on one large layer in the same run.
+    let (forward, backward) = shape.flops_per_gaussian();
+    let expected_gflop = (forward + backward) as f64 * 500.0 / 1e9;
+    assert!(
+        (rate("field_gflop_per_step") - expected_gflop).abs() < 1e-12,
+        "{report}"
+    );
+    assert!(rate("field_gflops") > 0.0, "{report}");
+    let matmul_rate = deformation["matmul"]["gflops"].as_f64().unwrap_or(0.0);
+    assert!(matmul_rate > 0.0, "{report}");
+    assert!(
+        (rate("field_rate_fraction") - rate("field_gflops") / matmul_rate).abs() < 1e-9,
+        "{report}"
+    );
+    assert!(deformation["gemm_kernel"].is_string(), "{report}");
+}
+
+/// `segsplat bench-matmul` prints the three products' rates with the adapter's kernel, each
+/// checked against an f64 product.
+#[test]
+fn bench_matmul_reports_the_kernel_rate() {
+    if gpu_context().is_none() {
+        return;
+    }
+    let output = segsplat(&[
+        "bench-matmul",
+        "--rows",
+        "600",
+        "--width",
+        "48",
+        "--repeats",
+        "1",
+        "--json",
+    ]);
+    assert!(output.status.success(), "{output:?}");
+    let report: serde_json::Value =
+        serde_json::from_slice(&output.stdout).expect("bench-matmul prints one JSON object");
+    let matmul = &report["matmul"];
+    assert_eq!(matmul["rows"], 600, "{report}");
+    let products = matmul["products"].as_array().cloned().unwrap_or_default();
+    let names: Vec<&str> = products
+        .iter()
+        .filter_map(|p| p["product"].as_str())
+        .collect();
+    assert_eq!(names, ["forward", "input_gradient", "weight_gradient"]);
+    for product in &products {
+        assert!(product["gflops"].as_f64().unwrap_or(0.0) > 0.0, "{report}");
+        assert!(
+            product["max_error"].as_f64().unwrap_or(1.0) < 1e-4,
+            "{report}"
+        );
+    }
 }
 
 /// A job much shorter than the 30k-step recipe still trains its deformation field: with the

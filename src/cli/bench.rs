@@ -5,6 +5,7 @@
 //! the field costs per step.
 
 mod curve;
+pub mod matmul;
 
 use std::path::PathBuf;
 
@@ -14,7 +15,9 @@ use glam::Vec3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use segsplat_engine::GaussianModel;
-use segsplat_engine::deform::{DeformationConfig, FieldShape};
+use segsplat_engine::deform::{
+    DeformationConfig, FieldShape, GemmKernel, MatmulReport, measure_matmul,
+};
 use segsplat_engine::init::random_gaussians;
 use segsplat_engine::ply::read_ply_file;
 use segsplat_engine::train::trainer::initial_model;
@@ -243,6 +246,19 @@ struct DeformationReport {
     /// pass (Adam excluded), each submitted and waited for, after training.
     field_forward_ms: f64,
     field_backward_ms: f64,
+    /// The GEMM kernel the field ran (`tiled`, `rows` or `broadcast`).
+    gemm_kernel: String,
+    /// Floating-point operations of the field's matrix products in one step at the end's
+    /// Gaussian count, forward and backward (`FieldShape::flops_per_gaussian`), in GFLOP.
+    field_gflop_per_step: f64,
+    /// `field_gflop_per_step` over `field_forward_ms + field_backward_ms`: the rate the field's
+    /// passes reached, everything in them counted (encoding, bias sums, split reductions).
+    field_gflops: f64,
+    /// The same kernel on one 256-wide layer over 16,384 Gaussians in this run (`segsplat
+    /// bench-matmul`): the adapter's own rate with it.
+    matmul: MatmulReport,
+    /// `field_gflops / matmul.gflops`.
+    field_rate_fraction: f64,
 }
 
 #[derive(Serialize)]
@@ -675,6 +691,13 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
             let mut times: Vec<f32> = trainer.views().train.iter().map(|v| v.time).collect();
             times.sort_by(f32::total_cmp);
             times.dedup();
+            let (forward, backward) = field.flops_per_gaussian();
+            let field_gflop_per_step =
+                (forward + backward) as f64 * trainer.gaussian_count() as f64 / 1e9;
+            let field_gflops =
+                field_gflop_per_step / ((field_forward_ms + field_backward_ms) / 1e3);
+            let kernel = GemmKernel::for_adapter(&ctx);
+            let matmul = measure_matmul(&ctx, kernel, 16_384, field.width, args.timing_repeats)?;
             Some(DeformationReport {
                 field,
                 parameters,
@@ -687,6 +710,11 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
                 step_time_ratio: static_steps_per_sec / run.steps_per_sec(),
                 field_forward_ms,
                 field_backward_ms,
+                gemm_kernel: format!("{kernel:?}").to_lowercase(),
+                field_gflop_per_step,
+                field_gflops,
+                field_rate_fraction: field_gflops / matmul.gflops,
+                matmul,
             })
         }
         _ => None,

@@ -98,6 +98,9 @@ pub struct AdapterReport {
     pub max_compute_invocations_per_workgroup: u32,
     pub float32_atomics: bool,
     pub subgroups: bool,
+    /// Smallest and largest subgroup the adapter may run (kernels that rely on one lane count,
+    /// like the deformation field's broadcast GEMM, check both).
+    pub subgroup_sizes: [u32; 2],
     pub timestamp_queries: bool,
 }
 
@@ -120,6 +123,7 @@ impl AdapterReport {
             max_compute_invocations_per_workgroup: limits.max_compute_invocations_per_workgroup,
             float32_atomics: features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC),
             subgroups: features.contains(wgpu::Features::SUBGROUP),
+            subgroup_sizes: [info.subgroup_min_size, info.subgroup_max_size],
             timestamp_queries: features.contains(wgpu::Features::TIMESTAMP_QUERY),
         }
     }

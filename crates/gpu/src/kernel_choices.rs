@@ -27,6 +27,8 @@ pub enum GemmLayout {
     Tiled,
     /// An output block per invocation, no workgroup memory.
     Rows,
+    /// Rows per invocation, the other operand shared by subgroup broadcasts (subgroups of 8).
+    Broadcast,
 }
 
 /// Variants to force; `None` leaves each to the adapter.
@@ -69,10 +71,11 @@ impl FromStr for GemmLayout {
         match value {
             "tiled" => Ok(Self::Tiled),
             "rows" => Ok(Self::Rows),
+            "broadcast" => Ok(Self::Broadcast),
             _ => Err(UnknownKernel {
                 what: "GEMM",
                 value: value.to_string(),
-                expected: "tiled, rows",
+                expected: "tiled, rows, broadcast",
             }),
         }
     }

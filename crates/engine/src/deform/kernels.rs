@@ -7,6 +7,8 @@ use segsplat_gpu::kernel::{workgroups_2d, workgroups_for};
 use segsplat_gpu::validation::validated;
 use segsplat_gpu::{GpuContext, GpuError, Kernel};
 
+use super::gemm_broadcast::{BroadcastBlock, SUBGROUP_LANES};
+
 const GEMM_COMMON: &str = include_str!("shaders/mlp_gemm_common.wgsl");
 const GEMM: &str = include_str!("shaders/mlp_gemm.wgsl");
 const GEMM_ROWS: &str = include_str!("shaders/mlp_gemm_rows.wgsl");
@@ -124,14 +126,30 @@ impl RowSplit {
     }
 }
 
-/// Which GEMM kernel the field runs: both compute the same products.
+/// Block of the broadcast kernel for products of many rows (the Gaussians).
+const BROADCAST_WIDE: BroadcastBlock = BroadcastBlock {
+    lane_rows: 8,
+    col_groups: 4,
+};
+/// Block of the broadcast kernel for products of at most `BROADCAST_NARROW.workgroup_rows()`
+/// rows (weight gradients, whose rows are a layer's outputs): half the wide block's rows, so a
+/// 256-row product fills its workgroups.
+const BROADCAST_NARROW: BroadcastBlock = BroadcastBlock {
+    lane_rows: 4,
+    col_groups: 4,
+};
+
+/// Which GEMM kernel the field runs: all compute the same products.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum GemmKernel {
     /// `mlp_gemm.wgsl`: 64x64 output tiles staged through workgroup memory (hardware GPUs).
     Tiled,
     /// `mlp_gemm_rows.wgsl`: a 4 x 8 output block per invocation, no workgroup memory or
-    /// barriers (software adapters, where a workgroup is a loop over SIMD lanes on a CPU core).
+    /// barriers (software adapters without 8-lane subgroups).
     Rows,
+    /// `gemm_broadcast.rs`: rows per invocation, the weights' side shared by subgroup
+    /// broadcasts (software adapters whose subgroups are exactly 8 lanes: lavapipe on AVX2).
+    Broadcast,
 }
 
 impl GemmKernel {
@@ -141,16 +159,63 @@ impl GemmKernel {
         match ctx.kernel_choices.gemm {
             Some(GemmLayout::Tiled) => Self::Tiled,
             Some(GemmLayout::Rows) => Self::Rows,
+            Some(GemmLayout::Broadcast) => Self::Broadcast,
+            None if ctx.report.is_software && Self::Broadcast.runs_on(ctx) => Self::Broadcast,
             None if ctx.report.is_software => Self::Rows,
             None => Self::Tiled,
+        }
+    }
+
+    /// Whether the adapter can run this kernel: the broadcast kernel names 8 lanes of a
+    /// subgroup, so it needs subgroups of exactly that size.
+    pub fn runs_on(self, ctx: &GpuContext) -> bool {
+        match self {
+            Self::Tiled | Self::Rows => true,
+            Self::Broadcast => {
+                ctx.has_subgroups() && ctx.report.subgroup_sizes == [SUBGROUP_LANES; 2]
+            }
+        }
+    }
+
+    /// Every kernel the adapter can run (the tests check each).
+    pub fn supported(ctx: &GpuContext) -> Vec<Self> {
+        [Self::Tiled, Self::Rows, Self::Broadcast]
+            .into_iter()
+            .filter(|kernel| kernel.runs_on(ctx))
+            .collect()
+    }
+}
+
+/// The compiled GEMM pipelines of one [`GemmKernel`].
+#[derive(Debug)]
+enum GemmPipelines {
+    Tiled(Kernel),
+    Rows(Kernel),
+    Broadcast { wide: Kernel, narrow: Kernel },
+}
+
+impl GemmPipelines {
+    /// The pipeline for a product of `rows` rows and the output block one workgroup covers
+    /// (columns, rows).
+    fn for_rows(&self, rows: u32) -> (&Kernel, u32, u32) {
+        match self {
+            Self::Tiled(kernel) => (kernel, GEMM_TILE, GEMM_TILE),
+            Self::Rows(kernel) => (kernel, GEMM_ROWS_COLS, GEMM_ROWS_ROWS),
+            Self::Broadcast { wide, narrow } => {
+                let (kernel, block) = if rows <= BROADCAST_NARROW.workgroup_rows() {
+                    (narrow, BROADCAST_NARROW)
+                } else {
+                    (wide, BROADCAST_WIDE)
+                };
+                (kernel, block.workgroup_cols(), block.workgroup_rows())
+            }
         }
     }
 }
 
 #[derive(Debug)]
 pub struct DeformKernels {
-    gemm: Kernel,
-    gemm_kind: GemmKernel,
+    gemm: GemmPipelines,
     column_sums: Kernel,
     split_reduce: Kernel,
     encode: Kernel,
@@ -179,13 +244,36 @@ impl DeformKernels {
         let build = |label: &'static str, sources: &[&str], entry: &str| {
             validated(ctx, label, || Kernel::new(ctx, label, sources, entry, &[]))
         };
+        if !gemm_kind.runs_on(ctx) {
+            return Err(GpuError::Device(format!(
+                "the {gemm_kind:?} GEMM kernel needs subgroups of {SUBGROUP_LANES} lanes; this adapter has {:?}",
+                ctx.report.subgroup_sizes
+            )));
+        }
         let gemm = match gemm_kind {
-            GemmKernel::Tiled => build("mlp_gemm", &[GEMM_COMMON, GEMM], "gemm")?,
-            GemmKernel::Rows => build("mlp_gemm_rows", &[GEMM_COMMON, GEMM_ROWS], "gemm_rows")?,
+            GemmKernel::Tiled => {
+                GemmPipelines::Tiled(build("mlp_gemm", &[GEMM_COMMON, GEMM], "gemm")?)
+            }
+            GemmKernel::Rows => GemmPipelines::Rows(build(
+                "mlp_gemm_rows",
+                &[GEMM_COMMON, GEMM_ROWS],
+                "gemm_rows",
+            )?),
+            GemmKernel::Broadcast => GemmPipelines::Broadcast {
+                wide: build(
+                    "mlp_gemm_broadcast",
+                    &[GEMM_COMMON, &BROADCAST_WIDE.source()],
+                    "gemm_broadcast",
+                )?,
+                narrow: build(
+                    "mlp_gemm_broadcast",
+                    &[GEMM_COMMON, &BROADCAST_NARROW.source()],
+                    "gemm_broadcast",
+                )?,
+            },
         };
         Ok(Self {
             gemm,
-            gemm_kind,
             column_sums: build("mlp_column_sums", &[COLUMN_SUMS], "column_sums")?,
             split_reduce: build("mlp_split_reduce", &[SPLIT_REDUCE], "split_reduce")?,
             encode: build("deform_encode", &[ENCODE], "deform_encode")?,
@@ -211,8 +299,9 @@ impl DeformKernels {
         splits: u32,
         buffers: GemmBuffers<'_>,
     ) {
+        let (kernel, col_block, row_block) = self.gemm.for_rows(params.rows);
         let uniforms = uniform(ctx, "mlp_gemm params", bytemuck::bytes_of(&params));
-        let bind = self.gemm.bind(
+        let bind = kernel.bind(
             ctx,
             &[
                 &uniforms,
@@ -223,16 +312,12 @@ impl DeformKernels {
                 buffers.c,
             ],
         );
-        let (col_block, row_block) = match self.gemm_kind {
-            GemmKernel::Tiled => (GEMM_TILE, GEMM_TILE),
-            GemmKernel::Rows => (GEMM_ROWS_COLS, GEMM_ROWS_ROWS),
-        };
         let grid = [
             params.cols.div_ceil(col_block).max(1),
             params.rows.div_ceil(row_block).max(1),
             splits.max(1),
         ];
-        self.gemm.dispatch(encoder, &bind, grid);
+        kernel.dispatch(encoder, &bind, grid);
     }
 
     /// Records per-split column sums of `source` rows (`[rows, cols]`, row stride given) into
