@@ -35,23 +35,22 @@ struct Cached {
 pub struct BindGroupCache {
     entries: HashMap<BindKey, Cached>,
     submissions: u64,
-    created: u64,
 }
 
 impl BindGroupCache {
-    /// The cached group for `key`, or the one `create` makes (then cached).
+    /// The cached group for `key`, or the one `create` makes (then cached); `true` when it
+    /// was made.
     pub fn get_or_create(
         &mut self,
         key: BindKey,
         create: impl FnOnce(&BindKey) -> wgpu::BindGroup,
-    ) -> wgpu::BindGroup {
+    ) -> (wgpu::BindGroup, bool) {
         let now = self.submissions;
         if let Some(cached) = self.entries.get_mut(&key) {
             cached.last_used = now;
-            return cached.group.clone();
+            return (cached.group.clone(), false);
         }
         let group = create(&key);
-        self.created += 1;
         self.entries.insert(
             key,
             Cached {
@@ -59,7 +58,7 @@ impl BindGroupCache {
                 last_used: now,
             },
         );
-        group
+        (group, true)
     }
 
     /// Counts a submission and drops the groups unused for [`KEEP_SUBMISSIONS`] of them.
@@ -73,18 +72,5 @@ impl BindGroupCache {
     /// Drops every cached group (and with them the last references to freed buffers).
     pub fn clear(&mut self) {
         self.entries.clear();
-    }
-
-    /// Bind groups created so far (cache misses).
-    pub fn created(&self) -> u64 {
-        self.created
-    }
-
-    pub fn len(&self) -> usize {
-        self.entries.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.entries.is_empty()
     }
 }

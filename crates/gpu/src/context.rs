@@ -492,10 +492,8 @@ impl GpuContext {
         key: BindKey,
         create: impl FnOnce(&BindKey) -> wgpu::BindGroup,
     ) -> wgpu::BindGroup {
-        let mut cache = locked(&self.bind_groups);
-        let before = cache.created();
-        let group = cache.get_or_create(key, create);
-        if cache.created() > before {
+        let (group, created) = locked(&self.bind_groups).get_or_create(key, create);
+        if created {
             self.host_costs
                 .bind_groups_created
                 .fetch_add(1, Ordering::Relaxed);

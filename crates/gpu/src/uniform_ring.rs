@@ -10,7 +10,7 @@
 //! A slot is overwritten only after the cursor has gone once round the ring, `RING_BYTES` later:
 //! a command buffer recorded with ring parameters must be submitted before that many more bytes
 //! of parameters are pushed (a few hundred steps of training). Pushes that would lap the ring
-//! before any submission get a buffer of their own instead (counted, see [`UniformRing::overflows`]).
+//! before any submission get a buffer of their own instead (counted in the context's host costs).
 
 /// Size of the ring: 4 MiB is thousands of dispatches' parameters.
 pub const RING_BYTES: u64 = 4 << 20;
@@ -41,7 +41,6 @@ pub struct UniformRing {
     pending_start: u64,
     /// Bytes pushed since the last submission, which must stay under the ring's size.
     since_submit: u64,
-    overflows: u64,
 }
 
 impl UniformRing {
@@ -60,7 +59,6 @@ impl UniformRing {
             pending: Vec::new(),
             pending_start: 0,
             since_submit: 0,
-            overflows: 0,
         }
     }
 
@@ -75,7 +73,6 @@ impl UniformRing {
         let size = (bytes.len() as u64).max(16).next_multiple_of(16);
         let mut offset = self.cursor.next_multiple_of(self.alignment);
         if self.since_submit + size + self.alignment > RING_BYTES {
-            self.overflows += 1;
             return None;
         }
         if offset + size > RING_BYTES {
@@ -114,10 +111,5 @@ impl UniformRing {
     pub fn before_submit(&mut self, queue: &wgpu::Queue) {
         self.flush(queue);
         self.since_submit = 0;
-    }
-
-    /// Pushes that got a buffer of their own because the ring was full.
-    pub fn overflows(&self) -> u64 {
-        self.overflows
     }
 }
