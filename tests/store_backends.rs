@@ -317,6 +317,76 @@ async fn losing_postgres_gives_503_with_the_reason_loses_nothing_and_recovers() 
     service.shutdown().await;
 }
 
+/// A job that is running when PostgreSQL goes away outlives the outage: its progress reports
+/// fail and are logged, its heartbeat waits for the database, and it ends `succeeded` on its
+/// first attempt without redoing a step (issue 39: an outage of a dependency is not the job's
+/// fault and never spends an attempt).
+#[tokio::test]
+async fn a_running_job_outlives_a_postgres_outage_on_its_first_attempt() {
+    let Some(cluster) = PrivateCluster::start("a_running_job_outlives_a_postgres_outage") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let config = config_on(&cluster, dir.path(), postgres_config());
+    let handler = StepsHandler::new();
+    let service = TestService::start(config, vec![Arc::new(handler.clone())]).await;
+    let scene_id = service.upload_test_scene().await;
+    let steps = 120;
+    let job = service
+        .create_job(
+            &scene_id,
+            STEPS_KIND,
+            json!({"steps": steps, "step_ms": 50}),
+        )
+        .await;
+    let started = Instant::now();
+    while handler
+        .stats
+        .steps_executed
+        .load(std::sync::atomic::Ordering::SeqCst)
+        < 10
+    {
+        assert!(started.elapsed() < WAIT, "the job never started its steps");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+
+    cluster.stop_server();
+    let during = handler
+        .stats
+        .steps_executed
+        .load(std::sync::atomic::Ordering::SeqCst);
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    let after_outage = handler
+        .stats
+        .steps_executed
+        .load(std::sync::atomic::Ordering::SeqCst);
+    cluster.start_server();
+    assert!(
+        after_outage > during,
+        "the job stopped stepping while the database was down ({during} -> {after_outage})"
+    );
+
+    let finished = service.wait_for_state(&job, "succeeded", WAIT).await;
+    assert_eq!(
+        finished["attempts"], 1,
+        "the outage spent an attempt: {finished}"
+    );
+    assert_eq!(
+        handler.stats.runs.load(std::sync::atomic::Ordering::SeqCst),
+        1,
+        "the job was run again"
+    );
+    assert_eq!(
+        handler
+            .stats
+            .steps_executed
+            .load(std::sync::atomic::Ordering::SeqCst),
+        steps,
+        "steps were redone"
+    );
+    service.shutdown().await;
+}
+
 /// `/readyz` with PostgreSQL down answers within a second, under the Kubernetes probes' 5 s
 /// timeout, with the reason: the ping that waits `acquire_timeout_secs` (5 s, the default) for
 /// a connection runs on in the background. Before issue 39's fix the endpoint awaited it and

@@ -101,6 +101,39 @@ fn deformation_field_beats_a_static_model_on_held_out_times() {
     assert!(dynamic_psnr > 22.0, "held-out PSNR {dynamic_psnr:.2} dB");
 }
 
+/// A steady dynamic step allocates nothing and creates no bind group, as a static one does: the
+/// field's GEMMs, reductions, encoding and warp take their parameters from the context's uniform
+/// ring (issue 38, item 4). Counted, not timed.
+#[test]
+fn steady_dynamic_steps_create_no_buffers_and_no_bind_groups() {
+    if gpu_context().is_none() {
+        return;
+    }
+    // A context of its own: the shared one counts the other tests' allocations too.
+    let ctx = &segsplat_gpu::GpuContext::new_default().expect("GPU context");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let scene = dynamic_scene(dir.path());
+    let steady = TrainConfig {
+        densify_from: Some(10_000),
+        ..config(&scene, 600, true)
+    };
+    let mut trainer = Trainer::new(ctx, &scene, steady, Some(initial())).expect("trainer");
+    let views = trainer.views().train.len() as u32;
+    // Past the field's warm-up (200 steps) and the coarse half, then a pass over the views at
+    // full resolution with the field on.
+    let warm = 300 + views;
+    trainer.run_until(warm, |_| true).expect("warm up");
+    let before = ctx.host_costs.reading();
+    trainer.run_until(warm + views, |_| true).expect("train");
+    let during = ctx.host_costs.reading().since(&before);
+    eprintln!(
+        "{views} steady dynamic steps: {} bind groups and {} buffers created",
+        during.bind_groups_created, during.buffers_created
+    );
+    assert_eq!(during.bind_groups_created, 0);
+    assert_eq!(during.buffers_created, 0);
+}
+
 #[test]
 fn checkpoint_restores_the_field_exactly() {
     let Some(ctx) = gpu_context() else { return };

@@ -3,13 +3,19 @@
 //! A training step binds the same buffers every step (they change only when the model grows or a
 //! scratch buffer is enlarged), so each dispatch creating its bind group anew was pure host cost.
 //! The cache is keyed by the kernel and the exact buffer ranges. An entry holds its buffers
-//! alive, so entries not used for [`KEEP_SUBMISSIONS`] submissions are dropped: replaced model
-//! buffers are freed a few submissions after their last use, not kept by the cache.
+//! alive, so entries not used for [`KEEP_SUBMISSIONS`] submissions are dropped, and the owners
+//! of buffers that are replaced wholesale clear the cache when they replace them (densification
+//! when it re-lays out the model, the mask renderer's scene cache when it evicts a scene).
 
 use std::collections::HashMap;
 
-/// Submissions an unused bind group survives.
-pub const KEEP_SUBMISSIONS: u64 = 256;
+/// Submissions an unused bind group survives. A view's loss binds that view's image, so its
+/// groups come back once a pass over the training views: the window must outlast a pass, the
+/// training views times the submissions of a step (a few; more for a dynamic step, whose field
+/// runs in chunks). 256 would make a capture of a hundred views or more bind anew every step;
+/// 4096 covers several hundred. A buffer replaced in between (a grown scratch buffer) is held
+/// that long at most.
+pub const KEEP_SUBMISSIONS: u64 = 4096;
 
 /// One binding of a cached group: a buffer range (size `None`: to the end).
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]

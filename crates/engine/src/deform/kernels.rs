@@ -1,7 +1,5 @@
 //! The deformation field's pipelines and the small typed dispatch helpers over them.
 
-use wgpu::util::DeviceExt;
-
 use segsplat_gpu::GemmLayout;
 use segsplat_gpu::kernel::{workgroups_2d, workgroups_for};
 use segsplat_gpu::validation::validated;
@@ -223,15 +221,6 @@ pub struct DeformKernels {
     apply_backward: Kernel,
 }
 
-fn uniform(ctx: &GpuContext, label: &str, bytes: &[u8]) -> wgpu::Buffer {
-    ctx.device
-        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(label),
-            contents: bytes,
-            usage: wgpu::BufferUsages::UNIFORM,
-        })
-}
-
 fn per_item_grid(ctx: &GpuContext, items: u32) -> [u32; 3] {
     workgroups_2d(
         workgroups_for(items, 256),
@@ -300,17 +289,10 @@ impl DeformKernels {
         buffers: GemmBuffers<'_>,
     ) {
         let (kernel, col_block, row_block) = self.gemm.for_rows(params.rows);
-        let uniforms = uniform(ctx, "mlp_gemm params", bytemuck::bytes_of(&params));
-        let bind = kernel.bind(
+        let bind = kernel.bind_params(
             ctx,
-            &[
-                &uniforms,
-                buffers.a,
-                buffers.b,
-                buffers.bias,
-                buffers.mask,
-                buffers.c,
-            ],
+            bytemuck::bytes_of(&params),
+            &[buffers.a, buffers.b, buffers.bias, buffers.mask, buffers.c],
         );
         let grid = [
             params.cols.div_ceil(col_block).max(1),
@@ -343,8 +325,9 @@ impl DeformKernels {
             source_row_stride,
             _pad: [0; 3],
         };
-        let uniforms = uniform(ctx, "mlp_column_sums params", bytemuck::bytes_of(&params));
-        let bind = self.column_sums.bind(ctx, &[&uniforms, source, partials]);
+        let bind =
+            self.column_sums
+                .bind_params(ctx, bytemuck::bytes_of(&params), &[source, partials]);
         self.column_sums
             .dispatch(encoder, &bind, [cols.div_ceil(64).max(1), split.splits, 1]);
     }
@@ -367,8 +350,9 @@ impl DeformKernels {
             target_offset,
             _pad: 0,
         };
-        let uniforms = uniform(ctx, "mlp_split_reduce params", bytemuck::bytes_of(&params));
-        let bind = self.split_reduce.bind(ctx, &[&uniforms, partials, target]);
+        let bind =
+            self.split_reduce
+                .bind_params(ctx, bytemuck::bytes_of(&params), &[partials, target]);
         self.split_reduce
             .dispatch(encoder, &bind, per_item_grid(ctx, count));
     }
@@ -381,8 +365,9 @@ impl DeformKernels {
         means: &wgpu::Buffer,
         encoded: &wgpu::Buffer,
     ) {
-        let uniforms = uniform(ctx, "deform_encode params", bytemuck::bytes_of(&params));
-        let bind = self.encode.bind(ctx, &[&uniforms, means, encoded]);
+        let bind = self
+            .encode
+            .bind_params(ctx, bytemuck::bytes_of(&params), &[means, encoded]);
         self.encode
             .dispatch(encoder, &bind, per_item_grid(ctx, params.count));
     }
@@ -420,9 +405,6 @@ fn dispatch_apply(
     params: ApplyParams,
     buffers: &[&wgpu::Buffer; 7],
 ) {
-    let uniforms = uniform(ctx, "deform_apply params", bytemuck::bytes_of(&params));
-    let mut all = vec![&uniforms];
-    all.extend_from_slice(buffers);
-    let bind = kernel.bind(ctx, &all);
+    let bind = kernel.bind_params(ctx, bytemuck::bytes_of(&params), buffers);
     kernel.dispatch(encoder, &bind, per_item_grid(ctx, params.count));
 }

@@ -288,12 +288,19 @@ impl SceneCache {
         resident.loads += 1;
         resident.bytes += scene.bytes;
         resident.scenes.put(key.to_string(), Arc::clone(&scene));
+        let mut evicted_any = false;
         while resident.bytes > self.budget_bytes && resident.scenes.len() > 1 {
             let Some((evicted_key, evicted)) = resident.scenes.pop_lru() else {
                 break;
             };
             resident.bytes = resident.bytes.saturating_sub(evicted.bytes);
+            evicted_any = true;
             tracing::info!(key = %evicted_key, "scene evicted from the mask cache");
+        }
+        if evicted_any && let Some(gpu) = lock(&self.gpu).as_ref() {
+            // Cached bind groups would keep the evicted scene's buffers alive for thousands of
+            // submissions (segsplat_gpu::bind_cache::KEEP_SUBMISSIONS).
+            gpu.ctx.release_cached_bind_groups();
         }
         metrics::gauge!("segsplat_scene_cache_bytes").set(resident.bytes as f64);
         metrics::gauge!("segsplat_scene_cache_scenes").set(resident.scenes.len() as f64);
