@@ -258,16 +258,44 @@ async fn wait_for_status(service: &TestService, path: &str, want: u16) -> serde_
     }
 }
 
-#[tokio::test]
-async fn losing_postgres_gives_503_with_the_reason_loses_nothing_and_recovers() {
-    let Some(cluster) = PrivateCluster::start("losing_postgres_gives_503") else {
-        return;
-    };
+/// A service on a fresh database of a private PostgreSQL cluster, with the steps job kind and
+/// one uploaded scene.
+struct OnCluster {
+    cluster: PrivateCluster,
+    dir: tempfile::TempDir,
+    handler: StepsHandler,
+    service: TestService,
+    scene_id: String,
+}
+
+async fn service_on_cluster(test: &str) -> Option<OnCluster> {
+    let cluster = PrivateCluster::start(test)?;
     let dir = tempfile::tempdir().unwrap();
     let config = config_on(&cluster, dir.path(), postgres_config());
     let handler = StepsHandler::new();
     let service = TestService::start(config, vec![Arc::new(handler.clone())]).await;
     let scene_id = service.upload_test_scene().await;
+    Some(OnCluster {
+        cluster,
+        dir,
+        handler,
+        service,
+        scene_id,
+    })
+}
+
+#[tokio::test]
+async fn losing_postgres_gives_503_with_the_reason_loses_nothing_and_recovers() {
+    let Some(OnCluster {
+        cluster,
+        dir,
+        service,
+        scene_id,
+        ..
+    }) = service_on_cluster("losing_postgres_gives_503").await
+    else {
+        return;
+    };
     let before = service
         .create_job(&scene_id, STEPS_KIND, json!({"steps": 2}))
         .await;
@@ -323,14 +351,17 @@ async fn losing_postgres_gives_503_with_the_reason_loses_nothing_and_recovers() 
 /// fault and never spends an attempt).
 #[tokio::test]
 async fn a_running_job_outlives_a_postgres_outage_on_its_first_attempt() {
-    let Some(cluster) = PrivateCluster::start("a_running_job_outlives_a_postgres_outage") else {
+    let Some(OnCluster {
+        cluster,
+        // Held: the service's data folder.
+        dir: _dir,
+        service,
+        handler,
+        scene_id,
+    }) = service_on_cluster("a_running_job_outlives_a_postgres_outage").await
+    else {
         return;
     };
-    let dir = tempfile::tempdir().unwrap();
-    let config = config_on(&cluster, dir.path(), postgres_config());
-    let handler = StepsHandler::new();
-    let service = TestService::start(config, vec![Arc::new(handler.clone())]).await;
-    let scene_id = service.upload_test_scene().await;
     let steps = 120;
     let job = service
         .create_job(

@@ -150,16 +150,7 @@ fn steady_steps_create_no_buffers_and_no_bind_groups() {
     // The coarse half, then two passes over the views at full resolution.
     let warm = 100 + 2 * views;
     trainer.run_until(warm, |_| true).unwrap();
-    let before = ctx.host_costs.reading();
-    let measured = views;
-    trainer.run_until(warm + measured, |_| true).unwrap();
-    let during = ctx.host_costs.reading().since(&before);
-    eprintln!(
-        "{measured} steady steps: {} bind groups and {} buffers created",
-        during.bind_groups_created, during.buffers_created
-    );
-    assert_eq!(during.bind_groups_created, 0);
-    assert_eq!(during.buffers_created, 0);
+    gpu_support::assert_steps_allocate_nothing(&ctx, &mut trainer, views);
 }
 
 /// The coarse steps (the first half by default) train on each view filtered down to half

@@ -71,3 +71,22 @@ pub fn segsplat(args: &[&str]) -> std::process::Output {
         .output()
         .expect("run segsplat")
 }
+
+/// Runs `steps` more steps of `trainer` and asserts that they created no buffer and no bind
+/// group on `ctx` (a context of the test's own: a shared one counts other tests' work too).
+pub fn assert_steps_allocate_nothing(
+    ctx: &GpuContext,
+    trainer: &mut segsplat_engine::train::Trainer,
+    steps: u32,
+) {
+    let before = ctx.host_costs.reading();
+    let until = trainer.step() + steps;
+    trainer.run_until(until, |_| true).expect("train");
+    let during = ctx.host_costs.reading().since(&before);
+    eprintln!(
+        "{steps} steady steps: {} bind groups and {} buffers created",
+        during.bind_groups_created, during.buffers_created
+    );
+    assert_eq!(during.bind_groups_created, 0);
+    assert_eq!(during.buffers_created, 0);
+}
