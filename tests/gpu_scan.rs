@@ -1,4 +1,5 @@
-//! `ExclusiveScan` against a CPU prefix sum (exact: integer sums, wrapping like the GPU).
+//! `ExclusiveScan` against a CPU prefix sum (exact: integer sums, wrapping like the GPU), and
+//! the deferred read-back the training loop reads its progress with (`DeferredRead`).
 
 mod gpu_support;
 
@@ -108,4 +109,58 @@ fn scans_sharing_one_encoder_use_their_own_counts() {
         ctx.read_vec::<u32>(&small_out).unwrap(),
         cpu_exclusive_scan(&small)
     );
+}
+
+/// A deferred read hands back the newest copy requested (never an older one once a newer has
+/// arrived), skips a request while two copies are on their way, and `read_now` waits for the
+/// newest; each delivery is one counted read-back.
+#[test]
+fn deferred_reads_deliver_the_newest_copy() {
+    use segsplat_gpu::deferred_read::DeferredRead;
+    if gpu_context().is_none() {
+        return;
+    }
+    // A context of its own: the read-backs counted must be this test's alone.
+    let ctx = &segsplat_gpu::GpuContext::new_default().expect("GPU context");
+    let source = storage_buffer(ctx, "deferred source", &[0u32; 4]);
+    let mut read = DeferredRead::new(ctx, "deferred test", 16);
+    let request = |read: &mut DeferredRead, values: [u32; 4]| {
+        ctx.queue
+            .write_buffer(&source, 0, bytemuck::cast_slice(&values));
+        let mut encoder = new_encoder(ctx);
+        let slot = read.record(&mut encoder, &source);
+        submit(ctx, encoder);
+        if let Some(slot) = slot {
+            read.after_submit(slot);
+        }
+        slot.is_some()
+    };
+    let as_u32 = |bytes: Vec<u8>| bytemuck::pod_collect_to_vec::<u8, u32>(&bytes);
+
+    assert_eq!(read.read_now(ctx).unwrap(), None, "nothing was asked");
+    assert!(request(&mut read, [1, 2, 3, 4]));
+    assert_eq!(
+        read.read_now(ctx).unwrap().map(as_u32),
+        Some(vec![1, 2, 3, 4])
+    );
+    assert_eq!(read.take(ctx).unwrap(), None, "a copy is delivered once");
+
+    // Two requests before a take: the newer wins.
+    assert!(request(&mut read, [5, 6, 7, 8]));
+    assert!(request(&mut read, [9, 10, 11, 12]));
+    ctx.wait_idle().unwrap();
+    assert_eq!(
+        read.take(ctx).unwrap().map(as_u32),
+        Some(vec![9, 10, 11, 12])
+    );
+
+    // Finished copies nobody took are recycled for newer requests.
+    let before = ctx.host_costs.reading();
+    for round in 0..5u32 {
+        assert!(request(&mut read, [round; 4]));
+        ctx.wait_idle().unwrap();
+    }
+    assert_eq!(read.take(ctx).unwrap().map(as_u32), Some(vec![4; 4]));
+    let counted = ctx.host_costs.reading().since(&before);
+    assert_eq!((counted.read_backs, counted.bytes_read_back), (1, 16));
 }

@@ -557,12 +557,16 @@ impl GpuContext {
             .map_err(|error| GpuError::Device(format!("mapping the read-back buffer: {error}")))?
             .to_vec();
         staging.unmap();
+        self.count_read_back(size_bytes);
+        Ok(bytes)
+    }
+
+    /// Counts a read-back of `bytes` in the host costs (for read-backs made elsewhere, e.g.
+    /// [`crate::deferred_read::DeferredRead`]).
+    pub fn count_read_back(&self, bytes: u64) {
         let costs = &self.host_costs;
         costs.read_backs.fetch_add(1, Ordering::Relaxed);
-        costs
-            .bytes_read_back
-            .fetch_add(size_bytes, Ordering::Relaxed);
-        Ok(bytes)
+        costs.bytes_read_back.fetch_add(bytes, Ordering::Relaxed);
     }
 
     /// Typed read-back of a whole buffer of plain values.

@@ -3,6 +3,7 @@
 
 pub mod bind_cache;
 pub mod context;
+pub mod deferred_read;
 pub mod kernel;
 pub mod kernel_choices;
 pub mod kernel_layout;

@@ -32,15 +32,17 @@
 //! No CPU read-back happens in `forward` or `backward`: counts stay on the GPU and
 //! intersection-dependent work is dispatched indirectly. See [`Renderer`] for the capacity policy.
 
+mod capacity;
 mod kernels;
 mod object_batch;
 mod renderer;
 mod uniforms;
 mod workspace;
 
+pub use capacity::CapacityReport;
 pub use kernels::RasterVariant;
 pub use object_batch::{ObjectBatchError, ObjectBatchOutput, ObjectSlot, slot_table};
 pub(crate) use renderer::RENDER_ATTEMPTS;
-pub use renderer::{CapacityReport, RenderError, RenderOutput, Renderer};
+pub use renderer::{RenderError, RenderOutput, Renderer};
 pub use uniforms::RenderUniforms;
 pub use workspace::GRAD_STRIDE;

@@ -10,6 +10,7 @@ use super::workspace::{
 };
 use crate::model::GaussianView;
 use crate::{GpuGaussianGrads, RenderCamera, RenderSettings};
+use segsplat_gpu::deferred_read::DeferredRead;
 use segsplat_gpu::kernel::{workgroups_2d, workgroups_for};
 use segsplat_gpu::sort::RadixSort;
 use segsplat_gpu::{ExclusiveScan, GpuContext, GpuError};
@@ -41,22 +42,6 @@ pub enum RenderError {
     IntersectionsExceedAdapter { needed: u64, limit: u64 },
 }
 
-/// What [`Renderer::sync_capacity`] found.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct CapacityReport {
-    /// Largest intersection count of any render since the previous sync (unclamped).
-    pub peak_intersections: u32,
-    /// Capacity renders use from now on.
-    pub capacity: u32,
-    /// Some render since the previous sync needed more intersections than its buffers held, so
-    /// it dropped tile entries (its image and gradients are approximate).
-    pub overflowed: bool,
-}
-
-/// Grow when the peak passes this fraction of the capacity.
-const GROW_AT_FRACTION: f64 = 0.8;
-/// New capacity = peak x this.
-const GROWTH_FACTOR: f64 = 1.5;
 /// Initial intersections per Gaussian before any peak is known.
 const INITIAL_INTERSECTIONS_PER_GAUSSIAN: usize = 8;
 const MIN_INTERSECTION_CAPACITY: u32 = 1 << 16;
@@ -140,8 +125,8 @@ impl RenderOutput {
 /// (initially `max(65536, 8 x Gaussians)`, never above one storage binding). Every forward pass
 /// clamps its count to its capacity on the GPU (excess entries are dropped, never written out of
 /// bounds) and folds its unclamped count into a running peak on the GPU. The caller reads that
-/// peak lazily with [`Renderer::sync_capacity`] (the trainer: every few dozen steps and after
-/// densification; one-off renders: [`Renderer::render_checked`]), which grows the capacity to
+/// peak lazily with [`Renderer::sync_capacity`] (one-off renders: [`Renderer::render_checked`];
+/// the training loop every few dozen steps without waiting, [`Renderer::request_capacity_check`]), which grows the capacity to
 /// 1.5x the peak once the peak passes 80% and reports whether any render overflowed, so an
 /// overflow is never silent.
 pub struct Renderer {
@@ -151,9 +136,11 @@ pub struct Renderer {
     pub(super) pool: Arc<WorkspacePool>,
     /// One u32: running maximum of unclamped intersection counts since the last sync.
     pub(super) peak_intersections: wgpu::Buffer,
-    intersection_capacity: u32,
+    pub(super) intersection_capacity: u32,
     /// Smallest capacity any render used since the last sync.
-    smallest_capacity_used: Option<u32>,
+    pub(super) smallest_capacity_used: Option<u32>,
+    /// The peak's deferred read-back for loops that must not wait ([`Self::request_capacity_check`]).
+    pub(super) peak_read: DeferredRead,
 }
 
 impl std::fmt::Debug for Renderer {
@@ -186,6 +173,7 @@ impl Renderer {
             }),
             intersection_capacity: MIN_INTERSECTION_CAPACITY,
             smallest_capacity_used: None,
+            peak_read: DeferredRead::new(ctx, "peak intersections read-back", 4),
         })
     }
 
@@ -602,36 +590,6 @@ impl Renderer {
         let grown = (self.intersection_capacity as f64 * factor).ceil();
         let limit = Self::max_intersections(ctx).min(u32::MAX as u64) as f64;
         self.set_intersection_capacity(grown.min(limit).max(1.0) as u32);
-    }
-
-    /// Reads the peak intersection count of the renders since the last sync (one small
-    /// read-back; waits for submitted work), grows the capacity when the peak nears it, and
-    /// reports whether any of those renders overflowed.
-    pub fn sync_capacity(&mut self, ctx: &GpuContext) -> Result<CapacityReport, RenderError> {
-        let peak = ctx.read_vec::<u32>(&self.peak_intersections)?[0];
-        ctx.queue
-            .write_buffer(&self.peak_intersections, 0, bytemuck::bytes_of(&0u32));
-        let used = self
-            .smallest_capacity_used
-            .take()
-            .unwrap_or(self.intersection_capacity);
-        let overflowed = peak > used;
-        let limit = Self::max_intersections(ctx);
-        if peak as f64 > GROW_AT_FRACTION * self.intersection_capacity as f64 {
-            let grown = (peak as f64 * GROWTH_FACTOR).ceil() as u64;
-            if peak as u64 > limit {
-                return Err(RenderError::IntersectionsExceedAdapter {
-                    needed: peak as u64,
-                    limit,
-                });
-            }
-            self.set_intersection_capacity(grown.min(limit) as u32);
-        }
-        Ok(CapacityReport {
-            peak_intersections: peak,
-            capacity: self.intersection_capacity,
-            overflowed,
-        })
     }
 
     /// Renders now (own encoder, submitted), re-rendering with grown buffers when the first

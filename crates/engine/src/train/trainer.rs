@@ -51,6 +51,7 @@ use crate::train::random_init::{camera_centres, has_sparse_points, random_visibl
 use crate::train::schedule::{DeformationSchedule, SPARSE_CAPTURE_VIEWS, TrainSchedule};
 use crate::train::views::{Views, ViewsError};
 use crate::{ObjectFilter, RenderSettings};
+use segsplat_gpu::deferred_read::DeferredRead;
 use segsplat_gpu::{GpuContext, GpuError};
 use segsplat_scene::Scene;
 
@@ -167,6 +168,10 @@ pub struct Trainer {
     adam: Adam,
     grad_image: wgpu::Buffer,
     loss_values: wgpu::Buffer,
+    /// The loss values' read-back for progress reports that must not wait.
+    loss_read: DeferredRead,
+    /// The newest loss values read back.
+    last_losses: Option<Vec<f32>>,
     step: u32,
     rng: ChaCha8Rng,
     view_queue: Vec<usize>,
@@ -295,6 +300,8 @@ impl Trainer {
             adam: Adam::new(ctx, AdamSettings::default())?,
             grad_image: ctx.storage_buffer("grad image", pixels * 16)?,
             loss_values: ctx.storage_buffer("loss values", LOSS_SLOTS as u64 * 4)?,
+            loss_read: DeferredRead::new(ctx, "loss values read-back", LOSS_SLOTS as u64 * 4),
+            last_losses: None,
             ctx: ctx.clone(),
             schedule,
             config,
@@ -533,7 +540,8 @@ impl Trainer {
 
     /// Trains until step `last_step` (capped at the configured steps), calling `on_progress`
     /// every [`SYNC_EVERY`] steps and at `last_step`; stops early when it returns `false`
-    /// (cancel). Step rates in the reports count from this call.
+    /// (cancel). Step rates in the reports count from this call. The reports between are read
+    /// without waiting for the device ([`Self::progress_without_waiting`]); the last is exact.
     pub fn run_until(
         &mut self,
         last_step: u32,
@@ -544,11 +552,15 @@ impl Trainer {
         self.steps_at_start = self.step;
         while self.step < last_step {
             let step = self.train_step()?;
-            if step % SYNC_EVERY == 0 || step == last_step {
-                let progress = self.progress()?;
-                if !on_progress(&progress) {
-                    return Ok(progress);
-                }
+            let progress = if step == last_step {
+                self.progress()?
+            } else if step % SYNC_EVERY == 0 {
+                self.progress_without_waiting()?
+            } else {
+                continue;
+            };
+            if !on_progress(&progress) {
+                return Ok(progress);
             }
         }
         self.progress()
@@ -558,8 +570,47 @@ impl Trainer {
     pub fn progress(&mut self) -> Result<TrainProgress, TrainError> {
         self.renderer.sync_capacity(&self.ctx)?;
         let losses: Vec<f32> = self.ctx.read_vec(&self.loss_values)?;
+        self.last_losses = Some(losses);
+        Ok(self.progress_from_last_losses())
+    }
+
+    /// Progress with the newest loss the device has delivered, and the intersection capacity
+    /// grown for the newest peak, without draining the queue: both are requested now (copies
+    /// behind the submitted steps) and read when the device gets there, so on a GPU the loss
+    /// reported is a few steps old. Only the first report of a trainer waits, so that every
+    /// report has a loss.
+    fn progress_without_waiting(&mut self) -> Result<TrainProgress, TrainError> {
+        let mut encoder = self
+            .ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("progress read-back"),
+            });
+        let loss_slot = self.loss_read.record(&mut encoder, &self.loss_values);
+        let peak_slot = self.renderer.request_capacity_check(&mut encoder);
+        self.ctx.submit_untimed(encoder.finish());
+        if let Some(slot) = loss_slot {
+            self.loss_read.after_submit(slot);
+        }
+        if let Some(slot) = peak_slot {
+            self.renderer.capacity_check_submitted(slot);
+        }
+        self.renderer.apply_capacity_check(&self.ctx)?;
+        let delivered = if self.last_losses.is_none() {
+            self.loss_read.read_now(&self.ctx)?
+        } else {
+            self.loss_read.take(&self.ctx)?
+        };
+        if let Some(bytes) = delivered {
+            self.last_losses = Some(bytemuck::pod_collect_to_vec(&bytes));
+        }
+        Ok(self.progress_from_last_losses())
+    }
+
+    fn progress_from_last_losses(&self) -> TrainProgress {
+        let losses = self.last_losses.as_deref().unwrap_or_default();
         let elapsed = self.started.elapsed().as_secs_f64();
-        Ok(TrainProgress {
+        TrainProgress {
             step: self.step,
             total_steps: self.config.steps,
             loss: losses.first().copied().unwrap_or(f32::NAN),
@@ -567,7 +618,7 @@ impl Trainer {
             gaussians: self.gaussians.count(),
             elapsed_secs: elapsed,
             steps_per_sec: (self.step - self.steps_at_start) as f64 / elapsed.max(1e-9),
-        })
+        }
     }
 
     /// Seeded randomness for callers that extend a step (object sampling).

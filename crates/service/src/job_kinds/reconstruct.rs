@@ -88,6 +88,7 @@ fn run_blocking(ctx: &JobContext) -> Result<(), JobFailure> {
     if config.deformation_from_scene && scene.is_dynamic() && config.train.deformation.is_none() {
         config.train.deformation = Some(Default::default());
     }
+    let setup_started = std::time::Instant::now();
     let mut trainer = match load_resume_point(ctx, CHECKPOINT_NAME)? {
         Some(checkpoint) => Trainer::resume(&gpu, &scene, &checkpoint).map_err(train_failure)?,
         None => Trainer::new(&gpu, &scene, config.train.clone(), None).map_err(train_failure)?,
@@ -97,9 +98,12 @@ fn run_blocking(ctx: &JobContext) -> Result<(), JobFailure> {
         gaussian_budget: trainer.gaussian_budget(),
         checkpoint_every: config.checkpoint_every,
     };
+    let setup_seconds = setup_started.elapsed().as_secs_f64();
     record_settings(ctx, &settings);
-    let training =
-        train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?;
+    let training = TrainingStageReport {
+        setup_seconds,
+        ..train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?
+    };
     finish(ctx, &scene, &mut trainer, training, settings)
 }
 

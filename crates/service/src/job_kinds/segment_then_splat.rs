@@ -13,6 +13,7 @@
 use std::collections::{BTreeMap, HashSet};
 use std::ops::ControlFlow;
 use std::sync::Arc;
+use std::time::Instant;
 
 use futures::future::BoxFuture;
 use serde::{Deserialize, Serialize};
@@ -238,6 +239,7 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
         background_shell: config.train.background_shell,
         ..SegmentedTrainingOptions::default()
     };
+    let setup_started = Instant::now();
     let mut trainer = match load_resume_point(ctx, CHECKPOINT_NAME)? {
         Some(checkpoint) => resume_segmented(&gpu, &scene, &checkpoint, &masks, &options)?,
         None => {
@@ -245,9 +247,12 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
                 .map_err(fatal)?
         }
     };
+    let setup_seconds = setup_started.elapsed().as_secs_f64();
     ctx.stop_requested()?;
-    let training =
-        train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?;
+    let training = TrainingStageReport {
+        setup_seconds,
+        ..train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?
+    };
     let objects = finish(ctx, &scene, &mut trainer, training, segmented, settings)?;
     let embeddings = embed_objects(ctx, &scene, &trainer, &masks, &objects)?;
     Ok((objects, embeddings))
@@ -344,6 +349,8 @@ fn masks_from(
     // One report per view segmented (the progress reporter estimates the stage's ETA), and a
     // stop noticed between views (and between a SAM model's batches, by `StopAware`).
     let stop = StopSignal::of(ctx);
+    let started = Instant::now();
+    let mut last_view_done = started;
     let (masks, association) = generated_view_masks_with_progress(
         scene,
         frames,
@@ -352,6 +359,7 @@ fn masks_from(
         &AssociationOptions::default(),
         |done| {
             if done > 0 {
+                last_view_done = Instant::now();
                 report(ctx, "segment", done as u64, views, &[]);
             }
             if stop.requested() {
@@ -363,7 +371,16 @@ fn masks_from(
     )
     .map_err(|error| stop_or(ctx, error, JobFailure::Fatal))?;
     let objects = association.levels.map(|level| level.objects);
-    merge_and_report(ctx, scene, config, masks, objects, &[])
+    // Where stage 1's time goes (issue 38, item 5): the views' masks, then their association
+    // across views (and the merge, timed in `merge_and_report`).
+    let timings = [
+        ("masks_seconds", (last_view_done - started).as_secs_f64()),
+        (
+            "association_seconds",
+            last_view_done.elapsed().as_secs_f64(),
+        ),
+    ];
+    merge_and_report(ctx, scene, config, masks, objects, &timings)
 }
 
 /// Stage 1's common end for generated masks: the lost-track merge, then the "segment" stage's
@@ -376,9 +393,13 @@ fn merge_and_report(
     objects: [usize; 3],
     extra: &[(&str, f64)],
 ) -> Result<(ViewMaskSet, SegmentFigures), JobFailure> {
+    let started = Instant::now();
     let merges = merge_lost_tracks(scene, &mut masks, &config.train, TrackMergeRule::default())
         .map_err(fatal)?;
-    let mut figures = vec![("lost_track_merges", merges.iter().sum::<usize>() as f64)];
+    let mut figures = vec![
+        ("lost_track_merges", merges.iter().sum::<usize>() as f64),
+        ("merge_seconds", started.elapsed().as_secs_f64()),
+    ];
     figures.extend_from_slice(extra);
     let figures = report_segmented(ctx, &masks, objects, &figures);
     Ok((masks, figures))

@@ -172,6 +172,11 @@ pub struct TrainingStageReport {
     /// adapter has no timestamp queries or the stage was too short to sample.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gpu_busy_fraction: Option<f64>,
+    /// Wall seconds of building the trainer before the stage (the initial model, the views'
+    /// images and masks on the GPU, the kernels), outside `seconds`: what a job waits between
+    /// its masks and its first step.
+    #[serde(default)]
+    pub setup_seconds: f64,
 }
 
 /// Steps timed with timestamp queries for [`TrainingStageReport::gpu_busy_fraction`]: few
@@ -311,6 +316,7 @@ fn train_stage(
             (host.buffers_created - checkpoint_host.buffers_created) as f64,
         ),
         gpu_busy_fraction,
+        setup_seconds: 0.0,
     })
 }
 

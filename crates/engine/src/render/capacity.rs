@@ -1,0 +1,90 @@
+//! The intersection capacity follows the renders' peak: read now ([`Renderer::sync_capacity`],
+//! for one-off renders), or without waiting ([`Renderer::request_capacity_check`] and
+//! [`Renderer::apply_capacity_check`], for the training loop, which must not drain the queue
+//! every few dozen steps to learn a number it can use a few steps late).
+
+use segsplat_gpu::GpuContext;
+
+use super::renderer::{RenderError, Renderer};
+
+/// What [`Renderer::sync_capacity`] found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CapacityReport {
+    /// Largest intersection count of any render since the previous sync (unclamped).
+    pub peak_intersections: u32,
+    /// Capacity renders use from now on.
+    pub capacity: u32,
+    /// Some render since the previous sync needed more intersections than its buffers held, so
+    /// it dropped tile entries (its image and gradients are approximate).
+    pub overflowed: bool,
+}
+
+/// Grow when the peak passes this fraction of the capacity.
+const GROW_AT_FRACTION: f64 = 0.8;
+/// New capacity = peak x this.
+const GROWTH_FACTOR: f64 = 1.5;
+impl Renderer {
+    /// Reads the peak intersection count of the renders since the last sync (one small
+    /// read-back; waits for submitted work), grows the capacity when the peak nears it, and
+    /// reports whether any of those renders overflowed.
+    pub fn sync_capacity(&mut self, ctx: &GpuContext) -> Result<CapacityReport, RenderError> {
+        let peak = ctx.read_vec::<u32>(&self.peak_intersections)?[0];
+        ctx.queue
+            .write_buffer(&self.peak_intersections, 0, bytemuck::bytes_of(&0u32));
+        let used = self
+            .smallest_capacity_used
+            .take()
+            .unwrap_or(self.intersection_capacity);
+        let overflowed = peak > used;
+        self.grow_for_peak(ctx, peak)?;
+        Ok(CapacityReport {
+            peak_intersections: peak,
+            capacity: self.intersection_capacity,
+            overflowed,
+        })
+    }
+
+    /// Records, with `encoder`, a copy of the peak for [`Self::apply_capacity_check`] and a
+    /// reset of the peak behind it; the caller submits `encoder` and then calls
+    /// [`Self::capacity_check_submitted`] with what this returned. `None` when the previous two
+    /// copies are still on their way (the peak keeps counting until the next request).
+    pub fn request_capacity_check(&mut self, encoder: &mut wgpu::CommandEncoder) -> Option<usize> {
+        let slot = self.peak_read.record(encoder, &self.peak_intersections)?;
+        encoder.clear_buffer(&self.peak_intersections, 0, None);
+        Some(slot)
+    }
+
+    /// See [`Self::request_capacity_check`].
+    pub fn capacity_check_submitted(&mut self, slot: usize) {
+        self.peak_read.after_submit(slot);
+    }
+
+    /// Grows the capacity for the newest peak the device has delivered, without waiting (a
+    /// peak not delivered yet is applied at a later call). The training loop's renders clamp
+    /// to their capacity, so one that overflowed in between dropped tile entries for a step:
+    /// the cost of not draining the queue, the same as between two blocking syncs.
+    pub fn apply_capacity_check(&mut self, ctx: &GpuContext) -> Result<(), RenderError> {
+        let Some(bytes) = self.peak_read.take(ctx)? else {
+            return Ok(());
+        };
+        let peak = bytemuck::pod_read_unaligned::<u32>(&bytes[..4]);
+        self.grow_for_peak(ctx, peak)
+    }
+
+    /// Grows the capacity to [`GROWTH_FACTOR`] x `peak` once `peak` passes
+    /// [`GROW_AT_FRACTION`] of it; an error when `peak` exceeds what the adapter can hold.
+    fn grow_for_peak(&mut self, ctx: &GpuContext, peak: u32) -> Result<(), RenderError> {
+        let limit = Self::max_intersections(ctx);
+        if peak as f64 > GROW_AT_FRACTION * self.intersection_capacity as f64 {
+            let grown = (peak as f64 * GROWTH_FACTOR).ceil() as u64;
+            if peak as u64 > limit {
+                return Err(RenderError::IntersectionsExceedAdapter {
+                    needed: peak as u64,
+                    limit,
+                });
+            }
+            self.set_intersection_capacity(grown.min(limit) as u32);
+        }
+        Ok(())
+    }
+}
