@@ -242,6 +242,19 @@ async fn segment_then_splat_job_stores_objects_at_three_levels() {
     assert_eq!(status, 200);
     let events = String::from_utf8_lossy(&events);
     assert!(events.contains("event: settings"), "{events}");
+    // Where the time before the first step went (issue 38, item 5): the masks, their
+    // association across views and the lost-track merge, then building the trainer.
+    let (_, stored) = client
+        .get_json(&format!("/v1/scenes/{unmasked_id}/trained/metrics.json"))
+        .await;
+    for field in ["masks_seconds", "association_seconds", "merge_seconds"] {
+        let seconds = stored["segment"][field].as_f64();
+        assert!(seconds.is_some_and(|s| s >= 0.0), "{field}: {stored}");
+    }
+    assert!(
+        stored["training"]["setup_seconds"].as_f64() > Some(0.0),
+        "{stored}"
+    );
     // The segmentation stage reports each view as it is segmented, not only its start and end.
     let steps = segment_steps(&client, &job_id).await;
     let train_views = steps.last().copied().unwrap_or_default();
