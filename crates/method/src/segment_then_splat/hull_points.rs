@@ -116,19 +116,8 @@ fn carve_object(
     depths: (f32, f32),
     fill: HullFill,
 ) -> Vec<Vec3> {
-    carve_object_with(
-        masks,
-        level,
-        object_id,
-        source_index,
-        depths,
-        fill,
-        inside_hull,
-    )
+    carve_object_with(masks, level, object_id, source_index, depths, fill, true)
 }
-
-/// Which test says a sample is inside the hull.
-type InsideTest = fn(&ViewMaskSet, usize, Level, u32, Vec3, HullFill) -> bool;
 
 fn carve_object_with(
     masks: &ViewMaskSet,
@@ -137,7 +126,7 @@ fn carve_object_with(
     source_index: usize,
     (near, far): (f32, f32),
     fill: HullFill,
-    inside_hull: InsideTest,
+    stop_early: bool,
 ) -> Vec<Vec3> {
     let source = &masks.views[source_index];
     let pixels: Vec<usize> = source
@@ -167,7 +156,15 @@ fn carve_object_with(
             let t = (sample as f32 + 0.5) / fill.depth_samples as f32;
             let depth = near + t * (far - near);
             let point = origin + direction * depth;
-            if inside_hull(masks, source_index, level, object_id, point, fill) {
+            if inside_hull(
+                masks,
+                source_index,
+                level,
+                object_id,
+                point,
+                fill,
+                stop_early,
+            ) {
                 kept.push(point);
             }
         }
@@ -177,9 +174,10 @@ fn carve_object_with(
 }
 
 /// Whether the views other than `source_index` that see `point` agree it is inside the mask.
-/// Stops as soon as the views left could not bring the agreement up to `fill.min_agreement`
-/// even if every one of them saw the point inside: most samples along a ray lie outside the
-/// object, and a handful of views settles that (the answer is the same as asking every view).
+/// With `stop_early`, stops as soon as the views left could not bring the agreement up to
+/// `fill.min_agreement` even if every one of them saw the point inside: most samples along a
+/// ray lie outside the object, and a handful of views settles that (the answer is the same as
+/// asking every view, which the tests check).
 fn inside_hull(
     masks: &ViewMaskSet,
     source_index: usize,
@@ -187,6 +185,7 @@ fn inside_hull(
     object_id: u32,
     point: Vec3,
     fill: HullFill,
+    stop_early: bool,
 ) -> bool {
     let others = masks.views.len() - usize::from(source_index < masks.views.len());
     let (mut seen, mut inside, mut asked) = (0usize, 0usize, 0usize);
@@ -199,7 +198,7 @@ fn inside_hull(
             seen += 1;
             inside += usize::from(view.id_near(level, position) == object_id);
             let left = others - asked;
-            if ((inside + left) as f32) < fill.min_agreement * (seen + left) as f32 {
+            if stop_early && ((inside + left) as f32) < fill.min_agreement * (seen + left) as f32 {
                 return false;
             }
         }
@@ -289,33 +288,11 @@ mod tests {
                     source_index,
                     depths,
                     fill,
-                    plain_inside_hull,
+                    false,
                 ));
             }
         }
         points
-    }
-
-    /// [`inside_hull`] asking every view.
-    fn plain_inside_hull(
-        masks: &ViewMaskSet,
-        source_index: usize,
-        level: Level,
-        object_id: u32,
-        point: Vec3,
-        fill: HullFill,
-    ) -> bool {
-        let (mut seen, mut inside) = (0usize, 0usize);
-        for (index, view) in masks.views.iter().enumerate() {
-            if index == source_index {
-                continue;
-            }
-            if let Some(position) = view.position_of_point(point) {
-                seen += 1;
-                inside += usize::from(view.id_near(level, position) == object_id);
-            }
-        }
-        seen >= fill.min_views && inside as f32 >= fill.min_agreement * seen as f32
     }
 
     /// A scene whose third sphere lost its sparse points, its masks, and its model with voted ids
