@@ -1,14 +1,15 @@
 #!/usr/bin/env bash
 # The REST contract against a live server (docs/service.md, "The contract"): starts
 # `segsplat serve` on 127.0.0.1 with a temporary data dir and a bearer token, trains a small
-# synthetic scene there (a short segment_then_splat job with the tiny test models), restarts the
-# server without workers on the same data, fetches the OpenAPI document it serves, validates it
+# synthetic scene there (a short segment_then_splat job with the tiny test models), downloads its
+# trained files through a client openapi-python-client generates from the served document,
+# restarts the server without workers on the same data, fetches the OpenAPI document, validates it
 # with openapi-spec-validator (OpenAPI 3.1), then runs schemathesis against the server for a
 # bounded time, with the operations on a scene or a job pointed at the trained scene and a
 # finished job (scripts/schemathesis.toml); any failure fails the script.
 #
 # Usage: bash scripts/contract.sh [MAX_EXAMPLES]   (default 30 generated cases per operation)
-# Both tools come from PyPI (scripts/bootstrap.sh pins them). Without them the script says so
+# The tools come from PyPI (scripts/bootstrap.sh pins them). Without them the script says so
 # and skips, except under CI=true, where a missing tool fails.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -17,7 +18,7 @@ max_examples=${1:-${SEGSPLAT_CONTRACT_EXAMPLES:-30}}
 # The whole schemathesis run stops after this many seconds, whatever is left.
 max_seconds=${SEGSPLAT_CONTRACT_SECONDS:-120}
 
-for tool in openapi-spec-validator schemathesis curl; do
+for tool in openapi-spec-validator schemathesis openapi-python-client curl; do
   if ! command -v "$tool" >/dev/null 2>&1; then
     if [ "${CI:-}" = "true" ]; then
       echo "contract: $tool is missing (scripts/bootstrap.sh installs it)" >&2
@@ -65,6 +66,19 @@ if [ "$state" != succeeded ]; then
   tail -n 50 "$work/server.log" >&2
   exit 1
 fi
+
+# A client generated from the served document downloads every trained file as what it is: the
+# JSON files parsed, the binary ones as bytes (scripts/trained_files_client.py; issue 41).
+echo "== generated client (openapi-python-client)"
+curl -fsS "$base/v1/openapi.json" -o "$work/openapi-trained.json"
+mkdir -p "$work/client"
+openapi-python-client generate --path "$work/openapi-trained.json" \
+  --output-path "$work/client/segsplat_client" --meta none >"$work/client.log" 2>&1 || {
+  echo "contract: openapi-python-client could not generate a client" >&2
+  cat "$work/client.log" >&2
+  exit 1
+}
+python3 scripts/trained_files_client.py "$work/client" "$base" "$token" "$scene"
 live_server_stop
 
 # API only (workers.enabled=false), on the same data: schemathesis queues jobs, which then stay

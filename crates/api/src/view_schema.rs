@@ -45,7 +45,11 @@ fn pose_view() -> serde_json::Value {
     let row = json!({"type": "array", "items": {"type": "number"}, "minItems": 4, "maxItems": 4});
     // The last row is exactly 0 0 0 1 (`pose_camera` compares it exactly); the rotation's
     // orthonormality, which JSON Schema cannot state, is in the description (else 400).
-    let last_row = json!({"type": "array", "minItems": 4, "maxItems": 4, "items": false,
+    // `items` (for elements after the four `prefixItems`, which `maxItems` rules out) as a
+    // schema, not `false`: client generators (openapi-python-client) do not read boolean
+    // schemas, and utoipa's array needs one.
+    let last_row = json!({"type": "array", "minItems": 4, "maxItems": 4,
+        "items": {"type": "number"},
         "prefixItems": [{"type": "number", "enum": [0]}, {"type": "number", "enum": [0]},
             {"type": "number", "enum": [0]}, {"type": "number", "enum": [1]}]});
     json!({
@@ -55,8 +59,8 @@ fn pose_view() -> serde_json::Value {
         "additionalProperties": false,
         "required": ["camera_to_world", "intrinsics"],
         "properties": {
-            "camera_to_world": {"type": "array", "minItems": 4, "maxItems": 4, "items": false,
-                "prefixItems": [row, row, row, last_row],
+            "camera_to_world": {"type": "array", "minItems": 4, "maxItems": 4, "items": row.clone(),
+                "prefixItems": [row.clone(), row.clone(), row, last_row],
                 "description": "row-major 4x4, OpenCV axes (x right, y down, z forward). Must \
                     be a rigid transform: the upper-left 3x3 a rotation (orthonormal within \
                     1e-3, determinant +1: no scale, shear or reflection), the last row exactly \
