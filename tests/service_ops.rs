@@ -148,6 +148,35 @@ async fn bearer_tokens_guard_rest_and_grpc_when_configured() {
             .status();
         assert_ne!(status.as_u16(), 401, "{open} must stay open");
     }
+    // `/readyz` is open, but only says whether the service is ready; its details (checks with
+    // server paths, reasons, adapters, workers) need a valid token (issue 41).
+    let readyz = |token: Option<&'static str>| {
+        let mut request = service.client.get(service.url("/readyz"));
+        if let Some(token) = token {
+            request = request.bearer_auth(token);
+        }
+        async move {
+            let response = request.send().await.unwrap();
+            let status = response.status().as_u16();
+            (status, response.json::<serde_json::Value>().await.unwrap())
+        }
+    };
+    for token in [None, Some("wrong")] {
+        let (status, body) = readyz(token).await;
+        assert_eq!(status, 503, "{body}");
+        let keys: Vec<&String> = body.as_object().unwrap().keys().collect();
+        assert_eq!(keys, ["ready"], "{token:?}: {body}");
+        assert_eq!(body["ready"], false);
+    }
+    let (status, body) = readyz(Some("s3cret")).await;
+    assert_eq!(status, 503, "{body}");
+    assert_eq!(body["checks"]["database"]["ok"], true, "{body}");
+    assert!(
+        body["reasons"]
+            .as_array()
+            .is_some_and(|reasons| !reasons.is_empty())
+    );
+    assert!(body["cluster"].is_object(), "{body}");
 
     let channel = grpc_channel(&service).await;
     let mut health = HealthClient::new(channel.clone());
