@@ -29,7 +29,8 @@ fn frame_view() -> serde_json::Value {
         "required": ["frame_index"],
         "properties": {
             "frame_index": {"type": "integer", "minimum": 0, "maximum": u32::MAX,
-                "description": "0-based in dataset order (`cameras.json`)"},
+                "description": "0-based in dataset order (`cameras.json`); one the scene \
+                    does not have is 400 (the scene's frame count is not in the schema)"},
             "max_side": {"type": ["integer", "null"], "minimum": 1, "maximum": u32::MAX,
                 "description": "the longest side of the mask in pixels (default and upper \
                     bound: the frame's size, and `query.max_mask_side`)"},
