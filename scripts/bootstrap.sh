@@ -6,8 +6,9 @@
 # - s3rver (npm registry), the S3-compatible server the object-store tests run against, and
 #   PostgreSQL (Debian's package), the database the Postgres store tests run against
 #   (scripts/test_servers.sh starts both);
-# - openapi-spec-validator and schemathesis (PyPI), which scripts/contract.sh runs against the
-#   REST API's document and a live server;
+# - openapi-spec-validator, schemathesis and openapi-python-client (PyPI), which
+#   scripts/contract.sh runs against the REST API's document and a live server (the last
+#   generates a Python client whose trained-file downloads it checks);
 # - Chromium (Debian's package) and playwright-core (npm), which scripts/console_e2e.sh uses to
 #   test the web console in a real browser;
 # - promtool (Debian's prometheus package, installed without its recommends), which
@@ -50,9 +51,10 @@ fi
 pip_version() { python3 -m pip show "$1" 2>/dev/null | sed -n 's/^Version: //p'; }
 if command -v python3 >/dev/null 2>&1; then
   if [ "$(pip_version openapi-spec-validator)" != "0.9.0" ] \
-    || [ "$(pip_version schemathesis)" != "4.32.5" ]; then
+    || [ "$(pip_version schemathesis)" != "4.32.5" ] \
+    || [ "$(pip_version openapi-python-client)" != "0.29.1" ]; then
     python3 -m pip install --quiet --disable-pip-version-check \
-      "openapi-spec-validator==0.9.0" "schemathesis==4.32.5" \
+      "openapi-spec-validator==0.9.0" "schemathesis==4.32.5" "openapi-python-client==0.29.1" \
       || echo "warning: could not install the contract tools; scripts/contract.sh needs them in CI" >&2
   fi
 fi

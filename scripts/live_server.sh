@@ -8,14 +8,20 @@
 #                     starts BINARY serve with its data dir in $work, free ports, the
 #                     variables given, and logs in $work/server.log; waits for /healthz, or
 #                     prints the log and exits 1 naming NAME.
+#   live_server_stop  stops that server (SIGTERM, waits); its data dir stays, so a server started
+#                     after it sees the same scenes and jobs.
 
 work=$(mktemp -d)
 server_pid=""
-live_server_cleanup() {
+live_server_stop() {
   if [ -n "$server_pid" ]; then
     kill "$server_pid" 2>/dev/null || true
     wait "$server_pid" 2>/dev/null || true
+    server_pid=""
   fi
+}
+live_server_cleanup() {
+  live_server_stop
   rm -rf "$work"
 }
 trap live_server_cleanup EXIT
@@ -36,7 +42,7 @@ live_server_start() {
     SEGSPLAT_HTTP_ADDR="127.0.0.1:$http_port" \
     SEGSPLAT_GRPC_ADDR="127.0.0.1:$grpc_port" \
     SEGSPLAT_LOG__LEVEL=warn \
-    "$@" "$binary" serve >"$work/server.log" 2>&1 &
+    "$@" "$binary" serve >>"$work/server.log" 2>&1 &
   server_pid=$!
   for _ in $(seq 1 240); do
     curl -fsS "$base/healthz" >/dev/null 2>&1 && return 0

@@ -47,6 +47,13 @@ async fn every_documented_family_is_exported_with_help_and_type() {
     grpc.list_scenes(segsplat_api::proto::ListScenesRequest {})
         .await
         .unwrap();
+    let missing = grpc
+        .get_scene(segsplat_api::proto::GetSceneRequest {
+            scene_id: "no-such-scene".to_string(),
+        })
+        .await
+        .unwrap_err();
+    assert_eq!(missing.code(), tonic::Code::NotFound);
 
     let response = service
         .client
@@ -129,6 +136,51 @@ async fn every_documented_family_is_exported_with_help_and_type() {
     );
     assert!(
         labelled("segsplat_mask_render_seconds", "rest", "error"),
+        "{text}"
+    );
+    // gRPC codes by their canonical names (issue 41: the label was the number, "5").
+    let grpc_code = |method: &str, code: &str| {
+        scrape.samples.iter().any(|sample| {
+            sample.metric == "segsplat_grpc_requests_total"
+                && sample.labels.get("method") == Some(method)
+                && sample.labels.get("code") == Some(code)
+        })
+    };
+    assert!(
+        grpc_code("/segsplat.v1.SceneQuery/ListScenes", "OK"),
+        "{text}"
+    );
+    assert!(
+        grpc_code("/segsplat.v1.SceneQuery/GetScene", "NOT_FOUND"),
+        "{text}"
+    );
+    assert!(
+        scrape
+            .samples
+            .iter()
+            .all(|sample| sample.metric != "segsplat_grpc_requests_total"
+                || sample
+                    .labels
+                    .get("code")
+                    .is_some_and(|code| code.chars().all(|c| c.is_ascii_uppercase() || c == '_'))),
+        "{text}"
+    );
+    // Job outcomes start at zero for each registered kind, not under a made-up kind "none".
+    let outcomes: Vec<_> = scrape
+        .samples
+        .iter()
+        .filter(|sample| sample.metric == "segsplat_job_outcomes_total")
+        .collect();
+    assert!(
+        outcomes
+            .iter()
+            .all(|sample| sample.labels.get("kind") == Some(STEPS_KIND)),
+        "{text}"
+    );
+    assert!(
+        outcomes
+            .iter()
+            .any(|sample| sample.labels.get("outcome") == Some("failed")),
         "{text}"
     );
     let build = scrape

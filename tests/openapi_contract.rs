@@ -194,6 +194,121 @@ fn check_document(document: &Value, auth: bool) {
     );
     let deleted = &document["paths"]["/v1/scenes/{id}"]["delete"]["responses"]["204"];
     assert!(deleted.get("content").is_none(), "{deleted}");
+
+    check_issue_41_schemas(document);
+    check_trained_files(document);
+}
+
+/// The trained version's files (issue 41, item 8): one operation per JSON file with its own
+/// schema, and the file route for the binary files only, as bytes; a generated client then
+/// parses the JSON files as JSON and hands the others back as bytes (scripts/contract.sh runs
+/// one against a trained scene).
+fn check_trained_files(document: &Value) {
+    let paths = &document["paths"];
+    let binary = &paths["/v1/scenes/{id}/trained/{file}"]["get"];
+    assert_eq!(binary["operationId"], "trained_file");
+    let content = binary["responses"]["200"]["content"].as_object().unwrap();
+    assert_eq!(
+        content.keys().collect::<Vec<_>>(),
+        ["application/octet-stream"],
+        "{binary}"
+    );
+    assert_eq!(
+        strings(&schema(document, "TrainedBinaryFileName")["enum"]),
+        ["scene.ply", "scene.spz", "labels.npy", "deformation.bin"]
+    );
+    for (file, operation_id, array_of) in [
+        ("cameras.json", "trained_cameras", Some("TrainedCamera")),
+        ("objects.json", "trained_objects", Some("TrainedObject")),
+        ("metrics.json", "trained_metrics", None),
+        (
+            "skipped_pairs.json",
+            "trained_skipped_pairs",
+            Some("SkippedFramePair"),
+        ),
+        ("deformation.json", "trained_deformation", None),
+    ] {
+        let operation = &paths[format!("/v1/scenes/{{id}}/trained/{file}")]["get"];
+        assert_eq!(operation["operationId"], operation_id, "{file}");
+        let content = operation["responses"]["200"]["content"]
+            .as_object()
+            .unwrap();
+        assert_eq!(
+            content.keys().collect::<Vec<_>>(),
+            ["application/json"],
+            "{file}"
+        );
+        let body = &content["application/json"]["schema"];
+        match array_of {
+            Some(item) => {
+                assert_eq!(body["type"], "array", "{file}: {body}");
+                assert_eq!(
+                    body["items"]["$ref"],
+                    format!("#/components/schemas/{item}"),
+                    "{file}"
+                );
+                assert!(schema(document, item)["required"].is_array(), "{item}");
+            }
+            None => assert_eq!(body["type"], "object", "{file}: {body}"),
+        }
+    }
+}
+
+/// What schemathesis found the document did not say (issue 41, item 9).
+fn check_issue_41_schemas(document: &Value) {
+    let operation = &document["paths"]["/v1/jobs/{id}/events"]["get"];
+    // Each Server-Sent Event is an object (id, event, data), the data a JobEvent as JSON; not
+    // `type: string`, which no event is.
+    let event = &operation["responses"]["200"]["content"]["text/event-stream"]["schema"];
+    assert_eq!(event["type"], "object", "{event}");
+    assert_eq!(strings(&event["required"]), ["id", "event", "data"]);
+    assert_eq!(
+        event["properties"]["data"]["contentSchema"]["$ref"],
+        "#/components/schemas/JobEvent"
+    );
+    // An empty or non-numeric `Last-Event-ID` is refused, and the document says both.
+    let last_event_id = operation["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|parameter| parameter["name"] == "Last-Event-ID")
+        .expect("Last-Event-ID is declared");
+    assert_eq!(last_event_id["in"], "header");
+    assert_eq!(
+        last_event_id["schema"],
+        json!({"type": "integer", "format": "int64", "minimum": 0})
+    );
+    assert!(operation["responses"]["400"].is_object());
+    // A job's config is an object or left out; `null` is not one.
+    let config = &schema(document, "CreateJobRequest")["properties"]["config"];
+    assert_eq!(config["type"], "object", "{config}");
+    // A free camera: the last row of its pose is 0 0 0 1, rigidity is stated, and the image
+    // side is bounded by this server's `query.max_mask_side`.
+    let shapes = schema(document, "ViewRequest")["oneOf"].as_array().unwrap();
+    let pose = &shapes[1]["properties"]["camera_to_world"];
+    let last_row: Vec<_> = pose["prefixItems"][3]["prefixItems"]
+        .as_array()
+        .expect("the last row is spelled out")
+        .iter()
+        .map(|value| value["enum"][0].as_f64().unwrap())
+        .collect();
+    assert_eq!(last_row, [0.0, 0.0, 0.0, 1.0], "{pose}");
+    assert_eq!(pose["maxItems"], 4, "{pose}");
+    assert!(
+        pose["description"].as_str().unwrap().contains("rigid"),
+        "{pose}"
+    );
+    let intrinsics = schema(document, "PinholeIntrinsics");
+    for side in ["width", "height"] {
+        assert_eq!(
+            intrinsics["properties"][side]["maximum"],
+            segsplat_service::serving::DEFAULT_MAX_MASK_SIDE,
+            "{side}"
+        );
+    }
+    // The mask PNG answers 400 for a frame index past the scene's frames.
+    let png = &document["paths"]["/v1/scenes/{id}/objects/{level}/{object_id}/mask.png"]["get"];
+    assert!(png["responses"]["400"].is_object());
 }
 
 #[tokio::test]
@@ -336,6 +451,19 @@ async fn framework_rejections_answer_in_the_error_envelope() {
             json(br#"{"text": "x", "top_k": 2.0}"#),
             (404, "not_found", "scene"),
         ),
+        // `config` is an object or left out (issue 41): `null` was taken as the defaults.
+        refused(
+            Method::POST,
+            "/v1/scenes/s/jobs",
+            json(br#"{"kind": "steps", "config": null}"#),
+            (422, "invalid_input", "config"),
+        ),
+        refused(
+            Method::POST,
+            "/v1/scenes/s/jobs",
+            json(br#"{"kind": "steps", "config": [1]}"#),
+            (422, "invalid_input", "config"),
+        ),
         refused(
             Method::GET,
             "/v1/nowhere",
@@ -367,6 +495,43 @@ async fn framework_rejections_answer_in_the_error_envelope() {
         if status == 405 {
             let allow = allow.unwrap_or_default();
             assert!(allow.contains("GET") && allow.contains("POST"), "{allow}");
+        }
+    }
+    service.shutdown().await;
+}
+
+/// `Last-Event-ID` must be an event id: empty or not a whole number from 0 is a 400 (issue 41),
+/// not "from the start". A good one reaches the job lookup.
+#[tokio::test]
+async fn a_bad_last_event_id_is_refused() {
+    let (_dir, service) = start(true).await;
+    for (value, status) in [
+        ("", 400),
+        ("null", 400),
+        ("abc", 400),
+        ("-1", 400),
+        ("1.5", 400),
+        ("7", 404),
+    ] {
+        let response = service
+            .client
+            .get(service.url("/v1/jobs/nosuchjob/events"))
+            .bearer_auth(TOKEN)
+            .header("last-event-id", value)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(response.status().as_u16(), status, "{value:?}");
+        let body: Value = response.json().await.unwrap();
+        if status == 400 {
+            assert_eq!(body["error"]["code"], "bad_request", "{body}");
+            assert!(
+                body["error"]["message"]
+                    .as_str()
+                    .unwrap()
+                    .contains("Last-Event-ID"),
+                "{body}"
+            );
         }
     }
     service.shutdown().await;

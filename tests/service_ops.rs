@@ -148,6 +148,35 @@ async fn bearer_tokens_guard_rest_and_grpc_when_configured() {
             .status();
         assert_ne!(status.as_u16(), 401, "{open} must stay open");
     }
+    // `/readyz` is open, but only says whether the service is ready; its details (checks with
+    // server paths, reasons, adapters, workers) need a valid token (issue 41).
+    let readyz = |token: Option<&'static str>| {
+        let mut request = service.client.get(service.url("/readyz"));
+        if let Some(token) = token {
+            request = request.bearer_auth(token);
+        }
+        async move {
+            let response = request.send().await.unwrap();
+            let status = response.status().as_u16();
+            (status, response.json::<serde_json::Value>().await.unwrap())
+        }
+    };
+    for token in [None, Some("wrong")] {
+        let (status, body) = readyz(token).await;
+        assert_eq!(status, 503, "{body}");
+        let keys: Vec<&String> = body.as_object().unwrap().keys().collect();
+        assert_eq!(keys, ["ready"], "{token:?}: {body}");
+        assert_eq!(body["ready"], false);
+    }
+    let (status, body) = readyz(Some("s3cret")).await;
+    assert_eq!(status, 503, "{body}");
+    assert_eq!(body["checks"]["database"]["ok"], true, "{body}");
+    assert!(
+        body["reasons"]
+            .as_array()
+            .is_some_and(|reasons| !reasons.is_empty())
+    );
+    assert!(body["cluster"].is_object(), "{body}");
 
     let channel = grpc_channel(&service).await;
     let mut health = HealthClient::new(channel.clone());
@@ -175,45 +204,90 @@ async fn bearer_tokens_guard_rest_and_grpc_when_configured() {
         .insert("authorization", "Bearer s3cret".parse().unwrap());
     assert!(client.list_scenes(request).await.is_ok());
 
-    // Reflection describes the API: behind the token too.
+    // Reflection describes the API (no tenant's data): open, like health, so grpcurl can
+    // resolve a health check without a token (issue 41). The rest stays behind the token.
     use tonic_reflection::pb::v1::ServerReflectionRequest;
     use tonic_reflection::pb::v1::server_reflection_client::ServerReflectionClient;
     use tonic_reflection::pb::v1::server_reflection_request::MessageRequest;
-    let list_services = || {
-        tokio_stream::iter(vec![ServerReflectionRequest {
-            host: String::new(),
-            message_request: Some(MessageRequest::ListServices(String::new())),
-        }])
+    use tonic_reflection::pb::v1::server_reflection_response::MessageResponse as V1Response;
+    let ask = |message: MessageRequest| ServerReflectionRequest {
+        host: String::new(),
+        message_request: Some(message),
     };
     let mut reflection = ServerReflectionClient::new(channel.clone());
-    let denied = reflection
-        .server_reflection_info(list_services())
-        .await
-        .unwrap_err();
-    assert_eq!(denied.code(), tonic::Code::Unauthenticated);
-    let mut request = tonic::Request::new(list_services());
-    request
-        .metadata_mut()
-        .insert("authorization", "Bearer s3cret".parse().unwrap());
+    // An unknown symbol is answered inside the stream (ErrorResponse, NOT_FOUND), and the
+    // stream goes on: the next questions are answered too.
+    let requests = tokio_stream::iter(vec![
+        ask(MessageRequest::FileContainingSymbol(
+            "segsplat.v1.NoSuchService".to_string(),
+        )),
+        ask(MessageRequest::ListServices(String::new())),
+        ask(MessageRequest::FileContainingSymbol(
+            "grpc.health.v1.Health".to_string(),
+        )),
+        ask(MessageRequest::FileByFilename("nowhere.proto".to_string())),
+        ask(MessageRequest::FileContainingSymbol(
+            "segsplat.v1.SceneQuery.Query".to_string(),
+        )),
+    ]);
     let mut answers = reflection
-        .server_reflection_info(request)
+        .server_reflection_info(requests)
         .await
-        .unwrap()
+        .expect("reflection needs no token")
         .into_inner();
-    assert!(answers.message().await.unwrap().is_some());
+    macro_rules! next {
+        () => {
+            answers
+                .message()
+                .await
+                .expect("the stream goes on")
+                .expect("an answer per question")
+                .message_response
+                .expect("a response")
+        };
+    }
+    let V1Response::ErrorResponse(unknown) = next!() else {
+        panic!("an unknown symbol is an in-stream error");
+    };
+    assert_eq!(unknown.error_code, tonic::Code::NotFound as i32);
+    assert!(
+        unknown.error_message.contains("NoSuchService"),
+        "{unknown:?}"
+    );
+    let V1Response::ListServicesResponse(listed) = next!() else {
+        panic!("services are listed after an error");
+    };
+    let names: Vec<&str> = listed.service.iter().map(|s| s.name.as_str()).collect();
+    for expected in [
+        "segsplat.v1.SceneQuery",
+        "grpc.health.v1.Health",
+        "grpc.reflection.v1.ServerReflection",
+        "grpc.reflection.v1alpha.ServerReflection",
+    ] {
+        assert!(names.contains(&expected), "{names:?}");
+    }
+    let V1Response::FileDescriptorResponse(health_file) = next!() else {
+        panic!("the health service resolves");
+    };
+    assert!(!health_file.file_descriptor_proto.is_empty());
+    assert!(matches!(next!(), V1Response::ErrorResponse(_)));
+    let V1Response::FileDescriptorResponse(api_file) = next!() else {
+        panic!("a method resolves to its file");
+    };
+    use prost::Message as _;
+    let file =
+        prost_types::FileDescriptorProto::decode(&api_file.file_descriptor_proto[0][..]).unwrap();
+    assert_eq!(file.package(), "segsplat.v1");
 
     // The older v1alpha protocol too, which many clients still speak.
     use tonic_reflection::pb::v1alpha::ServerReflectionRequest as AlphaRequest;
     use tonic_reflection::pb::v1alpha::server_reflection_client::ServerReflectionClient as Alpha;
     use tonic_reflection::pb::v1alpha::server_reflection_request::MessageRequest as AlphaMessage;
     use tonic_reflection::pb::v1alpha::server_reflection_response::MessageResponse;
-    let mut request = tonic::Request::new(tokio_stream::iter(vec![AlphaRequest {
+    let request = tonic::Request::new(tokio_stream::iter(vec![AlphaRequest {
         host: String::new(),
         message_request: Some(AlphaMessage::ListServices(String::new())),
     }]));
-    request
-        .metadata_mut()
-        .insert("authorization", "Bearer s3cret".parse().unwrap());
     let mut answers = Alpha::new(channel.clone())
         .server_reflection_info(request)
         .await

@@ -424,6 +424,7 @@ async fn segment_then_splat_embeds_objects_and_answers_text_queries() {
     assert_eq!(status, 400, "{body}");
 
     stream_query_answers_each_pose(&client, scene_id).await;
+    bad_views_are_refused_when_nothing_matches(&client, scene_id).await;
     client.shutdown().await;
 
     // `segsplat query` on the same data dir: the answer as JSON, masks as PNGs.
@@ -534,6 +535,76 @@ async fn stream_query_answers_each_pose(client: &TestService, scene_id: &str) {
     let error = replies.message().await.unwrap_err();
     assert_eq!(error.code(), tonic::Code::InvalidArgument, "{error}");
     assert!(error.message().contains("16 values"), "{error}");
+}
+
+/// A query whose text matches nothing still has its view checked (issue 41): a pose that is not
+/// rigid, or a frame the scene lacks, is a bad request (REST 400, gRPC INVALID_ARGUMENT), not
+/// "no match"; a good view with the same text is answered "no match".
+async fn bad_views_are_refused_when_nothing_matches(client: &TestService, scene_id: &str) {
+    use segsplat_api::proto;
+    let query_path = format!("/v1/scenes/{scene_id}/query");
+    let intrinsics = serde_json::json!({"fx": 80.0, "fy": 80.0, "cx": 48.0, "cy": 36.0, "width": 96, "height": 72});
+    let scaled = serde_json::json!([[2.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, 0], [0, 0, 0, 1]]);
+    let identity =
+        serde_json::json!([[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, 0], [0, 0, 0, 1]]);
+    let asked = |view: serde_json::Value| serde_json::json!({"text": "a chair", "granularity": "small", "view": view});
+    for (view, mentions) in [
+        (
+            serde_json::json!({"camera_to_world": scaled, "intrinsics": intrinsics}),
+            "rigid",
+        ),
+        (serde_json::json!({"frame_index": 900}), "900"),
+    ] {
+        let (status, body) = client.post_json(&query_path, asked(view)).await;
+        assert_eq!(status, 400, "{body}");
+        assert!(
+            body["error"]["message"]
+                .as_str()
+                .unwrap()
+                .contains(mentions),
+            "{body}"
+        );
+    }
+    let good = serde_json::json!({"camera_to_world": identity, "intrinsics": intrinsics});
+    let (status, body) = client.post_json(&query_path, asked(good)).await;
+    assert_eq!(status, 200, "{body}");
+    assert_eq!(body["matched"], false, "{body}");
+
+    let mut grpc = client.grpc().await;
+    let request = |rows: Vec<f64>| proto::QueryRequest {
+        scene_id: scene_id.to_string(),
+        text: "a chair".to_string(),
+        granularity: proto::Granularity::Small as i32,
+        top_k: 1,
+        view: Some(proto::View {
+            source: Some(proto::view::Source::Pose(proto::PoseView {
+                pose: Some(proto::Pose {
+                    camera_to_world: rows,
+                }),
+                intrinsics: Some(proto::Intrinsics {
+                    fx: 80.0,
+                    fy: 80.0,
+                    cx: 48.0,
+                    cy: 36.0,
+                    width: 96,
+                    height: 72,
+                }),
+            })),
+            ..Default::default()
+        }),
+        mask_encoding: proto::MaskEncoding::Png as i32,
+        ..Default::default()
+    };
+    let mut rows = vec![0.0; 16];
+    for (index, value) in [(0, 2.0), (5, 1.0), (10, 1.0), (15, 1.0)] {
+        rows[index] = value;
+    }
+    let refused = grpc.query(request(rows.clone())).await.unwrap_err();
+    assert_eq!(refused.code(), tonic::Code::InvalidArgument, "{refused}");
+    assert!(refused.message().contains("rigid"), "{refused}");
+    rows[0] = 1.0;
+    let answered = grpc.query(request(rows)).await.unwrap().into_inner();
+    assert!(answered.no_match, "{answered:?}");
 }
 
 /// `masks: "propagated"`: SAM automatic masks on the first view carried through the others by

@@ -277,6 +277,24 @@ async function main() {
     assert.ok(await page.locator("#grafana-link").isVisible(), "the Grafana link is shown when configured");
     const ready = await page.textContent("#status-facts");
     assert.ok(ready.includes("Workers"), ready);
+    // With the token the page gets /readyz's details (without one, /readyz says only whether
+    // the service is ready).
+    assert.ok(!ready.includes("details need a token"), ready);
+    assert.ok(ready.includes("reachable"), ready);
+    // Workers are alive here: no warning. Jobs queued with no live worker warn (issue 41: the
+    // page said "Ready: yes" and nothing else), whatever readiness says.
+    assert.ok(await page.locator("#status-warning").isHidden(), "no warning while workers are alive");
+    const warnings = await page.evaluate(async () => {
+      const { queueWarning } = await import("/console/status.js");
+      const series = (pairs) => pairs.map(([state, value]) => [{ state }, value]);
+      return [
+        queueWarning(series([["queued", 2], ["running", 0]]), series([["busy", 0], ["idle", 0], ["silent", 1]])),
+        queueWarning(series([["queued", 2]]), series([["busy", 0], ["idle", 1], ["silent", 0]])),
+        queueWarning(series([["queued", 0]]), series([["busy", 0], ["idle", 0], ["silent", 0]])),
+      ];
+    });
+    assert.ok(warnings[0].startsWith("2 jobs queued and no worker is alive (1 silent"), warnings[0]);
+    assert.deepEqual(warnings.slice(1), ["", ""]);
     await shot(page, "07-status");
 
     step("delete running");

@@ -14,7 +14,10 @@ use utoipa::IntoParams;
 use super::error::{ApiError, ApiResult, ErrorBody};
 use super::extract::{Query, UrlPath};
 use super::params::{parse_level, parse_time};
-use super::schema_names::{BinaryFile, LevelName, TimeValue};
+use super::schema_names::{
+    BinaryFile, LevelName, SkippedFramePair, TimeValue, TrainedBinaryFileName, TrainedCamera,
+    TrainedObject,
+};
 use super::state::AppState;
 use segsplat_method::scene_files::SCENE_FILE;
 use segsplat_service::serving::SplatFormat;
@@ -53,18 +56,24 @@ pub struct TrainedFileParams {
     pub time: Option<f64>,
 }
 
+/// A binary file of the trained version. The same route serves the JSON files too (their URLs
+/// are the same), but the document gives each of those its own operation and schema, so that a
+/// generated client parses JSON as JSON and hands bytes back as bytes: one operation answering
+/// both, as before issue 41, made clients parse `scene.ply` as JSON (the first media type
+/// listed) and gave the JSON arrays an object schema.
 #[utoipa::path(get, path = "/v1/scenes/{id}/trained/{file}", tag = "objects",
     params(("id" = String, Path, description = "scene id"),
-           ("file" = String, Path, description = "scene.ply, scene.spz (compressed, encoded on \
-             request), labels.npy, cameras.json, objects.json, metrics.json, skipped_pairs.json, \
-             deformation.json or deformation.bin"),
+           ("file" = TrainedBinaryFileName, Path, description = "scene.ply, scene.spz \
+             (compressed, encoded on request), labels.npy or deformation.bin (dynamic scenes); \
+             the JSON files have their own operations"),
            TrainedFileParams),
-    responses((status = 200, description = "the file: JSON for the `.json` files, bytes for the others",
-               content((BinaryFile = "application/octet-stream"), (Object = "application/json"))),
+    responses((status = 200, description = "the file's bytes",
+               content_type = "application/octet-stream", body = BinaryFile),
               (status = 400, description = "a time that is not a number or out of range, a time \
                with a file other than scene.ply or scene.spz, or a time for a static scene",
                body = ErrorBody),
-              (status = 404, description = "unknown scene or file", body = ErrorBody),
+              (status = 404, description = "unknown scene, or a file this scene's trained \
+               version does not have (deformation.bin for a static scene)", body = ErrorBody),
               (status = 409, description = "the scene is not trained yet", body = ErrorBody),
               (status = 503, description = "with a time: no GPU to move the Gaussians on",
                body = ErrorBody)))]
@@ -74,11 +83,99 @@ pub async fn trained_file(
     UrlPath((id, file)): UrlPath<(String, String)>,
     Query(params): Query<TrainedFileParams>,
 ) -> ApiResult<Response> {
-    if let Some(time) = parse_time(params.time)? {
-        return scene_at_time(&state, &caller, &id, &file, time).await;
-    }
-    stored_file(&state, &caller, &id, &file).await
+    trained(&state, &caller, &id, &file, params).await
 }
+
+async fn trained(
+    state: &AppState,
+    caller: &Caller,
+    id: &str,
+    file: &str,
+    params: TrainedFileParams,
+) -> ApiResult<Response> {
+    if let Some(time) = parse_time(params.time)? {
+        return scene_at_time(state, caller, id, file, time).await;
+    }
+    stored_file(state, caller, id, file).await
+}
+
+/// Declares the operation of one JSON file of the trained version: the same handler as
+/// `trained_file` with the file's name fixed, documented with that file's schema. `time` is
+/// not a parameter of theirs (it moves Gaussians); sent anyway, it is a 400 as it always was.
+macro_rules! trained_json_file {
+    ($(#[$doc:meta])* $name:ident, $path:literal, $file:literal, $body:tt, $what:literal,
+     $missing:literal) => {
+        $(#[$doc])*
+        #[utoipa::path(get, path = $path, tag = "objects",
+            params(("id" = String, Path, description = "scene id")),
+            responses((status = 200, description = $what, body = $body),
+                      (status = 400, description = "a `time` query parameter: it applies to \
+                       scene.ply and scene.spz only", body = ErrorBody),
+                      (status = 404, description = $missing, body = ErrorBody),
+                      (status = 409, description = "the scene is not trained yet",
+                       body = ErrorBody)))]
+        pub async fn $name(
+            State(state): State<AppState>,
+            Extension(caller): Extension<Caller>,
+            UrlPath(id): UrlPath<String>,
+            Query(params): Query<TrainedFileParams>,
+        ) -> ApiResult<Response> {
+            trained(&state, &caller, &id, $file, params).await
+        }
+    };
+}
+
+trained_json_file!(
+    /// `cameras.json`: the trained version's cameras in frame order (what a frame index means).
+    trained_cameras,
+    "/v1/scenes/{id}/trained/cameras.json",
+    "cameras.json",
+    [TrainedCamera],
+    "the cameras, in frame order",
+    "unknown scene"
+);
+
+trained_json_file!(
+    /// `objects.json`: every object the segment_then_splat job found.
+    trained_objects,
+    "/v1/scenes/{id}/trained/objects.json",
+    "objects.json",
+    [TrainedObject],
+    "the objects, by level then id",
+    "unknown scene, or a scene trained by a reconstruct job (it finds no objects)"
+);
+
+trained_json_file!(
+    /// `metrics.json`: the training report.
+    trained_metrics,
+    "/v1/scenes/{id}/trained/metrics.json",
+    "metrics.json",
+    Object,
+    "the job's report: steps, Gaussians, timings, held-out quality and the settings it ran \
+     with; its fields depend on the job kind",
+    "unknown scene"
+);
+
+trained_json_file!(
+    /// `skipped_pairs.json`: the (frame, object) pairs the object loss left out.
+    trained_skipped_pairs,
+    "/v1/scenes/{id}/trained/skipped_pairs.json",
+    "skipped_pairs.json",
+    [SkippedFramePair],
+    "the frame and object pairs the object loss skipped (masks it could not trust)",
+    "unknown scene, or a scene trained by a reconstruct job"
+);
+
+trained_json_file!(
+    /// `deformation.json`: a dynamic scene's deformation field header.
+    trained_deformation,
+    "/v1/scenes/{id}/trained/deformation.json",
+    "deformation.json",
+    Object,
+    "the deformation field's header: its shape, time range and where its weights lie in \
+     deformation.bin",
+    "unknown scene, or a static scene (it has no field)"
+);
 
 /// `scene.ply` or `scene.spz` with the Gaussians where the deformation field puts them at `time`.
 async fn scene_at_time(

@@ -32,6 +32,34 @@ fn ahead_of_tonic(timeout: Duration) -> Duration {
     (timeout / 10).clamp(Duration::from_millis(1), Duration::from_millis(20))
 }
 
+/// The canonical name of a `grpc-status` value (`NOT_FOUND` for `5`), as gRPC's own docs and
+/// other servers' metrics spell it; none is `OK`, an unknown value `UNKNOWN` (so a peer cannot
+/// grow the label set).
+pub fn code_name(status: Option<&str>) -> &'static str {
+    let Some(status) = status else {
+        return "OK";
+    };
+    match status.parse::<i32>().map(tonic::Code::from) {
+        Ok(tonic::Code::Ok) => "OK",
+        Ok(tonic::Code::Cancelled) => "CANCELLED",
+        Ok(tonic::Code::InvalidArgument) => "INVALID_ARGUMENT",
+        Ok(tonic::Code::DeadlineExceeded) => "DEADLINE_EXCEEDED",
+        Ok(tonic::Code::NotFound) => "NOT_FOUND",
+        Ok(tonic::Code::AlreadyExists) => "ALREADY_EXISTS",
+        Ok(tonic::Code::PermissionDenied) => "PERMISSION_DENIED",
+        Ok(tonic::Code::ResourceExhausted) => "RESOURCE_EXHAUSTED",
+        Ok(tonic::Code::FailedPrecondition) => "FAILED_PRECONDITION",
+        Ok(tonic::Code::Aborted) => "ABORTED",
+        Ok(tonic::Code::OutOfRange) => "OUT_OF_RANGE",
+        Ok(tonic::Code::Unimplemented) => "UNIMPLEMENTED",
+        Ok(tonic::Code::Internal) => "INTERNAL",
+        Ok(tonic::Code::Unavailable) => "UNAVAILABLE",
+        Ok(tonic::Code::DataLoss) => "DATA_LOSS",
+        Ok(tonic::Code::Unauthenticated) => "UNAUTHENTICATED",
+        Ok(tonic::Code::Unknown) | Err(_) => "UNKNOWN",
+    }
+}
+
 #[derive(Debug, Clone, Copy, Default)]
 pub struct GrpcCallLayer;
 
@@ -112,15 +140,15 @@ where
                 }
             };
             // Unary errors come as headers-only responses; a stream's final status is in its
-            // trailers, after this layer, so it counts as `0` here.
+            // trailers, after this layer, so it counts as `OK` here.
             let code = match &result {
-                Ok(response) => response
-                    .headers()
-                    .get("grpc-status")
-                    .and_then(|value| value.to_str().ok())
-                    .unwrap_or("0")
-                    .to_string(),
-                Err(_) => "transport".to_string(),
+                Ok(response) => code_name(
+                    response
+                        .headers()
+                        .get("grpc-status")
+                        .and_then(|value| value.to_str().ok()),
+                ),
+                Err(_) => "transport",
             };
             metrics::counter!("segsplat_grpc_requests_total", "method" => method.clone(),
                 "code" => code)
@@ -135,6 +163,17 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn codes_are_labelled_by_their_canonical_names() {
+        assert_eq!(code_name(None), "OK");
+        assert_eq!(code_name(Some("0")), "OK");
+        assert_eq!(code_name(Some("3")), "INVALID_ARGUMENT");
+        assert_eq!(code_name(Some("5")), "NOT_FOUND");
+        assert_eq!(code_name(Some("16")), "UNAUTHENTICATED");
+        assert_eq!(code_name(Some("99")), "UNKNOWN");
+        assert_eq!(code_name(Some("x")), "UNKNOWN");
+    }
 
     #[test]
     fn grpc_timeouts_parse_by_the_spec() {

@@ -10,7 +10,7 @@ use futures::{Stream, StreamExt};
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
-use super::error::{ApiResult, ErrorBody};
+use super::error::{ApiError, ApiResult, ErrorBody};
 use super::extract::{JsonBody, Query, UrlPath};
 use super::schema_names::{JobStateFilter, JobStateName};
 use super::state::AppState;
@@ -23,10 +23,22 @@ use segsplat_service::usecases::jobs::{self, Cancelled};
 pub struct CreateJobRequest {
     /// A job kind this server has registered (the served document lists them).
     pub kind: String,
-    /// Kind-specific settings, validated by the kind's handler.
-    #[serde(default)]
+    /// Kind-specific settings, validated by the kind's handler; absent: the kind's defaults.
+    /// An object when given (`null` or any other JSON type is refused with 422).
+    #[serde(default, deserialize_with = "config_object")]
     #[schema(value_type = Object)]
-    pub config: serde_json::Value,
+    pub config: Option<serde_json::Map<String, serde_json::Value>>,
+}
+
+/// `config`, when present, must be an object: `null` is not "the defaults" (leave the field out
+/// for those), and the schema says `type: object`.
+fn config_object<'de, D>(
+    deserializer: D,
+) -> Result<Option<serde_json::Map<String, serde_json::Value>>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+{
+    serde_json::Map::deserialize(deserializer).map(Some)
 }
 
 #[derive(Debug, Serialize, ToSchema)]
@@ -118,14 +130,10 @@ pub async fn create_job(
     UrlPath(scene_id): UrlPath<String>,
     JsonBody(request): JsonBody<CreateJobRequest>,
 ) -> ApiResult<(StatusCode, HeaderMap, Json<JobResponse>)> {
-    let job = jobs::create_job(
-        &state.core,
-        &caller,
-        &scene_id,
-        &request.kind,
-        &request.config,
-    )
-    .await?;
+    let config = request
+        .config
+        .map_or(serde_json::Value::Null, serde_json::Value::Object);
+    let job = jobs::create_job(&state.core, &caller, &scene_id, &request.kind, &config).await?;
     let mut headers = HeaderMap::new();
     if let Ok(location) = format!("/v1/jobs/{}", job.id).parse() {
         headers.insert(header::LOCATION, location);
@@ -184,11 +192,14 @@ pub async fn cancel_job(
 /// (`state`, `progress`, `cancel_requested`); ids allow resuming with `Last-Event-ID`.
 #[utoipa::path(get, path = "/v1/jobs/{id}/events", tag = "jobs",
     params(("id" = String, Path, description = "job id"),
-        ("Last-Event-ID" = Option<i64>, Header,
-            description = "resume after this event id (the `id:` of the last event received)")),
+        ("Last-Event-ID" = Option<i64>, Header, minimum = 0,
+            description = "resume after this event id (the `id:` of the last event received); \
+                anything but a whole number from 0 is refused with 400")),
     responses((status = 200, description = "Server-Sent Events, one per job event: `id:` the \
             event id, `event:` its kind, `data:` a JSON `JobEvent`",
             content_type = "text/event-stream", body = String),
+        (status = 400, description = "`Last-Event-ID` is not a whole number from 0",
+            body = ErrorBody),
         (status = 404, description = "no such job (for this caller)", body = ErrorBody)))]
 pub async fn job_events(
     State(state): State<AppState>,
@@ -196,11 +207,10 @@ pub async fn job_events(
     UrlPath(id): UrlPath<String>,
     headers: HeaderMap,
 ) -> ApiResult<Sse<impl Stream<Item = Result<Event, Infallible>>>> {
-    let resume_after = headers
-        .get("last-event-id")
-        .and_then(|value| value.to_str().ok())
-        .and_then(|value| value.parse::<i64>().ok())
-        .unwrap_or(0);
+    let resume_after = match headers.get("last-event-id") {
+        None => 0,
+        Some(value) => parse_last_event_id(value.as_bytes())?,
+    };
     let events = jobs::follow_job_events(
         &state.core,
         &caller,
@@ -210,6 +220,20 @@ pub async fn job_events(
     )
     .await?;
     Ok(Sse::new(events.map(sse_event)).keep_alive(KeepAlive::default()))
+}
+
+/// `Last-Event-ID`: an event id, a whole number from 0 (an id this server sent, or 0 for all).
+/// Anything else, the empty value included, is refused rather than read as "from the start".
+fn parse_last_event_id(value: &[u8]) -> Result<i64, ApiError> {
+    std::str::from_utf8(value)
+        .ok()
+        .filter(|text| !text.is_empty() && text.bytes().all(|byte| byte.is_ascii_digit()))
+        .and_then(|text| text.parse::<i64>().ok())
+        .ok_or_else(|| {
+            ApiError::bad_request(
+                "Last-Event-ID: give the id of the last event received (a whole number from 0)",
+            )
+        })
 }
 
 /// One job event: the `data:` of each Server-Sent Event of `GET /v1/jobs/{id}/events`.

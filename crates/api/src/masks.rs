@@ -243,7 +243,8 @@ pub async fn render_masks(
 
 #[derive(Debug, Deserialize, IntoParams)]
 pub struct MaskPngParams {
-    /// Frame index, 0-based in dataset order.
+    /// Frame index, 0-based in dataset order (`cameras.json`); one the scene does not have
+    /// is 400 (the scene's frame count is not in the schema).
     #[param(maximum = 4294967295_u64)]
     pub frame_index: u32,
     /// Longest side in pixels (default: the frame's size).

@@ -60,8 +60,10 @@ pub async fn track_requests(request: Request, next: Next) -> Response {
 
 /// Registers the series dashboards and alerts need before anything happened, at zero: a
 /// counter nobody incremented yet (no lease has expired) is exported as 0, not missing, so
-/// `rate()` and alert expressions work from the first scrape.
-pub fn register_zero_series() {
+/// `rate()` and alert expressions work from the first scrape. Job outcomes get a series per
+/// registered job kind (`kinds`) and outcome: before issue 41 they were registered once under
+/// `kind="none"`, a kind no job has, which showed up in every breakdown by kind.
+pub fn register_zero_series(kinds: &[&str]) {
     describe_families();
     metrics::counter!("segsplat_job_leases_expired_total").increment(0);
     metrics::gauge!("segsplat_scene_cache_bytes").increment(0.0);
@@ -74,8 +76,11 @@ pub fn register_zero_series() {
         "handed_back",
         "lease_lost",
     ] {
-        metrics::counter!("segsplat_job_outcomes_total", "kind" => "none", "outcome" => outcome)
+        for kind in kinds {
+            metrics::counter!("segsplat_job_outcomes_total", "kind" => kind.to_string(),
+                "outcome" => outcome)
             .increment(0);
+        }
     }
     for outcome in ["stored", "rejected"] {
         metrics::counter!("segsplat_scene_uploads_total", "outcome" => outcome).increment(0);

@@ -30,6 +30,11 @@ use super::{error, exports, jobs, masks, objects, ops, query, scenes, schema_nam
         masks::render_masks,
         masks::object_mask_png,
         exports::trained_file,
+        exports::trained_cameras,
+        exports::trained_objects,
+        exports::trained_metrics,
+        exports::trained_skipped_pairs,
+        exports::trained_deformation,
         exports::object_ply,
         exports::object_spz,
         workers::list_workers,
@@ -66,6 +71,10 @@ use super::{error, exports, jobs, masks, objects, ops, query, scenes, schema_nam
         ops::ClusterWorkers,
         // Referenced from parameters and annotations, which utoipa does not collect from.
         schema_names::BinaryFile,
+        schema_names::TrainedBinaryFileName,
+        schema_names::TrainedCamera,
+        schema_names::TrainedObject,
+        schema_names::SkippedFramePair,
         schema_names::GranularityName,
         schema_names::JobStateFilter,
         schema_names::JobStateName,
@@ -78,12 +87,14 @@ use super::{error, exports, jobs, masks, objects, ops, query, scenes, schema_nam
 pub struct ApiDoc;
 
 /// What the served document says that depends on the running configuration.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct DocumentFacts {
     /// Tokens are configured, so every route but the open ones needs one.
     pub auth: bool,
     /// The job kinds this server has handlers for.
     pub job_kinds: Vec<String>,
+    /// `query.max_mask_side`: the largest image side a free camera may ask for.
+    pub max_mask_side: u32,
 }
 
 impl DocumentFacts {
@@ -97,6 +108,7 @@ impl DocumentFacts {
                 .into_iter()
                 .map(str::to_string)
                 .collect(),
+            max_mask_side: state.core.config.query.max_mask_side,
         }
     }
 }
@@ -107,6 +119,8 @@ pub fn document(facts: &DocumentFacts) -> Value {
     // only make the contract checks fail loudly.
     let mut document = serde_json::to_value(ApiDoc::openapi()).unwrap_or_default();
     describe_upload_body(&mut document);
+    describe_event_stream(&mut document);
+    state_view_limits(&mut document, facts.max_mask_side);
     add_shared_responses(&mut document, facts.auth);
     declare_security(&mut document, facts.auth);
     list_job_kinds(&mut document, &facts.job_kinds);
@@ -141,6 +155,66 @@ fn describe_upload_body(document: &mut Value) {
                 "content": content,
             }),
         );
+    }
+}
+
+/// `GET /v1/jobs/{id}/events` answers Server-Sent Events. OpenAPI 3.1 has no `itemSchema` (3.2
+/// adds it for sequential media types), so the media type's `schema` describes each event, as
+/// tools read it for `text/event-stream` (schemathesis validates every event of a stream against
+/// it): the event's fields as the SSE format defines them, `data` holding a `JobEvent` as JSON.
+fn describe_event_stream(document: &mut Value) {
+    let event = json!({
+        "title": "JobEventMessage",
+        "description": "One Server-Sent Event: `id:` the event id (for `Last-Event-ID`), \
+            `event:` its kind, `data:` a `JobEvent` as JSON.",
+        "type": "object",
+        "required": ["id", "event", "data"],
+        "properties": {
+            "id": {"type": "string", "pattern": "^[0-9]+$"},
+            "event": {"type": "string", "minLength": 1},
+            "data": {
+                "type": "string",
+                "contentMediaType": "application/json",
+                "contentSchema": {"$ref": "#/components/schemas/JobEvent"},
+            },
+            "retry": {"type": "integer", "minimum": 0},
+        },
+        "additionalProperties": false,
+    });
+    let Some(operation) = document.pointer_mut("/paths/~1v1~1jobs~1{id}~1events/get") else {
+        return;
+    };
+    if let Some(stream) = operation
+        .pointer_mut("/responses/200/content/text~1event-stream")
+        .and_then(Value::as_object_mut)
+    {
+        stream.insert("schema".to_string(), event);
+    }
+    // `Last-Event-ID` may be left out, but when sent it is a number: the `Option` it is read
+    // into would otherwise make its schema nullable, and `null` is no event id (400).
+    if let Some(parameters) = operation
+        .get_mut("parameters")
+        .and_then(Value::as_array_mut)
+    {
+        for parameter in parameters {
+            if parameter["name"] == "Last-Event-ID" {
+                parameter["schema"] = json!({"type": "integer", "format": "int64", "minimum": 0});
+            }
+        }
+    }
+}
+
+/// A free camera's image may be at most `query.max_mask_side` pixels on a side (else 400), a
+/// bound of this server's configuration.
+fn state_view_limits(document: &mut Value, max_mask_side: u32) {
+    for side in ["width", "height"] {
+        let pointer = format!("/components/schemas/PinholeIntrinsics/properties/{side}");
+        if let Some(side) = document
+            .pointer_mut(&pointer)
+            .and_then(Value::as_object_mut)
+        {
+            side.insert("maximum".to_string(), Value::from(max_mask_side));
+        }
     }
 }
 

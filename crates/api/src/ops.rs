@@ -2,11 +2,12 @@
 
 use axum::Json;
 use axum::extract::State;
-use axum::http::{StatusCode, header};
+use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::IntoResponse;
 use serde::Serialize;
 use utoipa::ToSchema;
 
+use super::auth::TokenCheck;
 use super::metrics::{refresh_cluster_gauges, refresh_queue_gauges};
 use super::readiness::{ANSWER_WITHIN, Reading};
 use super::state::AppState;
@@ -33,17 +34,41 @@ pub struct ReadinessChecks {
     pub models: ReadinessCheck,
 }
 
+/// `/readyz`'s answer. Everyone gets `ready` (and the status: 200 or 503), what a probe needs.
+/// The details (why not, each check with server paths and driver messages, the adapters, the
+/// cluster's workers) come only with a valid bearer token when tokens are configured, and to
+/// everyone when none are: they describe the deployment, which an open endpoint should not.
 #[derive(Debug, Serialize, ToSchema)]
 pub struct ReadinessResponse {
     pub ready: bool,
-    /// Why the service is not ready; empty when it is.
-    pub reasons: Vec<String>,
-    pub checks: ReadinessChecks,
-    /// The GPU adapters workers use (as reported by wgpu).
-    #[schema(value_type = Vec<Object>)]
-    pub adapters: Vec<segsplat_gpu::AdapterReport>,
-    /// Worker slots of every process on this database (`GET /v1/workers` lists them).
-    pub cluster: ClusterWorkers,
+    /// Why the service is not ready; empty when it is. With a token (or without tokens
+    /// configured) only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reasons: Option<Vec<String>>,
+    /// With a token (or without tokens configured) only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub checks: Option<ReadinessChecks>,
+    /// The GPU adapters workers use (as reported by wgpu). With a token only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(value_type = Option<Vec<Object>>)]
+    pub adapters: Option<Vec<segsplat_gpu::AdapterReport>>,
+    /// Worker slots of every process on this database (`GET /v1/workers` lists them). With a
+    /// token only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cluster: Option<ClusterWorkers>,
+}
+
+/// Whether this request may see `/readyz`'s details: tokens are not configured, or it carries
+/// one of them (any tenant's).
+fn sees_details(state: &AppState, headers: &HeaderMap) -> bool {
+    let auth = &state.core.config.auth;
+    if !auth.enabled() {
+        return true;
+    }
+    let header = headers
+        .get(header::AUTHORIZATION)
+        .and_then(|value| value.to_str().ok());
+    TokenCheck::from_config(auth).caller(header).is_some()
 }
 
 #[derive(Debug, Default, Clone, Serialize, ToSchema)]
@@ -83,9 +108,11 @@ pub async fn healthz() -> Json<HealthResponse> {
 /// Whether the service can do its work: database and blob store reachable, GPU workers
 /// available, models.
 #[utoipa::path(get, path = "/readyz", tag = "ops",
-    responses((status = 200, description = "ready", body = ReadinessResponse),
-        (status = 503, description = "not ready; `reasons` says why", body = ReadinessResponse)))]
-pub async fn readyz(State(state): State<AppState>) -> impl IntoResponse {
+    responses((status = 200, description = "ready; with a valid bearer token (or without tokens \
+            configured) also the checks' details", body = ReadinessResponse),
+        (status = 503, description = "not ready; with a valid bearer token (or without tokens \
+            configured) `reasons` says why", body = ReadinessResponse)))]
+pub async fn readyz(State(state): State<AppState>, headers: HeaderMap) -> impl IntoResponse {
     // Every check gets the same budget; one that cannot answer in it is reported as such,
     // with its last answer, and keeps running for the next probe.
     let until = std::time::Instant::now() + ANSWER_WITHIN;
@@ -164,17 +191,27 @@ pub async fn readyz(State(state): State<AppState>) -> impl IntoResponse {
         }
     }
     let ready = reasons.is_empty();
-    let body = ReadinessResponse {
-        ready,
-        reasons,
-        checks: ReadinessChecks {
-            database,
-            blobs,
-            adapters,
-            models,
-        },
-        adapters: workers.adapters.clone(),
-        cluster,
+    let body = if sees_details(&state, &headers) {
+        ReadinessResponse {
+            ready,
+            reasons: Some(reasons),
+            checks: Some(ReadinessChecks {
+                database,
+                blobs,
+                adapters,
+                models,
+            }),
+            adapters: Some(workers.adapters.clone()),
+            cluster: Some(cluster),
+        }
+    } else {
+        ReadinessResponse {
+            ready,
+            reasons: None,
+            checks: None,
+            adapters: None,
+            cluster: None,
+        }
     };
     let status = if ready {
         StatusCode::OK

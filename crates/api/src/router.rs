@@ -41,6 +41,27 @@ pub fn router(state: AppState) -> Router {
             "/v1/scenes/{id}/objects/{level}/{object_id}/spz",
             get(exports::object_spz),
         )
+        // The JSON files before the file route: each has its own operation in the document.
+        .route(
+            "/v1/scenes/{id}/trained/cameras.json",
+            get(exports::trained_cameras),
+        )
+        .route(
+            "/v1/scenes/{id}/trained/objects.json",
+            get(exports::trained_objects),
+        )
+        .route(
+            "/v1/scenes/{id}/trained/metrics.json",
+            get(exports::trained_metrics),
+        )
+        .route(
+            "/v1/scenes/{id}/trained/skipped_pairs.json",
+            get(exports::trained_skipped_pairs),
+        )
+        .route(
+            "/v1/scenes/{id}/trained/deformation.json",
+            get(exports::trained_deformation),
+        )
         .route("/v1/scenes/{id}/trained/{file}", get(exports::trained_file))
         .route("/v1/jobs", get(jobs::list_jobs))
         .route("/v1/jobs/{id}", get(jobs::get_job))

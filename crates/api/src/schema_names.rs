@@ -11,10 +11,13 @@ use utoipa::openapi::schema::{KnownFormat, ObjectBuilder, Schema, SchemaFormat, 
 use utoipa::{PartialSchema, ToSchema};
 
 use super::params::TIME_LIMIT;
+use segsplat_engine::deform::file::DEFORMATION_WEIGHTS_FILE;
+use segsplat_method::scene_files::{LABELS_FILE, SCENE_FILE};
 use segsplat_scene::Level;
 use segsplat_service::serving::MaskFormat;
 use segsplat_service::store::jobs::JobState;
 use segsplat_service::store::workers::WorkerState;
+use segsplat_service::usecases::serving::SPZ_FILE;
 
 fn names<I>(description: &str, names: I) -> RefOr<Schema>
 where
@@ -113,6 +116,89 @@ name_schema!(
         .schema_type(Type::String)
         .format(Some(SchemaFormat::KnownFormat(KnownFormat::Binary)))
         .into()
+);
+
+name_schema!(
+    /// The binary files of a trained version, as `GET /v1/scenes/{id}/trained/{file}` names
+    /// them (the JSON files have an operation each).
+    TrainedBinaryFileName => names(
+        "a binary file of the trained version",
+        [SCENE_FILE, SPZ_FILE, LABELS_FILE, DEFORMATION_WEIGHTS_FILE],
+    )
+);
+
+/// A schema written as JSON (in utoipa's own shape, so reading it back does not fail; if it
+/// did, the schema would be left open, which tests/openapi_contract.rs would notice).
+fn from_json(schema: serde_json::Value) -> RefOr<Schema> {
+    serde_json::from_value(schema).unwrap_or_default()
+}
+
+fn level_ref() -> serde_json::Value {
+    serde_json::json!({"$ref": "#/components/schemas/LevelName"})
+}
+
+fn vec3() -> serde_json::Value {
+    serde_json::json!({"type": "array", "items": {"type": "number"}, "minItems": 3,
+        "maxItems": 3})
+}
+
+name_schema!(
+    /// One camera of `cameras.json` (`segsplat_method::cameras::SceneCamera`).
+    TrainedCamera => from_json(serde_json::json!({
+        "type": "object",
+        "description": "one frame's pinhole camera, in the scene's world frame and units",
+        "required": ["name", "width", "height", "fx", "fy", "cx", "cy", "camera_to_world"],
+        "properties": {
+            "name": {"type": "string", "description": "the frame's image name in the dataset"},
+            "width": {"type": "integer", "minimum": 0},
+            "height": {"type": "integer", "minimum": 0},
+            "fx": {"type": "number"},
+            "fy": {"type": "number"},
+            "cx": {"type": "number"},
+            "cy": {"type": "number"},
+            "camera_to_world": {
+                "type": "array", "minItems": 4, "maxItems": 4,
+                "items": {"type": "array", "items": {"type": "number"}, "minItems": 4,
+                    "maxItems": 4},
+                "description": "row-major 4x4, OpenCV axes (x right, y down, z forward)",
+            },
+            "time": {"type": "number",
+                "description": "normalised capture time (dynamic scenes only)"},
+        },
+    }))
+);
+
+name_schema!(
+    /// One object of `objects.json`
+    /// (`segsplat_method::segment_then_splat::objects::ObjectSummary`).
+    TrainedObject => from_json(serde_json::json!({
+        "type": "object",
+        "required": ["level", "object_id", "gaussian_count", "centroid", "bounds_min",
+            "bounds_max", "mean_color"],
+        "properties": {
+            "level": level_ref(),
+            "object_id": {"type": "integer", "minimum": 0},
+            "gaussian_count": {"type": "integer", "minimum": 0},
+            "centroid": vec3(),
+            "bounds_min": vec3(),
+            "bounds_max": vec3(),
+            "mean_color": vec3(),
+        },
+    }))
+);
+
+name_schema!(
+    /// One entry of `skipped_pairs.json`: a frame's object the object loss left out.
+    SkippedFramePair => from_json(serde_json::json!({
+        "type": "object",
+        "required": ["frame_index", "frame_name", "level", "object_id"],
+        "properties": {
+            "frame_index": {"type": "integer", "minimum": 0},
+            "frame_name": {"type": "string"},
+            "level": level_ref(),
+            "object_id": {"type": "integer", "minimum": 0},
+        },
+    }))
 );
 
 name_schema!(

@@ -124,7 +124,7 @@ impl ServiceBuilder {
         let database = Database::connect(&config).await?;
         let blobs = open_blob_store(&config)?;
         let metrics = prometheus_handle().ok_or(ServiceError::Metrics)?;
-        register_zero_series();
+        register_zero_series(&self.handlers.kinds());
         let bus = JobEventBus::default();
         let job_queued = Arc::new(Notify::new());
         let shutdown = CancellationToken::new();
@@ -358,25 +358,15 @@ async fn start_grpc(
     health_reporter
         .set_serving::<SceneQueryServer<SceneQueryService>>()
         .await;
-    let describing = || {
-        tonic_reflection::server::Builder::configure()
-            .register_encoded_file_descriptor_set(crate::proto::FILE_DESCRIPTOR_SET)
-            .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
-    };
-    let reflection_error =
-        |error: tonic_reflection::server::Error| ServiceError::Reflection(error.to_string());
     // Both reflection versions: `grpc.reflection.v1`, and `v1alpha`, which grpcio's reflection
-    // client, grpcurl's older releases and many tools still speak. Reflection describes the
-    // whole API; with tokens set it needs one like every other call (health checks stay open
-    // for load balancers).
-    let reflection = tonic::service::interceptor::InterceptedService::new(
-        describing().build_v1().map_err(reflection_error)?,
-        grpc_interceptor(tokens.clone()),
-    );
-    let reflection_v1alpha = tonic::service::interceptor::InterceptedService::new(
-        describing().build_v1alpha().map_err(reflection_error)?,
-        grpc_interceptor(tokens.clone()),
-    );
+    // client, grpcurl's older releases and many tools still speak; our own service
+    // (`grpc_reflection.rs`), which answers an unknown name inside the stream. Open, like
+    // health: reflection describes the API's services and messages (the proto file), never a
+    // tenant's data, and grpcurl resolves every call through it, a health check included.
+    let descriptors = crate::grpc_reflection::api_descriptors()
+        .map_err(|error| ServiceError::Reflection(error.to_string()))?;
+    let reflection = crate::grpc_reflection::v1::server(Arc::clone(&descriptors));
+    let reflection_v1alpha = crate::grpc_reflection::v1alpha::server(descriptors);
     let scene_query =
         SceneQueryServer::with_interceptor(SceneQueryService::new(core), grpc_interceptor(tokens));
     let task = tokio::spawn(async move {

@@ -29,7 +29,8 @@ fn frame_view() -> serde_json::Value {
         "required": ["frame_index"],
         "properties": {
             "frame_index": {"type": "integer", "minimum": 0, "maximum": u32::MAX,
-                "description": "0-based in dataset order (`cameras.json`)"},
+                "description": "0-based in dataset order (`cameras.json`); one the scene \
+                    does not have is 400 (the scene's frame count is not in the schema)"},
             "max_side": {"type": ["integer", "null"], "minimum": 1, "maximum": u32::MAX,
                 "description": "the longest side of the mask in pixels (default and upper \
                     bound: the frame's size, and `query.max_mask_side`)"},
@@ -43,6 +44,15 @@ fn frame_view() -> serde_json::Value {
 /// The free-camera shape: `camera_to_world` and `intrinsics`, optional `time`.
 fn pose_view() -> serde_json::Value {
     let row = json!({"type": "array", "items": {"type": "number"}, "minItems": 4, "maxItems": 4});
+    // The last row is exactly 0 0 0 1 (`pose_camera` compares it exactly); the rotation's
+    // orthonormality, which JSON Schema cannot state, is in the description (else 400).
+    // `items` (for elements after the four `prefixItems`, which `maxItems` rules out) as a
+    // schema, not `false`: client generators (openapi-python-client) do not read boolean
+    // schemas, and utoipa's array needs one.
+    let last_row = json!({"type": "array", "minItems": 4, "maxItems": 4,
+        "items": {"type": "number"},
+        "prefixItems": [{"type": "number", "enum": [0]}, {"type": "number", "enum": [0]},
+            {"type": "number", "enum": [0]}, {"type": "number", "enum": [1]}]});
     json!({
         "type": "object",
         "title": "PoseView",
@@ -50,9 +60,13 @@ fn pose_view() -> serde_json::Value {
         "additionalProperties": false,
         "required": ["camera_to_world", "intrinsics"],
         "properties": {
-            "camera_to_world": {"type": "array", "items": row, "minItems": 4, "maxItems": 4,
-                "description": "row-major 4x4, a rigid transform (last row 0 0 0 1), OpenCV \
-                    axes (x right, y down, z forward)"},
+            "camera_to_world": {"type": "array", "minItems": 4, "maxItems": 4, "items": row.clone(),
+                "prefixItems": [row.clone(), row.clone(), row, last_row],
+                "description": "row-major 4x4, OpenCV axes (x right, y down, z forward). Must \
+                    be a rigid transform: the upper-left 3x3 a rotation (orthonormal within \
+                    1e-3, determinant +1: no scale, shear or reflection), the last row exactly \
+                    0 0 0 1. A pose that fits this schema but is not rigid is refused with 400, \
+                    which a JSON Schema cannot express."},
             "intrinsics": {"$ref": "#/components/schemas/PinholeIntrinsics"},
             "time": time_property(),
             "frame_index": {"type": "null"},

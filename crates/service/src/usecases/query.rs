@@ -209,6 +209,13 @@ pub async fn query_with_masks(
     )
     .await?;
     if outcome.matches.is_empty() {
+        // Nothing to render, but a bad view is still a bad request (400 / INVALID_ARGUMENT),
+        // not "no match": the answer must not depend on whether the text found something.
+        if let Some(masks) = &request.masks {
+            serving
+                .check_view(&request.scene_id, caller, &masks.view)
+                .await?;
+        }
         return Ok(QueryAnswer {
             matched: outcome.matched,
             objects: Vec::new(),

@@ -317,6 +317,24 @@ impl Serving {
         .await
     }
 
+    /// Checks `view` as a render would (a frame the scene has, sides within `max_mask_side`,
+    /// positive focal lengths, a rigid pose) without rendering: for a query that matched
+    /// nothing, whose view would otherwise never be looked at. A free camera needs no scene; a
+    /// frame view reads the scene's cameras (`cameras`, no GPU).
+    pub async fn check_view(
+        &self,
+        scene_id: &str,
+        caller: &Caller,
+        view: &MaskView,
+    ) -> Result<(), ServeFailure> {
+        let cameras = match view {
+            MaskView::Pose { .. } => Vec::new(),
+            MaskView::Frame { .. } => self.cameras(scene_id, caller).await?,
+        };
+        view.render_camera(&cameras, self.max_mask_side)?;
+        Ok(())
+    }
+
     /// The cameras of the scene's served version, in frame order (what a frame index means).
     /// Read from the loaded scene when it is in the cache, else from its stored `cameras.json`
     /// (so asking for cameras never loads Gaussians onto the GPU).
