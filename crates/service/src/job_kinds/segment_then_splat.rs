@@ -26,6 +26,7 @@ use crate::jobs::{JobContext, JobFailure, JobHandler, Progress};
 use crate::store::objects::{ObjectEmbedding, ObjectRecord};
 use segsplat_engine::checkpoint::Checkpoint;
 use segsplat_engine::deform::{DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE};
+use segsplat_engine::train::trainer::resolve_random_init;
 use segsplat_engine::train::{EvalReport, ObjectLossConfig, TrainConfig, Trainer, TrainerMeta};
 use segsplat_gpu::GpuContext;
 use segsplat_method::segment_then_splat::association::{
@@ -210,6 +211,7 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
     config
         .scene_sized
         .apply_background(rgba.then_some(scene.background), &mut config.train);
+    resolve_random_init(&mut config.train, &scene, &gpu);
     tracing::info!(
         ?size,
         steps = config.train.steps,
