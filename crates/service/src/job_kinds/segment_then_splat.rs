@@ -19,8 +19,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::job_kinds::stop_aware::{StopAware, StopSignal, stop_or};
 use crate::job_kinds::training::{
-    TrainingStageReport, fatal, load_resume_point, record_settings, report, report_evaluation,
-    retryable, store_outputs, train_failure, train_with_checkpoints,
+    TrainingStageReport, fatal, load_resume_point, note_undistortion, record_settings, report,
+    report_evaluation, retryable, store_outputs, train_failure, train_with_checkpoints,
 };
 use crate::jobs::{JobContext, JobFailure, JobHandler, Progress};
 use crate::store::objects::{ObjectEmbedding, ObjectRecord};
@@ -201,6 +201,7 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
         .clone()
         .ok_or_else(|| fatal("the segment_then_splat job needs a GPU worker"))?;
     let scene = load_scene(&ctx.scene_dir, &LoadOptions::default()).map_err(fatal)?;
+    note_undistortion(ctx, &scene);
     let frames = training_frames(&scene, &config.train);
     let size = SceneSize::of(frames.len());
     config.scene_sized.apply(frames.len(), &mut config.train);
