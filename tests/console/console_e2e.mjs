@@ -205,6 +205,16 @@ async function main() {
     assert.ok(seenSteps.size >= 1);
     assert.equal(await page.locator("#job-progress").evaluate((bar) => bar.value), 1, "the bar is full");
     assert.ok(!(await page.textContent("#job-loss")).startsWith("-"), "a loss was shown");
+    // Done, the panel shows the job's final figures instead of its last progress report
+    // ("persist 1/1", "-" for the loss) and no empty loss chart.
+    await page.locator("#job-final").waitFor();
+    const final = await page.textContent("#job-final-facts");
+    assert.match(final, /Held-out PSNR(\d[\d.,]* dB|no held-out views)/, final);
+    assert.match(final, /Gaussians\d/, final);
+    assert.match(final, /Objects\d+ small, \d+ middle, \d+ large/, final);
+    assert.match(final, /Wall time.*segment \d+ s.*train \d+ s/, final);
+    assert.ok(await page.locator("#job-facts").isHidden(), "the live figures give way to the final ones");
+    await shot(page, "03b-job-done");
 
     step("3d view");
     await page.locator("#view-status").filter({ hasText: "Gaussians" }).waitFor({ timeout: 60_000 });
