@@ -3,7 +3,7 @@
 
 import { followEvents, getJson, sendJson } from "./api.js";
 import { LineChart } from "./chart.js";
-import { $, describeError, el, formatNumber, formatSeconds, showError } from "./dom.js";
+import { $, describeError, el, fillFacts, formatNumber, formatSeconds, showError } from "./dom.js";
 
 const FINAL_STATES = ["succeeded", "failed", "cancelled"];
 
@@ -102,12 +102,52 @@ export class JobPanel {
     $("job-live").hidden = false;
     $("job-title").textContent = `${job.kind} ${job.id}`;
     this.chart.clear();
+    $("loss-chart").hidden = false;
+    $("job-final").hidden = true;
+    $("job-facts").hidden = false;
     for (const id of ["job-stage", "job-step", "job-loss", "job-psnr", "job-gaussians", "job-eta"]) {
       $(id).textContent = "-";
     }
     showError($("job-error"), "");
     this.showProgress(job.progress || {});
     this.showState(job.state, job.error);
+    if (job.state === "succeeded") this.showFinal(job);
+  }
+
+  // A finished job's figures instead of its last progress report: held-out PSNR / SSIM,
+  // Gaussians and objects per level from its metrics.json, wall time by stage from its events.
+  async showFinal(job) {
+    const path = `/v1/jobs/${encodeURIComponent(job.id)}/events`;
+    const [metrics, stages] = await Promise.all([
+      getJson(`/v1/scenes/${encodeURIComponent(job.scene_id)}/trained/metrics.json`).catch(() => null),
+      stageTimes(path).catch(() => []),
+    ]);
+    if (this.job?.id !== job.id) return;
+    const facts = [];
+    const heldOut = metrics?.held_out;
+    const evaluated = stages.evaluate || {};
+    const psnr = heldOut?.psnr ?? evaluated.psnr;
+    const ssim = heldOut?.ssim ?? evaluated.ssim;
+    const gaussians = metrics?.gaussians ?? evaluated.gaussians;
+    facts.push(["Held-out PSNR", Number.isFinite(psnr) ? `${formatNumber(psnr, 2)} dB` : "no held-out views"]);
+    if (Number.isFinite(ssim)) facts.push(["Held-out SSIM", formatNumber(ssim, 3)]);
+    if (Number.isFinite(gaussians)) facts.push(["Gaussians", formatNumber(gaussians, 0)]);
+    if (Array.isArray(metrics?.objects)) {
+      const [small, middle, large] = metrics.objects;
+      facts.push(["Objects", `${small} small, ${middle} middle, ${large} large`]);
+    }
+    if (Number.isFinite(metrics?.steps)) facts.push(["Steps", String(metrics.steps)]);
+    const walls = stages.order || [];
+    if (walls.length) {
+      facts.push(["Wall time", walls.map(([stage, seconds]) => `${stage} ${formatSeconds(seconds)}`).join(", ")]);
+    }
+    if (job.started_at_ms && job.finished_at_ms) {
+      facts.push(["Total", formatSeconds((job.finished_at_ms - job.started_at_ms) / 1000)]);
+    }
+    fillFacts($("job-final-facts"), facts);
+    $("job-final").hidden = false;
+    $("job-facts").hidden = true;
+    if (this.chart.points.length < 2) $("loss-chart").hidden = true;
   }
 
   follow(job) {
@@ -134,6 +174,7 @@ export class JobPanel {
         this.following = null;
         const latest = await getJson(path.replace(/\/events$/, "")).catch(() => null);
         if (latest) this.showState(latest.state, latest.error);
+        if (latest?.state === "succeeded") this.showFinal(latest);
         this.history();
         if ((latest?.state || finalState) === "succeeded") this.onFinished(latest || job);
       });
@@ -168,4 +209,34 @@ export class JobPanel {
       $("job-progress").value = 1;
     }
   }
+}
+
+// Wall time per stage from a finished job's events: each stage runs from its first progress
+// event (the job's start for the first) to the next stage's first, the last to the final state.
+// Also the last metrics of each stage (the "evaluate" stage's PSNR / SSIM).
+async function stageTimes(path) {
+  const events = [];
+  await followEvents(path, (kind, event) => events.push({ kind, ...event }));
+  const result = { order: [] };
+  let startMs = null;
+  let current = null;
+  const close = (atMs) => {
+    if (current) result.order.push([current.stage, Math.max(0, (atMs - current.from) / 1000)]);
+  };
+  for (const event of events) {
+    if (event.kind === "state" && event.payload?.state === "running" && startMs === null) startMs = event.at_ms;
+    if (event.kind === "progress") {
+      const stage = event.payload?.stage;
+      if (stage && stage !== current?.stage) {
+        close(event.at_ms);
+        current = { stage, from: current ? event.at_ms : (startMs ?? event.at_ms) };
+      }
+      if (stage) result[stage] = event.payload.metrics || {};
+    }
+    if (event.kind === "state" && event.payload?.state === "succeeded") {
+      close(event.at_ms);
+      current = null;
+    }
+  }
+  return result;
 }

@@ -3,6 +3,20 @@
 import { getJson, request, upload } from "./api.js";
 import { $, activatable, describeError, el, fillFacts, showError } from "./dom.js";
 
+// A scene's image sizes for the table: one size as is; several as a count and the range
+// (smallest to largest by pixels), the full list in the cell's tooltip, so a capture with many
+// frame sizes does not widen the table past the window.
+export function sizesSummary(resolutions) {
+  const sizes = resolutions.map(([w, h]) => `${w}x${h}`);
+  if (sizes.length <= 2) return { text: sizes.join(", ") || "-", title: "" };
+  const byPixels = [...resolutions].sort((a, b) => a[0] * a[1] - b[0] * b[1]);
+  const [small, large] = [byPixels[0], byPixels[byPixels.length - 1]];
+  return {
+    text: `${sizes.length} sizes, ${small[0]}x${small[1]} to ${large[0]}x${large[1]}`,
+    title: sizes.join(", "),
+  };
+}
+
 export function sceneFacts(scene) {
   return [
     ["Format", scene.format],
@@ -75,7 +89,7 @@ export class ScenesPage {
         el("td", {}, scene.name),
         el("td", {}, scene.format),
         el("td", {}, String(scene.frame_count)),
-        el("td", {}, scene.resolutions.map(([w, h]) => `${w}x${h}`).join(", ")),
+        sizesCell(scene.resolutions),
         el("td", {}, scene.dynamic ? "yes" : "no"),
         el("td", {}, new Date(scene.created_at_ms).toLocaleString()),
         el("td", {}, remove)),
@@ -122,4 +136,9 @@ export class ScenesPage {
     }
     this.refresh();
   }
+}
+
+function sizesCell(resolutions) {
+  const { text, title } = sizesSummary(resolutions);
+  return el("td", title ? { class: "sizes", title } : { class: "sizes" }, text);
 }

@@ -15,7 +15,9 @@
 # Everything it writes (the service's data, the server log, the mask, the summary) goes into one
 # folder, demo-output in the current directory unless SEGSPLAT_DEMO_OUT names another. SEGSPLAT_BIN=path/to/segsplat
 # uses that binary as it is (no bootstrap, no build); otherwise the release build is made first.
-# SEGSPLAT_DEMO_PORT picks the HTTP port (8080).
+# SEGSPLAT_DEMO_PORT picks the HTTP port (8080). The server stops when the demo ends, unless
+# SEGSPLAT_DEMO_KEEP_SERVER=1 (or, on a terminal, the answer to the question at the end) keeps it
+# running for the web console until Ctrl-C.
 set -euo pipefail
 case ${2:-500} in
   defaults|auto) ;;
@@ -60,3 +62,15 @@ done
 
 python3 scripts/demo_walkthrough.py --url "http://$http" --dataset "$dataset" --steps "$steps" \
   --out "$out"
+
+keep=${SEGSPLAT_DEMO_KEEP_SERVER:-}
+if [ -z "$keep" ] && [ -t 0 ] && [ -t 1 ]; then
+  read -r -p "Keep the server running to look at the result in the console? [y/N] " answer || answer=""
+  case $answer in [yY]*) keep=1;; esac
+fi
+if [ "$keep" = 1 ]; then
+  echo "the server keeps running on http://$http (the console is at http://$http/); Ctrl-C stops it"
+  wait "$server" || true
+else
+  echo "stopping the server (SEGSPLAT_DEMO_KEEP_SERVER=1 keeps it running for the console)"
+fi

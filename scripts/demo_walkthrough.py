@@ -71,10 +71,15 @@ class ProgressView:
 
     def line(self, progress):
         stage = progress.get("stage", "")
+        metrics = progress.get("metrics") or {}
+        if metrics.get("skipped_no_clip_model"):
+            # Not a stalled bar: the stage has nothing to do.
+            return (f"{stage:<9} skipped: no CLIP model is configured, so the objects are stored "
+                    "without embeddings and text queries are refused (`segsplat models init` "
+                    "sets one up)")
         step, total = progress.get("step", 0), max(progress.get("total_steps", 0), 1)
         filled = int(BAR_WIDTH * min(step / total, 1.0))
         bar = "#" * filled + "-" * (BAR_WIDTH - filled)
-        metrics = progress.get("metrics") or {}
         shown = []
         for name, label, fmt in (("loss", "loss", "{:.4f}"), ("psnr", "PSNR", "{:.1f} dB"),
                                  ("gaussians", "Gaussians", "{:.0f}")):
@@ -85,6 +90,13 @@ class ProgressView:
             shown.append(f"ETA {duration(eta)}")
         unit = UNITS.get(stage, "")
         return f"{stage:<9} [{bar}] {step}/{total} {unit}  " + "  ".join(shown)
+
+    def note(self, text):
+        """A line of its own between the bars (a warning, a word about the stage)."""
+        if self.tty and self.stage is not None:
+            sys.stdout.write("\n")
+            self.stage, self.last_line = None, None
+        print(text, flush=True)
 
     def update(self, progress):
         stage = progress.get("stage", "")
@@ -121,9 +133,12 @@ class ProgressView:
                          for (stage, start), end in zip(starts, ends))
 
 
-def follow_job(url, job_id, view):
-    """Follows the job's Server-Sent Events until its final state; returns that state's payload."""
+def follow_job(url, job_id, view, frame_count=None):
+    """Follows the job's Server-Sent Events until its final state; returns that state's payload.
+    Warnings (and the note that the frames were undistorted) are printed as they come; with
+    `frame_count`, the first segment report says how many frames are held out."""
     final = None
+    split_told = False
     with urllib.request.urlopen(f"{url}/v1/jobs/{job_id}/events") as stream:
         data = []
         for raw in stream:
@@ -136,8 +151,21 @@ def follow_job(url, job_id, view):
             event = json.loads("\n".join(data))
             data = []
             payload = event.get("payload") or {}
-            if event.get("kind") == "progress":
+            kind = event.get("kind")
+            if kind == "progress":
+                stage = payload.get("stage")
+                total = payload.get("total_steps", 0)
+                if not split_told and frame_count and stage == "segment":
+                    held_out = frame_count - total
+                    split_told = True
+                    if held_out > 0:
+                        view.note(f"{total} of the {frame_count} frames train; {held_out} "
+                                  f"{'is' if held_out == 1 else 'are'} held out to measure "
+                                  "the held-out PSNR / SSIM at the end")
                 view.update(payload)
+            elif kind in ("warning", "undistorted"):
+                label = "warning" if kind == "warning" else "note"
+                view.note(f"{label}: {payload.get('message') or json.dumps(payload)}")
             elif event.get("kind") == "state" and payload.get("state") in (
                     "succeeded", "failed", "cancelled"):
                 final = payload
@@ -189,7 +217,7 @@ def main():
                     {"kind": "segment_then_splat", "config": config})
     print(f"job {job['id']}: segment_then_splat, {settings}", flush=True)
     view = ProgressView()
-    final = follow_job(url, job["id"], view)
+    final = follow_job(url, job["id"], view, scene["frame_count"])
     if not final or final.get("state") != "succeeded":
         reason = (final or {}).get("error") or "the event stream ended early"
         sys.exit(f"job {job['id']} {(final or {}).get('state', 'ended')}: {reason}")
@@ -229,9 +257,12 @@ def main():
     rows += [["objects table", os.path.join(out, "objects.json")],
              ["trained files", os.path.join(out, "data", "blobs", "jobs", job["id"], "output")],
              ["server log", os.path.join(out, "server.log")]]
+    rows.append(["in the console", f"{url}/#/scenes/{scene['id']}"])
     print(table(["what", "where"], rows))
     with open(os.path.join(out, "summary.txt"), "w") as file:
         file.write(table(["what", "where"], rows) + "\n")
+    print(f"\nTo look at the result, open {url}/#/scenes/{scene['id']} in a browser (the web "
+          "console: the splats in 3D, the objects, text queries, masks) while the server runs.")
 
 
 if __name__ == "__main__":

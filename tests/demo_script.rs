@@ -75,6 +75,30 @@ fn the_demo_walks_through_the_job_cleanly() {
         .expect("the segment stage's time");
     let train = stage_times.find("train ").expect("the train stage's time");
     assert!(segment < train, "{stage_times}");
+    // The frames held out of training are named before their bars (the synthetic scene
+    // holds out every 8th of its frames).
+    assert!(
+        lines
+            .iter()
+            .any(|line| line.contains("frames train;") && line.contains("held out")),
+        "{stdout}"
+    );
+    // Without a CLIP model the embed stage says it is skipped, not a bar stuck at 0/1.
+    assert!(
+        !lines
+            .iter()
+            .any(|line| line.starts_with("embed") && line.contains("0/1")),
+        "a stalled bar: {stdout}"
+    );
+    assert!(
+        lines
+            .iter()
+            .any(|line| line.starts_with("embed") && line.contains("skipped: no CLIP model")),
+        "{stdout}"
+    );
+    // How to look at the result, and the server's stop said out loud.
+    assert!(stdout.contains("/#/scenes/"), "{stdout}");
+    assert!(stdout.contains("SEGSPLAT_DEMO_KEEP_SERVER=1"), "{stdout}");
     for file in ["server.log", "summary.txt", "objects.json"] {
         assert!(out.join(file).is_file(), "{file}");
     }
@@ -84,6 +108,13 @@ fn the_demo_walks_through_the_job_cleanly() {
         "empty server log"
     );
     assert!(!log.contains('\u{1b}'), "colour codes in the log file");
+    // The job's warnings reach the walk-through, not only the server's log.
+    if log.contains("densification never runs") {
+        assert!(
+            stdout.contains("warning: densification never runs"),
+            "{stdout}"
+        );
+    }
     let masks: Vec<_> = std::fs::read_dir(&out)
         .unwrap()
         .filter_map(Result::ok)

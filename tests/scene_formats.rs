@@ -569,9 +569,32 @@ fn colmap_opencv_frames_are_undistorted_to_the_pinhole_camera() {
     .unwrap();
     let distorted = load_scene(distorted_dir.path(), &LoadOptions::default()).unwrap();
     let pinhole = load_scene(pinhole_dir.path(), &LoadOptions::default()).unwrap();
-    validate_scene(&distorted).unwrap();
+    let summary = validate_scene(&distorted).unwrap();
     assert_eq!(distorted.frames[0].intrinsics.model, "OPENCV");
     assert_eq!(distorted.frames[0].intrinsics.distortion, OPENCV_LENS);
+    // The upload's summary (the scene's description) says what was undistorted.
+    assert_eq!(summary.undistorted.len(), 1, "{:?}", summary.undistorted);
+    let described = &summary.undistorted[0];
+    assert_eq!(described.model, "OPENCV");
+    assert_eq!(described.frame_count, 4);
+    assert_eq!(
+        (described.size, described.undistorted_size),
+        ([160, 120], [160, 120])
+    );
+    let coefficients: Vec<(&str, f64)> = described
+        .coefficients
+        .iter()
+        .map(|c| (c.name.as_str(), c.value))
+        .collect();
+    assert_eq!(
+        coefficients,
+        [("k1", -0.35), ("k2", 0.12), ("p1", 0.003), ("p2", -0.004)]
+    );
+    assert_eq!(
+        segsplat_scene::distortion::describe_lens(described),
+        "OPENCV k1=-0.35 k2=0.12 p1=0.003 p2=-0.004, 160x120 undistorted to 160x120 pinhole (4 frames)"
+    );
+    assert!(validate_scene(&pinhole).unwrap().undistorted.is_empty());
     assert_undistorted_like_pinhole(&distorted, &pinhole, "COLMAP OPENCV");
 
     // Known 3D points: their tracks (COLMAP keypoints, stored where the lens put them) come out

@@ -636,9 +636,12 @@ async fn a_dynamic_scene_trained_static_serves_its_stored_scene_at_any_time() {
             serde_json::json!({"steps": 30, "checkpoint_every": 0, "deformation": null}),
         )
         .await;
-    client
+    let job = client
         .wait_for_state(&job_id, "succeeded", Duration::from_secs(300))
         .await;
+    // No sparse points and no `random_init_count`: the random start is sized from the scene
+    // (its floor here, 5000, on this small capture) and the job's settings say so.
+    assert_eq!(job["settings"]["train"]["random_init_count"], 5000, "{job}");
     let trained = format!("/v1/scenes/{scene_id}/trained");
     let (status, _) = client
         .get_bytes(&format!("{trained}/deformation.json"))
@@ -676,7 +679,7 @@ async fn a_camera_rig_is_segmented_by_propagation_along_each_camera() {
             &scene_id,
             "segment_then_splat",
             serde_json::json!({
-                "steps": 40, "checkpoint_every": 0, "random_init_count": 20000,
+                "steps": 40, "checkpoint_every": 0,
                 "object_loss": {"objects_per_level": 1},
                 "deformation": {
                     "field": {"depth": 4, "width": 64, "skip_after": 2}, "warm_up_steps": 20

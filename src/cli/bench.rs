@@ -216,7 +216,7 @@ fn random_model_in_points_bounds(scene: &mut Scene, count: usize, seed: u64) -> 
         }
         _ => {
             let config = TrainConfig {
-                random_init_count: count,
+                random_init_count: Some(count),
                 seed,
                 ..TrainConfig::default()
             };

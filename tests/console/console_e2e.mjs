@@ -158,6 +158,34 @@ async function main() {
     await row.waitFor();
     assert.ok((await row.textContent()).startsWith("scene"), "the scene is named after its file");
 
+    step("many sizes");
+    // A capture with several frame sizes (the figurine has 7) keeps the table inside 1280x800:
+    // the cell gives the count and the range, the tooltip every size; "Uploaded" and "Delete"
+    // stay on screen.
+    const figurineSizes = [[3024, 4032], [4032, 3024], [2268, 4032], [4032, 2268], [3000, 4000],
+      [4000, 3000], [1080, 1920]];
+    const manySizes = async (route) => {
+      const response = await route.fetch();
+      const body = await response.json();
+      for (const scene of body.scenes) scene.resolutions = figurineSizes;
+      await route.fulfill({ response, json: body });
+    };
+    await page.route(/\/v1\/scenes$/, manySizes);
+    await page.reload();
+    await page.locator("#scene-list tr td.sizes").filter({ hasText: "7 sizes" }).first().waitFor();
+    const sizesCell = page.locator("#scene-list tr td.sizes").first();
+    assert.equal(await sizesCell.textContent(), "7 sizes, 1080x1920 to 4032x3024");
+    assert.ok((await sizesCell.getAttribute("title")).includes("4032x2268"), "every size in the tooltip");
+    const tableWidth = await page.evaluate(() => document.getElementById("scene-table").getBoundingClientRect().width);
+    const deleteRight = await page.locator("#scene-list tr button.delete").first().evaluate((button) => button.getBoundingClientRect().right);
+    const pageOverflow = await page.evaluate(() => document.documentElement.scrollWidth - window.innerWidth);
+    assert.ok(tableWidth <= 1280 && deleteRight <= 1280 && pageOverflow <= 1,
+      `the scenes table fits 1280 px (table ${tableWidth} px, Delete's right edge ${deleteRight} px, overflow ${pageOverflow} px)`);
+    await shot(page, "02b-many-sizes");
+    await page.unroute(/\/v1\/scenes$/, manySizes);
+    await page.reload();
+    await page.locator("#scene-list tr").first().waitFor();
+
     step("job");
     await row.click();
     await page.locator("#scene-page").waitFor();
@@ -177,6 +205,16 @@ async function main() {
     assert.ok(seenSteps.size >= 1);
     assert.equal(await page.locator("#job-progress").evaluate((bar) => bar.value), 1, "the bar is full");
     assert.ok(!(await page.textContent("#job-loss")).startsWith("-"), "a loss was shown");
+    // Done, the panel shows the job's final figures instead of its last progress report
+    // ("persist 1/1", "-" for the loss) and no empty loss chart.
+    await page.locator("#job-final").waitFor();
+    const final = await page.textContent("#job-final-facts");
+    assert.match(final, /Held-out PSNR(\d[\d.,]* dB|no held-out views)/, final);
+    assert.match(final, /Gaussians\d/, final);
+    assert.match(final, /Objects\d+ small, \d+ middle, \d+ large/, final);
+    assert.match(final, /Wall time.*segment \d+ s.*train \d+ s/, final);
+    assert.ok(await page.locator("#job-facts").isHidden(), "the live figures give way to the final ones");
+    await shot(page, "03b-job-done");
 
     step("3d view");
     await page.locator("#view-status").filter({ hasText: "Gaussians" }).waitFor({ timeout: 60_000 });

@@ -48,6 +48,8 @@ use super::{error, exports, jobs, masks, objects, ops, query, scenes, schema_nam
         error::ErrorDetail,
         scenes::SceneResponse,
         scenes::SceneList,
+        scenes::UndistortedLensResponse,
+        scenes::CoefficientResponse,
         jobs::CreateJobRequest,
         jobs::JobResponse,
         jobs::JobList,

@@ -56,6 +56,32 @@ pub struct SceneResponse {
     pub created_at_ms: i64,
     /// The tenant that owns it (the uploading token's).
     pub tenant: String,
+    /// Camera models with lens distortion: their frames (and masks) are undistorted to pinhole
+    /// cameras with the same `fx, fy, cx, cy` and size before any job sees them. Empty when
+    /// every camera is pinhole.
+    pub undistorted: Vec<UndistortedLensResponse>,
+}
+
+/// A distorted camera model of the upload and what its frames become.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct UndistortedLensResponse {
+    /// The model as the dataset names it (COLMAP's `OPENCV`, `SIMPLE_RADIAL`, ...).
+    pub model: String,
+    /// Its distortion coefficients by COLMAP's names (`k1`, `k2`, `p1`, `p2`, ...), in order.
+    pub coefficients: Vec<CoefficientResponse>,
+    /// Frames with this camera.
+    pub frame_count: u32,
+    /// Their images' size, `[width, height]`.
+    pub size: [u32; 2],
+    /// The undistorted images' size, `[width, height]`.
+    pub undistorted_size: [u32; 2],
+}
+
+/// One distortion coefficient.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct CoefficientResponse {
+    pub name: String,
+    pub value: f64,
 }
 
 impl From<&SceneRecord> for SceneResponse {
@@ -82,6 +108,24 @@ impl From<&SceneRecord> for SceneResponse {
             ignored_files: summary.ignored_files.clone(),
             created_at_ms: record.created_at_ms,
             tenant: record.tenant.clone(),
+            undistorted: summary
+                .undistorted
+                .iter()
+                .map(|lens| UndistortedLensResponse {
+                    model: lens.model.clone(),
+                    coefficients: lens
+                        .coefficients
+                        .iter()
+                        .map(|c| CoefficientResponse {
+                            name: c.name.clone(),
+                            value: c.value,
+                        })
+                        .collect(),
+                    frame_count: lens.frame_count,
+                    size: lens.size,
+                    undistorted_size: lens.undistorted_size,
+                })
+                .collect(),
         }
     }
 }

@@ -5,7 +5,8 @@
 use glam::Mat4;
 use serde::{Deserialize, Serialize};
 
-use segsplat_scene::{Frame, Intrinsics, Scene};
+use segsplat_scene::distortion::undistorted_coefficients;
+use segsplat_scene::{Frame, Intrinsics, NamedCoefficient, Scene};
 
 pub const CAMERAS_FILE: &str = "cameras.json";
 
@@ -25,6 +26,19 @@ pub struct SceneCamera {
     /// Normalised capture time, 0..1 over the dataset (dynamic scenes).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub time: Option<f32>,
+    /// The distorted camera model this pinhole camera was undistorted from (its images were
+    /// remapped as they loaded); absent for pinhole cameras.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub undistorted_from: Option<UndistortedFrom>,
+}
+
+/// A frame's original lens, before undistortion.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct UndistortedFrom {
+    /// COLMAP's model name (`OPENCV`, `SIMPLE_RADIAL`, ...).
+    pub model: String,
+    /// Its distortion coefficients by COLMAP's names, in order.
+    pub coefficients: Vec<NamedCoefficient>,
 }
 
 impl SceneCamera {
@@ -40,6 +54,12 @@ impl SceneCamera {
             cy: intrinsics.cy,
             camera_to_world: frame.world_from_camera.transpose().to_cols_array_2d(),
             time: frame.time,
+            undistorted_from: undistorted_coefficients(intrinsics).map(|coefficients| {
+                UndistortedFrom {
+                    model: intrinsics.model.clone(),
+                    coefficients,
+                }
+            }),
         }
     }
 
@@ -91,6 +111,7 @@ mod tests {
             cy: 24.5,
             camera_to_world: world_from_camera.transpose().to_cols_array_2d(),
             time: Some(0.25),
+            undistorted_from: None,
         }
         .to_frame();
         let camera = SceneCamera::from_frame(&frame);
@@ -107,5 +128,36 @@ mod tests {
         );
         // Row-major: each row ends with a translation component.
         assert_eq!(back[0].camera_to_world[1][3], -2.0);
+    }
+
+    #[test]
+    fn a_distorted_camera_names_the_lens_it_was_undistorted_from() {
+        let mut frame = SceneCamera {
+            name: "a.png".to_string(),
+            width: 64,
+            height: 48,
+            fx: 50.0,
+            fy: 50.0,
+            cx: 32.0,
+            cy: 24.0,
+            camera_to_world: Mat4::IDENTITY.to_cols_array_2d(),
+            time: None,
+            undistorted_from: None,
+        }
+        .to_frame();
+        assert_eq!(SceneCamera::from_frame(&frame).undistorted_from, None);
+        frame.intrinsics.model = "OPENCV".to_string();
+        frame.intrinsics.distortion = vec![-0.25, 0.05, 0.0, 0.001];
+        let camera = SceneCamera::from_frame(&frame);
+        let from = camera.undistorted_from.clone().unwrap();
+        assert_eq!(from.model, "OPENCV");
+        let names: Vec<&str> = from.coefficients.iter().map(|c| c.name.as_str()).collect();
+        assert_eq!(names, ["k1", "k2", "p1", "p2"]);
+        assert_eq!(from.coefficients[0].value, -0.25);
+        let json = serde_json::to_value(&camera).unwrap();
+        assert_eq!(json["undistorted_from"]["model"], "OPENCV");
+        // All-zero OpenCV coefficients change nothing: no undistortion to report.
+        frame.intrinsics.distortion = vec![0.0; 4];
+        assert_eq!(SceneCamera::from_frame(&frame).undistorted_from, None);
     }
 }

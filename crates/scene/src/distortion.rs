@@ -25,7 +25,75 @@
 use image::Rgb32FImage;
 use rayon::prelude::*;
 
-use super::{InstanceMask, Intrinsics};
+use super::{InstanceMask, Intrinsics, NamedCoefficient, Scene, UndistortedLens};
+
+/// The scene's distorted cameras, one entry per model, coefficients and size (in first-frame
+/// order), with how many frames use each; frames whose lens is a pinhole (no model with
+/// distortion, or all coefficients zero) are left out, as are invalid ones (validation refuses
+/// them).
+pub fn undistorted_lenses(scene: &Scene) -> Vec<UndistortedLens> {
+    let mut lenses: Vec<UndistortedLens> = Vec::new();
+    for frame in &scene.frames {
+        let intrinsics = &frame.intrinsics;
+        let Some(coefficients) = undistorted_coefficients(intrinsics) else {
+            continue;
+        };
+        let size = [intrinsics.width, intrinsics.height];
+        match lenses.iter_mut().find(|lens| {
+            lens.model == intrinsics.model && lens.size == size && lens.coefficients == coefficients
+        }) {
+            Some(lens) => lens.frame_count += 1,
+            None => lenses.push(UndistortedLens {
+                model: intrinsics.model.clone(),
+                coefficients,
+                frame_count: 1,
+                size,
+                undistorted_size: size,
+            }),
+        }
+    }
+    lenses
+}
+
+/// The named distortion coefficients of a camera whose frames are undistorted; `None` for a
+/// pinhole lens (no distortion, or all coefficients zero) and for an invalid one.
+pub fn undistorted_coefficients(intrinsics: &Intrinsics) -> Option<Vec<NamedCoefficient>> {
+    match Lens::from_intrinsics(intrinsics) {
+        Ok(lens) if !lens.is_pinhole() => {}
+        _ => return None,
+    }
+    Some(
+        intrinsics
+            .distortion
+            .iter()
+            .enumerate()
+            .map(|(index, value)| NamedCoefficient {
+                name: parameter_name(&intrinsics.model, index).to_string(),
+                value: *value,
+            })
+            .collect(),
+    )
+}
+
+/// One line for logs and job events: `OPENCV k1=-0.3 k2=0.1 p1=0 p2=0, 640x480 -> 640x480 (23 frames)`.
+pub fn describe_lens(lens: &UndistortedLens) -> String {
+    let coefficients: Vec<String> = lens
+        .coefficients
+        .iter()
+        .map(|c| format!("{}={}", c.name, c.value))
+        .collect();
+    format!(
+        "{} {}, {}x{} undistorted to {}x{} pinhole ({} frame{})",
+        lens.model,
+        coefficients.join(" "),
+        lens.size[0],
+        lens.size[1],
+        lens.undistorted_size[0],
+        lens.undistorted_size[1],
+        lens.frame_count,
+        if lens.frame_count == 1 { "" } else { "s" }
+    )
+}
 
 /// A camera's lens distortion in normalised image coordinates (`x = X / Z`, `y = Y / Z`).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -276,6 +276,35 @@ pub struct SceneSummary {
     /// The first of them (at most [`IGNORED_FILES_LISTED`]), relative to the dataset.
     #[serde(default)]
     pub ignored_files: Vec<String>,
+    /// Camera models with lens distortion whose frames (and masks) are undistorted to pinhole
+    /// cameras where they are loaded ([`crate::distortion`]); empty when every camera is
+    /// pinhole (and in summaries stored before this was reported).
+    #[serde(default)]
+    pub undistorted: Vec<UndistortedLens>,
+}
+
+/// A distorted camera model of an upload and what its frames become: pinhole cameras with the
+/// same `fx, fy, cx, cy` and the same size.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct UndistortedLens {
+    /// The model as the source named it (COLMAP's: `OPENCV`, `SIMPLE_RADIAL`, ...).
+    pub model: String,
+    /// Its distortion coefficients by COLMAP's names (`k1`, `k2`, `p1`, `p2`, `omega`, ...), in
+    /// COLMAP's order.
+    pub coefficients: Vec<NamedCoefficient>,
+    /// Frames with this camera.
+    pub frame_count: u32,
+    /// Their images' size, [width, height].
+    pub size: [u32; 2],
+    /// The size of the undistorted images (the pinhole camera keeps the size).
+    pub undistorted_size: [u32; 2],
+}
+
+/// One distortion coefficient.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct NamedCoefficient {
+    pub name: String,
+    pub value: f64,
 }
 
 /// How many ignored files a summary names.

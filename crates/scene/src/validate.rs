@@ -84,6 +84,7 @@ pub fn validate_scene_within(
         time_count: scene.frame_times().len() as u32,
         ignored_file_count: 0,
         ignored_files: Vec::new(),
+        undistorted: crate::distortion::undistorted_lenses(scene),
     })
 }
 

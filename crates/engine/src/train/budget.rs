@@ -26,6 +26,33 @@ pub fn scene_gaussian_budget(training_pixels: u64, initial: usize) -> usize {
     by_pixels.max(initial.saturating_mul(2))
 }
 
+/// Random initial Gaussians per training pixel (all training views, at the training
+/// resolution) when a scene without sparse points leaves `random_init_count` out: twice the
+/// Gaussian budget's rate, since most random points land where no surface is and are pruned in
+/// the first few hundred steps.
+pub const RANDOM_INIT_PER_TRAINING_PIXEL: f64 = 0.02;
+/// Fewest random initial Gaussians the scene-sized start uses (a few small views).
+pub const MIN_RANDOM_INIT: usize = 5_000;
+/// Most random initial Gaussians the scene-sized start uses on a GPU: the 3DGS recipe's
+/// 100k, which it draws for 100 views of 800 x 800.
+pub const MAX_RANDOM_INIT: usize = 100_000;
+/// Most on a software (CPU) adapter, where every Gaussian of the first steps costs host time.
+pub const MAX_RANDOM_INIT_SOFTWARE: usize = 20_000;
+
+/// The random start of a scene without sparse points whose training views hold
+/// `training_pixels` pixels: [`RANDOM_INIT_PER_TRAINING_PIXEL`] of them, within
+/// [`MIN_RANDOM_INIT`] and [`MAX_RANDOM_INIT`] (or [`MAX_RANDOM_INIT_SOFTWARE`] on a software
+/// adapter). Figures: docs/engine.md, "The random start".
+pub fn scene_random_init_count(training_pixels: u64, software: bool) -> usize {
+    let ceiling = if software {
+        MAX_RANDOM_INIT_SOFTWARE
+    } else {
+        MAX_RANDOM_INIT
+    };
+    let by_pixels = (training_pixels as f64 * RANDOM_INIT_PER_TRAINING_PIXEL).round() as usize;
+    by_pixels.clamp(MIN_RANDOM_INIT, ceiling)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -37,5 +64,25 @@ mod tests {
         assert_eq!(scene_gaussian_budget(20 * 1000 * 658, 2_443), 131_600);
         // A start as large as the pixels' share may still double.
         assert_eq!(scene_gaussian_budget(1_000, 5_000), 10_000);
+    }
+
+    #[test]
+    fn the_random_start_follows_the_pixels_within_a_floor_and_a_ceiling() {
+        // 20 views at 256 x 168: 17k; 12 views of 80 x 60: the floor.
+        assert_eq!(scene_random_init_count(20 * 256 * 168, false), 17_203);
+        assert_eq!(
+            scene_random_init_count(12 * 80 * 60, false),
+            MIN_RANDOM_INIT
+        );
+        // 100 views of 800 x 800: the recipe's 100k, a fifth of that on a software adapter.
+        assert_eq!(
+            scene_random_init_count(100 * 800 * 800, false),
+            MAX_RANDOM_INIT
+        );
+        assert_eq!(
+            scene_random_init_count(100 * 800 * 800, true),
+            MAX_RANDOM_INIT_SOFTWARE
+        );
+        assert_eq!(scene_random_init_count(20 * 256 * 168, true), 17_203);
     }
 }

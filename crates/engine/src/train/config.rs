@@ -54,8 +54,10 @@ pub struct TrainConfig {
     /// training pixels, at least twice the start, [`crate::train::budget`]), so a sparse capture is not grown into
     /// floaters that fit each training view and no other. Always within `max_gaussians`.
     pub gaussian_budget: Option<usize>,
-    /// Random initial Gaussians when the dataset has no sparse points.
-    pub random_init_count: usize,
+    /// Random initial Gaussians when the dataset has no sparse points; `None` sizes the start
+    /// from the scene's training pixels and the adapter ([`crate::train::budget::scene_random_init_count`]),
+    /// and the trainer's config then holds the count it chose.
+    pub random_init_count: Option<usize>,
     /// Background Gaussians (no object) on a far sphere around the cameras and points, for the
     /// far background (sky, walls) the sparse points miss. Plain training adds them to a
     /// scene's sparse points (not to random initialisations); Segment then Splat to its voted
@@ -89,7 +91,7 @@ impl Default for TrainConfig {
             coarse_halvings: 1,
             max_gaussians: 6_000_000,
             gaussian_budget: None,
-            random_init_count: 100_000,
+            random_init_count: None,
             background_shell: crate::background_shell::DEFAULT_BACKGROUND_SHELL,
             object_loss: None,
             deformation: None,

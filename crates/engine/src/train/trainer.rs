@@ -43,13 +43,13 @@ use crate::model::{
 };
 use crate::render::{RenderError, RenderOutput, Renderer};
 use crate::schedule::scene_extent;
-use crate::train::budget::scene_gaussian_budget;
+use crate::train::budget::{scene_gaussian_budget, scene_random_init_count};
 use crate::train::config::{ConfigError, TrainConfig};
 use crate::train::densify_stats::DensifyAccumulators;
 use crate::train::object_loss::{MAX_OBJECTS_PER_LEVEL, ObjectTargets, SkippedPair};
 use crate::train::random_init::{camera_centres, has_sparse_points, random_visible_gaussians};
 use crate::train::schedule::{DeformationSchedule, SPARSE_CAPTURE_VIEWS, TrainSchedule};
-use crate::train::views::{Views, ViewsError};
+use crate::train::views::{Views, ViewsError, training_pixels};
 use crate::{ObjectFilter, RenderSettings};
 use segsplat_gpu::deferred_read::DeferredRead;
 use segsplat_gpu::{GpuContext, GpuError};
@@ -215,13 +215,36 @@ pub fn initial_model(scene: &Scene, config: &TrainConfig) -> Result<GaussianMode
         }
         _ => {
             let mut rng = ChaCha8Rng::seed_from_u64(config.seed ^ 0x1417);
-            random_visible_gaussians(scene, config.random_init_count, &mut rng)
+            let count = config
+                .random_init_count
+                .unwrap_or_else(|| scene_sized_random_init(scene, config, false));
+            random_visible_gaussians(scene, count, &mut rng)
         }
     };
     if model.is_empty() {
         return Err(TrainError::EmptyModel);
     }
     Ok(model)
+}
+
+/// The random start [`scene_random_init_count`] sizes for `scene` under `config` (its training
+/// views at its resolution), on a software adapter or not.
+pub fn scene_sized_random_init(scene: &Scene, config: &TrainConfig, software: bool) -> usize {
+    let pixels = training_pixels(scene, config.max_resolution, config.eval_split_every);
+    scene_random_init_count(pixels, software)
+}
+
+/// Fills in `random_init_count` when `config` leaves it out and `scene` has no sparse points
+/// (so the start is random), sized for the adapter of `ctx`; an explicit count is kept. The
+/// config then says what the job started from.
+pub fn resolve_random_init(config: &mut TrainConfig, scene: &Scene, ctx: &GpuContext) {
+    if config.random_init_count.is_none() && !has_sparse_points(scene) {
+        config.random_init_count = Some(scene_sized_random_init(
+            scene,
+            config,
+            ctx.report.is_software,
+        ));
+    }
 }
 
 /// The initial model of plain training: [`initial_model`], plus `background_shell` Gaussians on
@@ -248,10 +271,13 @@ impl Trainer {
     pub fn new(
         ctx: &GpuContext,
         scene: &Scene,
-        config: TrainConfig,
+        mut config: TrainConfig,
         model: Option<GaussianModel>,
     ) -> Result<Self, TrainError> {
         config.validate()?;
+        if model.is_none() {
+            resolve_random_init(&mut config, scene, ctx);
+        }
         let model = match model {
             Some(model) => model,
             None => plain_initial_model(scene, &config)?,

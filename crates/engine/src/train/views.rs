@@ -84,6 +84,25 @@ pub fn is_held_out(scene: &Scene, frame_index: usize, split_every: u32) -> bool 
     split_every > 0 && frame_index.is_multiple_of(split_every as usize)
 }
 
+/// Pixels of the training views (every frame not held out) at `max_resolution`, from the
+/// frames' sizes, without loading their images.
+pub fn training_pixels(scene: &Scene, max_resolution: Option<u32>, split_every: u32) -> u64 {
+    scene
+        .frames
+        .iter()
+        .enumerate()
+        .filter(|(index, _)| !is_held_out(scene, *index, split_every))
+        .map(|(_, frame)| {
+            let (width, height) = (frame.intrinsics.width, frame.intrinsics.height);
+            let factor = max_resolution.map_or(1.0, |side| {
+                segsplat_scene::scale_for_max_side(width, height, side)
+            });
+            let (width, height) = segsplat_scene::scaled_size(width, height, factor);
+            width as u64 * height as u64
+        })
+        .sum()
+}
+
 impl Views {
     /// Loads every frame at `max_resolution`; training views also get `coarse_halvings` coarse
     /// images ([`View::coarse`]).

@@ -9,8 +9,8 @@ use futures::future::BoxFuture;
 use serde::{Deserialize, Serialize};
 
 use super::training::{
-    TrainingStageReport, fatal, load_resume_point, record_settings, report_evaluation,
-    store_outputs, train_failure, train_with_checkpoints,
+    TrainingStageReport, fatal, load_resume_point, note_undistortion, record_settings,
+    report_evaluation, store_outputs, train_failure, train_with_checkpoints,
 };
 use crate::jobs::{JobContext, JobFailure, JobHandler};
 use segsplat_engine::deform::{DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE};
@@ -85,6 +85,7 @@ fn run_blocking(ctx: &JobContext) -> Result<(), JobFailure> {
         .clone()
         .ok_or_else(|| fatal("the reconstruct job needs a GPU worker"))?;
     let scene = load_scene(&ctx.scene_dir, &LoadOptions::default()).map_err(fatal)?;
+    note_undistortion(ctx, &scene);
     if config.deformation_from_scene && scene.is_dynamic() && config.train.deformation.is_none() {
         config.train.deformation = Some(Default::default());
     }

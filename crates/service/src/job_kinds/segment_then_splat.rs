@@ -20,13 +20,14 @@ use serde::{Deserialize, Serialize};
 
 use crate::job_kinds::stop_aware::{StopAware, StopSignal, stop_or};
 use crate::job_kinds::training::{
-    TrainingStageReport, fatal, load_resume_point, record_settings, report, report_evaluation,
-    retryable, store_outputs, train_failure, train_with_checkpoints,
+    TrainingStageReport, fatal, load_resume_point, note_undistortion, record_settings, report,
+    report_evaluation, retryable, store_outputs, train_failure, train_with_checkpoints,
 };
 use crate::jobs::{JobContext, JobFailure, JobHandler, Progress};
 use crate::store::objects::{ObjectEmbedding, ObjectRecord};
 use segsplat_engine::checkpoint::Checkpoint;
 use segsplat_engine::deform::{DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE};
+use segsplat_engine::train::trainer::resolve_random_init;
 use segsplat_engine::train::{EvalReport, ObjectLossConfig, TrainConfig, Trainer, TrainerMeta};
 use segsplat_gpu::GpuContext;
 use segsplat_method::segment_then_splat::association::{
@@ -201,6 +202,7 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
         .clone()
         .ok_or_else(|| fatal("the segment_then_splat job needs a GPU worker"))?;
     let scene = load_scene(&ctx.scene_dir, &LoadOptions::default()).map_err(fatal)?;
+    note_undistortion(ctx, &scene);
     let frames = training_frames(&scene, &config.train);
     let size = SceneSize::of(frames.len());
     config.scene_sized.apply(frames.len(), &mut config.train);
@@ -211,6 +213,7 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
     config
         .scene_sized
         .apply_background(rgba.then_some(scene.background), &mut config.train);
+    resolve_random_init(&mut config.train, &scene, &gpu);
     tracing::info!(
         ?size,
         steps = config.train.steps,

@@ -55,6 +55,29 @@ pub fn report(ctx: &JobContext, stage: &str, step: u64, total_steps: u64, metric
     }
 }
 
+/// Records an `undistorted` job event and logs it when the scene has cameras with lens
+/// distortion: their frames are undistorted to pinhole cameras as they load (model,
+/// coefficients and sizes in the event's `lenses`).
+pub fn note_undistortion(ctx: &JobContext, scene: &segsplat_scene::Scene) {
+    let lenses = segsplat_scene::distortion::undistorted_lenses(scene);
+    if lenses.is_empty() {
+        return;
+    }
+    let described: Vec<String> = lenses
+        .iter()
+        .map(segsplat_scene::distortion::describe_lens)
+        .collect();
+    let message = format!(
+        "lens distortion detected; frames undistorted to pinhole cameras: {}",
+        described.join("; ")
+    );
+    tracing::info!(job = %ctx.job_id, "{message}");
+    let lenses = serde_json::to_value(&lenses).unwrap_or_default();
+    if let Err(error) = ctx.progress.undistorted_blocking("load", &message, &lenses) {
+        tracing::warn!(%error, "undistortion event not recorded");
+    }
+}
+
 /// Records a `warning` job event for every stage the trainer's config makes impossible (a
 /// deformation warm-up longer than the job, densification that never starts, ...), and logs it.
 pub fn warn_about_schedule(ctx: &JobContext, trainer: &Trainer) {

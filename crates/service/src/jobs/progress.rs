@@ -127,6 +127,18 @@ impl ProgressReporter {
         tokio::runtime::Handle::current().block_on(self.record("resumed", &payload))
     }
 
+    /// Records an `undistorted` event (`{"stage", "message", "lenses"}`): the scene's frames of
+    /// these distorted camera models were undistorted to pinhole cameras as they were loaded.
+    pub fn undistorted_blocking(
+        &self,
+        stage: &str,
+        message: &str,
+        lenses: &serde_json::Value,
+    ) -> Result<bool, StoreError> {
+        let payload = serde_json::json!({ "stage": stage, "message": message, "lenses": lenses });
+        tokio::runtime::Handle::current().block_on(self.record("undistorted", &payload))
+    }
+
     /// Records the settings the job runs with, resolved from the scene, in its record and as a
     /// `settings` event, from blocking code. Returns false when this worker no longer holds the
     /// job's lease.

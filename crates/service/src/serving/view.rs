@@ -166,6 +166,7 @@ mod tests {
             cy: 50.0,
             camera_to_world: Mat4::IDENTITY.to_cols_array_2d(),
             time: None,
+            undistorted_from: None,
         }
     }
 

@@ -86,6 +86,12 @@ pub fn ingest_scene(request: &IngestRequest) -> Result<SceneSummary, IngestError
     // The loader looks through a single wrapping folder; `scene.root` is the dataset itself.
     let scene = load_scene(unpack_dir.path(), &request.load_options)?;
     let mut summary = validate_scene_within(&scene, &request.pixel_limits)?;
+    for lens in &summary.undistorted {
+        tracing::info!(
+            lens = %segsplat_scene::distortion::describe_lens(lens),
+            "upload has lens distortion; its frames are undistorted to pinhole cameras"
+        );
+    }
     let used = used_files(&scene);
     store_tree(&scene.root, &scene.root, &used, request, &mut summary)?;
     Ok(summary)

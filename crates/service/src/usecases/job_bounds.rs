@@ -4,6 +4,7 @@
 
 use crate::config::JobsConfig;
 use segsplat_engine::model::max_gaussians_for_binding;
+use segsplat_engine::train::budget::MAX_RANDOM_INIT;
 use segsplat_gpu::AdapterReport;
 
 /// `Err` names the field, its value and the limit (with its config key).
@@ -51,7 +52,11 @@ pub fn check_adapter_fit(
     let (source, initial) = if sparse_point_count > 0 {
         ("the scene's sparse points", sparse_point_count)
     } else {
-        ("random_init_count", field("random_init_count").unwrap_or(0))
+        // Left out, the start is sized from the scene, at most the scene-sized ceiling.
+        (
+            "random_init_count",
+            field("random_init_count").unwrap_or(MAX_RANDOM_INIT as u64),
+        )
     };
     let fits = max_gaussians_for_binding(smallest.max_storage_buffer_binding_bytes);
     let needed = initial.saturating_add(shell);
