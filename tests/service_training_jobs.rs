@@ -662,3 +662,48 @@ async fn segment_then_splat_with_propagated_masks() {
     );
     client.shutdown().await;
 }
+
+/// A capture whose cameras have lens distortion says so where a user looks (issue 41, item 2):
+/// the upload's reply and `GET /v1/scenes/{id}` list the lens, and a job on it records an
+/// `undistorted` event.
+#[tokio::test]
+async fn a_distorted_capture_is_described_and_its_job_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(client) = start_service(dir.path()).await else {
+        return;
+    };
+    let spec = SyntheticSpec {
+        frame_count: 4,
+        width: 80,
+        height: 60,
+        camera_distance: 2.0,
+        lens: Some(segsplat_scene::synthetic::SyntheticLens {
+            model: segsplat_scene::colmap::CameraModel::OpenCv,
+            distortion: vec![-0.35, 0.12, 0.003, -0.004],
+        }),
+        ..SyntheticSpec::default()
+    };
+    let archive = archives::zip_of(&archives::colmap_files(spec, ColmapEncoding::Text));
+    let (status, uploaded) = client.upload(archive, "application/zip").await;
+    assert_eq!(status, 201, "{uploaded}");
+    let scene_id = uploaded["id"].as_str().unwrap();
+    let (status, described) = client.get_json(&format!("/v1/scenes/{scene_id}")).await;
+    assert_eq!(status, 200, "{described}");
+    for scene in [&uploaded, &described] {
+        let lens = &scene["undistorted"][0];
+        assert_eq!(lens["model"], "OPENCV", "{scene}");
+        assert_eq!(lens["frame_count"], 4, "{scene}");
+    }
+    let job_id = client
+        .create_job(scene_id, "reconstruct", serde_json::json!({"steps": 5}))
+        .await;
+    client
+        .wait_for_state(&job_id, "succeeded", Duration::from_secs(240))
+        .await;
+    let (status, events) = client.get_bytes(&format!("/v1/jobs/{job_id}/events")).await;
+    assert_eq!(status, 200);
+    let events = String::from_utf8_lossy(&events);
+    assert!(events.contains("event: undistorted"), "{events}");
+    assert!(events.contains("OPENCV"), "{events}");
+    client.shutdown().await;
+}
