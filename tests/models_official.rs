@@ -373,3 +373,41 @@ fn clip_models_of_different_widths_are_refused_as_a_pair() {
     let open = ModelStore::open(dir.path(), runtime).expect_err("the store refuses it too");
     assert!(open.to_string().contains("not a pair"), "{open}");
 }
+
+/// An encoder and a decoder of different SAM generations are refused by family, before any trial
+/// run (issue 41, item 13), and a folder without a manifest says how to write one.
+#[test]
+fn mixed_sam_generations_are_refused_by_family_and_a_missing_manifest_names_init() {
+    let Some(runtime) = models_support::runtime() else {
+        return;
+    };
+    let mixed = tempfile::tempdir().expect("temp dir");
+    std::fs::copy(
+        official_dir("sam2").join("sam2.1_hiera_tiny.decoder.onnx"),
+        mixed.path().join("decoder.onnx"),
+    )
+    .expect("copy");
+    std::fs::copy(
+        official_dir("mobilesam").join("mobile_sam_encoder.onnx"),
+        mixed.path().join("mobile_sam_encoder.onnx"),
+    )
+    .expect("copy");
+    let error = init_model_dir(mixed.path(), &runtime, &InitOptions::default())
+        .expect_err("a SAM 2 decoder with a MobileSAM encoder");
+    let message = error.to_string();
+    assert!(message.contains("different model families"), "{message}");
+    assert!(
+        message.contains("SAM 2 decoder") && message.contains("SAM 1 / MobileSAM encoder"),
+        "{message}"
+    );
+
+    let check = ModelStore::check(mixed.path(), &runtime);
+    let missing = check
+        .manifest_error
+        .expect("no manifest was written")
+        .to_string();
+    assert!(
+        missing.contains("segsplat models init"),
+        "a missing manifest names the command: {missing}"
+    );
+}

@@ -156,6 +156,7 @@ pub fn init_model_dir(
             ),
         ));
     }
+    check_sam_pair(dir, &by_role)?;
     let sam_family = sam_family(&by_role, options);
     let tokenizer = tokenizer_entry(dir, &by_role, options.tokenizer.as_deref())?;
     let mut models = Vec::new();
@@ -257,6 +258,42 @@ fn onnx_files(dir: &Path) -> Result<Vec<String>, ModelError> {
     }
     files.sort();
     Ok(files)
+}
+
+/// An encoder and a decoder of different SAM generations cannot work together: a SAM 2.1
+/// decoder reads the high-resolution features only a SAM 2.1 encoder gives, and a SAM 1 or
+/// MobileSAM decoder reads one embedding. Said here, by family, before the manifest's own
+/// check would name only the first missing tensor (issue 41, item 13). SAM 1 and MobileSAM
+/// share a signature, so only SAM 2 against the others can be told from the graphs.
+fn check_sam_pair(dir: &Path, by_role: &BTreeMap<&'static str, Graph>) -> Result<(), ModelError> {
+    let (Some(encoder), Some(decoder)) = (
+        by_role.get(Role::SamEncoder.as_str()),
+        by_role.get(Role::SamDecoder.as_str()),
+    ) else {
+        return Ok(());
+    };
+    let sam2 = |graph: &Graph| graph.recognised.family == Family::Sam2;
+    if sam2(encoder) == sam2(decoder) {
+        return Ok(());
+    }
+    let generation = |graph: &Graph| {
+        if sam2(graph) {
+            "SAM 2"
+        } else {
+            "SAM 1 / MobileSAM"
+        }
+    };
+    Err(init_error(
+        dir,
+        format!(
+            "{} is a {} encoder and {} a {} decoder: they come from different model families \
+             and cannot be paired; put the encoder and decoder of one export in the folder",
+            encoder.file,
+            generation(encoder),
+            decoder.file,
+            generation(decoder),
+        ),
+    ))
 }
 
 /// SAM 1 and MobileSAM share a signature: the option decides, else a file name with "mobile".

@@ -262,9 +262,23 @@ impl Manifest {
     /// Reads and validates `dir/manifest.json`.
     pub fn load(dir: &Path) -> Result<Manifest, ModelError> {
         let path = dir.join(MANIFEST_FILE);
-        let text = std::fs::read_to_string(&path).map_err(|source| ModelError::Read {
-            path: path.clone(),
-            source,
+        let text = std::fs::read_to_string(&path).map_err(|source| {
+            if source.kind() == std::io::ErrorKind::NotFound {
+                // A folder of ONNX files as downloaded: say how to describe it.
+                ModelError::Manifest {
+                    path: path.clone(),
+                    reason: format!(
+                        "is missing; run `segsplat models init {}` to write it from the \
+                         folder's .onnx files",
+                        dir.display()
+                    ),
+                }
+            } else {
+                ModelError::Read {
+                    path: path.clone(),
+                    source,
+                }
+            }
         })?;
         Manifest::parse(&text).map_err(|reason| ModelError::Manifest { path, reason })
     }
