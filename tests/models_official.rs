@@ -411,3 +411,63 @@ fn mixed_sam_generations_are_refused_by_family_and_a_missing_manifest_names_init
         "a missing manifest names the command: {missing}"
     );
 }
+
+/// Replaces every occurrence of `from` in the file by `to`, of the same length, so the protobuf
+/// stays valid and every reference to a tensor follows its new name.
+fn rename_in_file(path: &Path, from: &str, to: &str) {
+    assert_eq!(
+        from.len(),
+        to.len(),
+        "same-length names keep the protobuf valid"
+    );
+    let mut bytes = std::fs::read(path).expect("read model");
+    let mut renamed = 0;
+    let mut at = 0;
+    while let Some(offset) = bytes[at..]
+        .windows(from.len())
+        .position(|window| window == from.as_bytes())
+    {
+        let start = at + offset;
+        bytes[start..start + to.len()].copy_from_slice(to.as_bytes());
+        renamed += 1;
+        at = start + to.len();
+    }
+    assert!(renamed > 0, "{from} is not in {}", path.display());
+    std::fs::write(path, bytes).expect("write model");
+}
+
+/// A graph recognised for its role but with an input renamed is refused with the names, as a
+/// signature difference before any trial run (not ONNX Runtime's "Invalid input name"), and a
+/// CLIP image model whose image input has another name is told so, not that its side is
+/// dynamic (issue 41, item 13).
+#[test]
+fn renamed_inputs_are_named_as_signature_differences() {
+    let Some(runtime) = models_support::runtime() else {
+        return;
+    };
+    let sam = bare_copy(&official_dir("sam"));
+    rename_in_file(
+        &sam.path().join("sam_vit_b_decoder.onnx"),
+        "point_coords",
+        "point_coordz",
+    );
+    let message = init_model_dir(sam.path(), &runtime, &InitOptions::default())
+        .expect_err("a decoder without point_coords")
+        .to_string();
+    assert!(message.contains("signature differs"), "{message}");
+    assert!(message.contains("point_coords"), "{message}");
+    assert!(!message.contains("Invalid input name"), "{message}");
+
+    let clip = tempfile::tempdir().expect("temp dir");
+    let image = clip.path().join("image.onnx");
+    std::fs::copy(tiny_models_dir().join("tiny-clip-image.onnx"), &image).expect("copy");
+    rename_in_file(&image, "pixel_values", "image_pixels");
+    let message = init_model_dir(clip.path(), &runtime, &InitOptions::default())
+        .expect_err("an image input under another name")
+        .to_string();
+    assert!(
+        message.contains("named `image_pixels`") && message.contains("pixel_values"),
+        "{message}"
+    );
+    assert!(!message.contains("--clip-image-size"), "{message}");
+}

@@ -15,7 +15,7 @@ use super::recognise::{Recognised, describe_signature, recognise};
 use super::runtime::OrtRuntime;
 use super::sam::mask_probe::graph_masks_follow_original_size;
 use super::session::{ModelSession, actual_signature};
-use super::signature::ActualTensor;
+use super::signature::{ActualTensor, manifest_vs_role};
 use super::store::sha256_file;
 
 /// OpenAI CLIP's normalisation (open_clip's default for every OpenAI and most LAION models).
@@ -174,6 +174,7 @@ pub fn init_model_dir(
         manifest["tokenizer"] = tokenizer.clone();
     }
     let mut text = manifest_text(&manifest, dir)?;
+    check_role_signatures(dir, &text)?;
     if !decoder_masks_follow_original_size(dir, runtime, &text)? {
         for (entry, model) in entries_mut(&mut manifest).zip(models.iter_mut()) {
             if model.role == Role::SamDecoder {
@@ -214,6 +215,36 @@ fn entries_mut(manifest: &mut Value) -> impl Iterator<Item = &mut Value> {
         .as_array_mut()
         .into_iter()
         .flat_map(|models| models.iter_mut())
+}
+
+/// Each recognised graph against its role's signature (the tensors segsplat feeds and reads by
+/// name, their dtypes and ranks), before any trial run: a renamed or retyped input is named here
+/// as a signature difference, not left to ONNX Runtime's "Invalid input name" or "Unexpected
+/// input data type" at the first run (issue 41, item 13).
+fn check_role_signatures(dir: &Path, text: &str) -> Result<(), ModelError> {
+    let manifest = Manifest::parse(text).map_err(|reason| init_error(dir, reason))?;
+    for entry in &manifest.models {
+        let check = manifest_vs_role(entry);
+        if !check.is_ok() {
+            return Err(ModelError::Signature {
+                role: entry.role.to_string(),
+                file: entry.file.clone(),
+                problems: format!(
+                    "recognised as a {} but its signature differs from the one segsplat feeds \
+                     and reads by name: {}",
+                    entry.role,
+                    check
+                        .problems
+                        .iter()
+                        // The manifest was just written from the graph: its tensors are the graph's.
+                        .map(|problem| problem.replacen("manifest ", "the graph ", 1))
+                        .collect::<Vec<_>>()
+                        .join("; ")
+                ),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// One trial run of the decoder, when there is one (see `sam::mask_probe`).
@@ -337,10 +368,12 @@ fn tensor_specs(tensors: &[ActualTensor]) -> Result<Vec<Value>, String> {
         .collect()
 }
 
+fn input_named<'a>(tensors: &'a [ActualTensor], name: &str) -> Option<&'a ActualTensor> {
+    tensors.iter().find(|tensor| tensor.name == name)
+}
+
 fn fixed_dim(tensors: &[ActualTensor], name: &str, axis: usize) -> Option<i64> {
-    tensors
-        .iter()
-        .find(|tensor| tensor.name == name)
+    input_named(tensors, name)
         .and_then(|tensor| tensor.shape.get(axis).copied())
         .filter(|dim| *dim > 0)
 }
@@ -360,6 +393,20 @@ fn manifest_entry(
     };
     let preprocess = match role {
         Role::ClipImage => {
+            if input_named(&graph.inputs, "pixel_values").is_none() {
+                let name = graph
+                    .inputs
+                    .first()
+                    .map_or("?", |input| input.name.as_str());
+                return Err(init_error(
+                    dir,
+                    format!(
+                        "{}: looks like a CLIP image model, but its image input is named `{name}`; \
+                         segsplat feeds it by the name `pixel_values` (re-export with that name)",
+                        graph.file
+                    ),
+                ));
+            }
             let size = match (
                 fixed_dim(&graph.inputs, "pixel_values", 2),
                 options.clip_image_size,
