@@ -585,7 +585,8 @@ impl Trainer {
             } else {
                 continue;
             };
-            if !on_progress(&progress) {
+            // The last step's report is exact and final: no second read-back after it.
+            if !on_progress(&progress) || step == last_step {
                 return Ok(progress);
             }
         }
