@@ -11,7 +11,8 @@ use image::{GrayImage, Luma};
 use segment_then_splat_support::{config, full_truth, gpu, iou, mean, synthetic_scene};
 use segsplat_engine::ObjectFilter;
 use segsplat_engine::render::Renderer;
-use segsplat_engine::train::{SkippedPair, TrainError};
+use segsplat_engine::train::convergence::ConvergenceStop;
+use segsplat_engine::train::{SkippedPair, TrainConfig, TrainError};
 use segsplat_method::segment_then_splat::objects::{
     full_mask, render_layer, summarize_objects, visible_mask,
 };
@@ -164,6 +165,15 @@ fn trained_object_masks_match_held_out_truth() {
     );
 }
 
+/// The test config trained for `steps` without densification.
+fn without_densification(steps: u32) -> TrainConfig {
+    TrainConfig {
+        steps,
+        densify_from: Some(1000),
+        ..config()
+    }
+}
+
 /// The partial-mask filter, which renders every (object, view) pair inside one training step,
 /// hears a stop between views (issue 39, defect 4's remainder): the step ends with
 /// `TrainError::Stopped` and no pair is left out, so a resumed run filters again.
@@ -173,13 +183,10 @@ fn the_partial_mask_filter_stops_when_asked() {
     let dir = tempfile::tempdir().unwrap();
     let scene = synthetic_scene(dir.path(), |_| {});
     // A few steps, no densification: the filter's step comes at once.
-    let mut short = config();
-    short.steps = 20;
-    short.densify_from = Some(1000);
     let mut trainer = segmented_trainer_from_user_masks(
         &ctx,
         &scene,
-        short,
+        without_densification(20),
         &SegmentedTrainingOptions::default(),
     )
     .unwrap();
@@ -197,4 +204,50 @@ fn the_partial_mask_filter_stops_when_asked() {
     );
     assert_eq!(asked.load(std::sync::atomic::Ordering::Relaxed), 1);
     assert_eq!(trainer.skipped_pairs(), Vec::<SkippedPair>::new());
+}
+
+/// A convergence verdict before the partial-mask filter's step brings the filter forward (it is
+/// part of the method: an early end must not skip it): the filter runs after the step that
+/// follows the verdict, and the run trains one check interval on the filtered pairs before it
+/// ends (issue 38, item 2).
+#[test]
+fn an_early_convergence_verdict_brings_the_partial_mask_filter_forward() {
+    let Some(ctx) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let scene = synthetic_scene(dir.path(), |_| {});
+    // No densification; the SH bands by step 30; the large level joins at 50 (a quarter of
+    // 200) and the filter would run at 150 (three quarters).
+    let mut short = without_densification(200);
+    short.sh_degree_interval = Some(10);
+    short.stop_when_converged = Some(ConvergenceStop {
+        min_gain_db: 1000.0,
+        window_passes: 1,
+        check_every_passes: 1,
+        check_views: 2,
+    });
+    let mut trainer = segmented_trainer_from_user_masks(
+        &ctx,
+        &scene,
+        short,
+        &SegmentedTrainingOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(trainer.convergence_floor(), 50);
+    let progress = trainer.run(|_| true).unwrap();
+    // 28 training views: checks at 50 and 78, the verdict at 78, the filter after 79, the end
+    // a pass later.
+    let converged = trainer.converged_at().expect("the rule converges at once");
+    assert_eq!(
+        (
+            converged.verdict_step,
+            converged.partial_filter_step,
+            converged.step
+        ),
+        (78, Some(79), 107)
+    );
+    assert_eq!(progress.step, 107);
+    assert!(
+        trainer.partial_filter_cost().dispatches > 0,
+        "the partial-mask filter ran"
+    );
 }

@@ -176,6 +176,42 @@ async fn reconstruct_job_trains_and_stores_artifacts() {
         assert!(started.elapsed().as_secs() < 10, "final checkpoint kept");
         tokio::time::sleep(std::time::Duration::from_millis(20)).await;
     }
+
+    // The convergence stop through the job (issue 38, item 2): a rule no fit can meet ends the
+    // job at its first verdict. 7 training views: checks from step 3 (the last SH band) every
+    // pass, so the window's start is there at step 10.
+    let converging = client
+        .create_job(
+            scene_id,
+            "reconstruct",
+            serde_json::json!({"steps": 200, "checkpoint_every": 0, "densify_until": 0,
+                               "sh_degree_interval": 1, "coarse_until": 0,
+                               "stop_when_converged": {"min_gain_db": 1000.0, "window_passes": 1,
+                                                       "check_every_passes": 1, "check_views": 2}}),
+        )
+        .await;
+    let job = client
+        .wait_for_state(&converging, "succeeded", Duration::from_secs(120))
+        .await;
+    let metrics: serde_json::Value = serde_json::from_slice(
+        &blobs
+            .get_bytes(&format!("jobs/{converging}/output/metrics.json"))
+            .unwrap(),
+    )
+    .unwrap();
+    let training = &metrics["training"];
+    assert_eq!(training["converged_at"]["step"], 10, "{training}");
+    assert_eq!(training["steps"], 10, "{training}");
+    assert_eq!(
+        training["fit_checks"].as_array().map(Vec::len),
+        Some(2),
+        "{training}"
+    );
+    assert_eq!(metrics["steps"], 10, "{metrics}");
+    assert_eq!(
+        job["settings"]["train"]["stop_when_converged"]["min_gain_db"], 1000.0,
+        "{job}"
+    );
     client.shutdown().await;
 }
 

@@ -7,6 +7,7 @@ mod gpu_support;
 
 use gpu_support::segsplat;
 use segsplat_engine::checkpoint::Checkpoint;
+use segsplat_engine::train::convergence::ConvergenceStop;
 use segsplat_engine::train::trainer::{initial_model, plain_initial_model};
 use segsplat_engine::train::{TrainConfig, Trainer, TrainerMeta};
 use segsplat_gpu::GpuContext;
@@ -236,6 +237,74 @@ fn checkpoint_restores_state_exactly() {
     let mut resumed = resumed;
     let progress = resumed.run(|_| true).unwrap();
     assert_eq!(progress.step, 150);
+}
+
+/// The convergence stop (`stop_when_converged`): checks start at the floor (here the end of
+/// densification), a fit that has not gained the rule's minimum over its window ends the run
+/// there (the report, `end_step` and a checkpoint say so, and a resumed trainer stays ended),
+/// and a rule that asks for no gain never ends a run whose fit keeps its best.
+#[test]
+fn the_convergence_stop_ends_a_run_when_the_fit_stops_gaining() {
+    let Some(ctx) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let scene = synthetic_scene(dir.path());
+    // 28 training views: a check every pass (28 steps), a window of two passes.
+    let rule = ConvergenceStop {
+        min_gain_db: 1000.0,
+        window_passes: 2,
+        check_every_passes: 1,
+        check_views: 2,
+    };
+    // Short: densification from step 100 to 150, the SH bands by 90, no coarse steps.
+    let short = |steps| TrainConfig {
+        densify_until: Some(150),
+        sh_degree_interval: Some(30),
+        coarse_until: Some(0),
+        stop_when_converged: Some(rule),
+        ..config(steps)
+    };
+    let stopping = short(300);
+    let mut trainer = Trainer::new(&ctx, &scene, stopping, None).unwrap();
+    assert_eq!(trainer.convergence_floor(), 150);
+    let progress = trainer.run(|_| true).unwrap();
+    // Checks at 150, 178 and 206; the window (56 steps) has a start from 206 on.
+    assert_eq!((progress.step, progress.total_steps), (206, 206));
+    let converged = trainer.converged_at().expect("the run converged");
+    assert_eq!(converged.step, 206);
+    assert_eq!(trainer.end_step(), 206);
+    let checks: Vec<u32> = trainer.fit_checks().iter().map(|&(step, _)| step).collect();
+    assert_eq!(checks, vec![150, 178, 206]);
+    for &(step, psnr) in trainer.fit_checks() {
+        assert!(
+            psnr.is_finite() && psnr > 12.0,
+            "fit {psnr} dB at step {step}"
+        );
+    }
+    let saved = trainer.checkpoint().unwrap();
+    let mut resumed = Trainer::resume(&ctx, &scene, &saved).unwrap();
+    assert_eq!(resumed.end_step(), 206);
+    assert_eq!(
+        resumed.run(|_| true).unwrap().step,
+        206,
+        "a converged run stays ended"
+    );
+
+    // No gain asked: the best fit never falls below itself, so the run trains every step.
+    let patient = TrainConfig {
+        stop_when_converged: Some(ConvergenceStop {
+            min_gain_db: 0.0,
+            ..rule
+        }),
+        ..short(260)
+    };
+    let mut trainer = Trainer::new(&ctx, &scene, patient, None).unwrap();
+    assert_eq!(trainer.run(|_| true).unwrap().step, 260);
+    assert_eq!(trainer.converged_at(), None);
+    assert_eq!(
+        trainer.fit_checks().len(),
+        4,
+        "checks at 150, 178, 206 and 234"
+    );
 }
 
 /// `segsplat train` writes a trained scene and `segsplat bench --init-ply` times steps starting

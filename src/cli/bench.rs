@@ -20,8 +20,9 @@ use segsplat_engine::deform::{
 };
 use segsplat_engine::init::random_gaussians;
 use segsplat_engine::ply::read_ply_file;
+use segsplat_engine::train::convergence::ConvergenceStop;
 use segsplat_engine::train::trainer::initial_model;
-use segsplat_engine::train::{TrainConfig, Trainer};
+use segsplat_engine::train::{ConvergedAt, TrainConfig, Trainer};
 use segsplat_gpu::profiler::KernelTime;
 use segsplat_gpu::{GpuContext, HostCostReading};
 use segsplat_scene::Scene;
@@ -60,6 +61,11 @@ pub struct BenchArgs {
     /// `m` for `--object-loss`.
     #[arg(long, default_value_t = 3)]
     pub objects_per_level: u32,
+    /// Stop before `--steps` when the fit of a few training views stops gaining (the
+    /// convergence stop a `segment_then_splat` job without `steps` uses; `--steps` is then the
+    /// ceiling); the report gives `converged_at` and every check in `fit_checks`.
+    #[arg(long)]
+    pub converge: bool,
     /// Render each object of `--object-loss` separately (its own projection, depth sort and
     /// backward: the path before batching) rather than batched on the step's full render, to
     /// compare the two in one build.
@@ -305,6 +311,12 @@ struct BenchReport {
     /// With `--eval-every`: held-out quality along the run.
     #[serde(skip_serializing_if = "Option::is_none")]
     curve: Option<Vec<curve::CurvePoint>>,
+    /// With a convergence stop (`--converge`, or a config's `stop_when_converged`): where it
+    /// ended the run, and the check views' fit at every check (step, mean PSNR).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    converged_at: Option<ConvergedAt>,
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    fit_checks: Vec<(u32, f64)>,
 }
 
 /// The plain step on the object-loss run's own starting Gaussians (background shell included),
@@ -426,12 +438,12 @@ fn timed_runs(ctx: &GpuContext, trainers: &mut [&mut Trainer]) -> anyhow::Result
     let mut dispatches = vec![0u64; trainers.len()];
     while trainers
         .iter()
-        .any(|trainer| trainer.step() < trainer.config().steps)
+        .any(|trainer| trainer.step() < trainer.end_step())
     {
         for ((trainer, run), dispatched) in trainers.iter_mut().zip(&mut runs).zip(&mut dispatches)
         {
             let first_step = trainer.step();
-            if first_step >= trainer.config().steps {
+            if first_step >= trainer.end_step() {
                 continue;
             }
             *dispatched += run.train_turn(ctx, trainer, first_step.saturating_add(turn))?;
@@ -610,6 +622,11 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     if args.no_densify {
         config.densify_until = Some(0);
     }
+    if args.converge {
+        config
+            .stop_when_converged
+            .get_or_insert_with(ConvergenceStop::default);
+    }
     let baseline = if args.deformation {
         config.deformation = Some(deformation_config(&args));
         config.validate()?;
@@ -748,6 +765,8 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         deformation,
         kernel_profile,
         curve,
+        converged_at: trainer.converged_at(),
+        fit_checks: trainer.fit_checks().to_vec(),
     };
     if args.json {
         println!("{}", serde_json::to_string(&report)?);

@@ -94,7 +94,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         checkpoint_path.display()
     );
     let started = std::time::Instant::now();
-    while trainer.step() < total && !interrupt.requested() {
+    while trainer.step() < trainer.end_step() && !interrupt.requested() {
         let next = match args.checkpoint_every {
             0 => total,
             every => (trainer.step() / every + 1) * every,

@@ -29,7 +29,7 @@ pub fn run_with_curve(
     let mut run = TimedRun::default();
     let mut dispatches = 0u64;
     let mut curve = Vec::new();
-    while trainer.step() < trainer.config().steps {
+    while trainer.step() < trainer.end_step() {
         let last_step = trainer.step().saturating_add(every);
         dispatches += run.train_turn(ctx, trainer, last_step)?;
         let eval = trainer.evaluate()?;

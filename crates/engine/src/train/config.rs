@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 use crate::deform::DeformationConfig;
 use crate::densify::DensifyConfig;
 use crate::schedule::LearningRates;
+use crate::train::convergence::ConvergenceStop;
 use crate::train::object_loss::ObjectLossConfig;
 use crate::train::schedule::TrainSchedule;
 
@@ -69,6 +70,11 @@ pub struct TrainConfig {
     /// The deformation field of a dynamic scene; `None` trains a static scene. Each view is
     /// rendered at its frame's time (0 when the frame has none).
     pub deformation: Option<DeformationConfig>,
+    /// Ends the run before `steps` once the fit of a few training views stops gaining
+    /// ([`crate::train::convergence`]; `steps` is then a ceiling); `None` trains every step.
+    /// Off unless asked for: on the figurine the training views' fit kept gaining past the
+    /// point where held-out quality levelled off (docs/benchmarks.md, "A convergence stop").
+    pub stop_when_converged: Option<ConvergenceStop>,
 }
 
 impl Default for TrainConfig {
@@ -95,6 +101,7 @@ impl Default for TrainConfig {
             background_shell: crate::background_shell::DEFAULT_BACKGROUND_SHELL,
             object_loss: None,
             deformation: None,
+            stop_when_converged: None,
         }
     }
 }
@@ -183,6 +190,9 @@ impl TrainConfig {
             && let Err((field, problem)) = deformation.validate()
         {
             return fail(field, &problem);
+        }
+        if let Some(Err(problem)) = self.stop_when_converged.map(|stop| stop.validate()) {
+            return fail("stop_when_converged", problem);
         }
         Ok(())
     }

@@ -2,6 +2,7 @@
 
 pub mod budget;
 pub mod config;
+pub mod convergence;
 pub mod densify_stats;
 pub mod mask_iou;
 pub mod object_loss;
@@ -14,5 +15,6 @@ pub use config::TrainConfig;
 pub use object_loss::{ObjectLossConfig, ObjectTargets, SkippedPair, ViewIdMaps};
 pub use schedule::TrainSchedule;
 pub use trainer::{
-    EvalReport, PartialFilterCost, StopCheck, TrainError, TrainProgress, Trainer, TrainerMeta,
+    ConvergedAt, EvalReport, PartialFilterCost, StopCheck, TrainError, TrainProgress, Trainer,
+    TrainerMeta,
 };

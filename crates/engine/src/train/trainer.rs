@@ -16,6 +16,7 @@ mod adam_step;
 mod checkpointing;
 mod densification;
 mod dynamics;
+mod fit_check;
 mod measure;
 mod object_separate;
 mod object_step;
@@ -54,6 +55,8 @@ use crate::{ObjectFilter, RenderSettings};
 use segsplat_gpu::deferred_read::DeferredRead;
 use segsplat_gpu::{GpuContext, GpuError};
 use segsplat_scene::Scene;
+
+pub use fit_check::ConvergedAt;
 
 /// Steps between loss / capacity read-backs.
 const SYNC_EVERY: u32 = 25;
@@ -148,6 +151,10 @@ pub struct TrainerMeta {
     /// trainer then sizes it from the scene again, at least the checkpoint's count).
     #[serde(default)]
     pub gaussian_budget: Option<usize>,
+    /// Where the convergence stop ended the run (a resumed run that had ended stays ended; the
+    /// checks' history is not kept, so a run resumed before its stop refills its window).
+    #[serde(default)]
+    pub converged_at: Option<ConvergedAt>,
 }
 
 pub struct Trainer {
@@ -193,6 +200,8 @@ pub struct Trainer {
     resolution_divisor: Option<u32>,
     /// Gaussians densification may grow to (the config's, or the scene's).
     gaussian_budget: usize,
+    /// The convergence stop's checks and verdict (`config.stop_when_converged`).
+    fit_check: fit_check::FitCheck,
 }
 
 /// Wall time and kernel dispatches the partial-mask filter has taken, inside [`Trainer::run`]'s
@@ -348,6 +357,7 @@ impl Trainer {
             object_buffers: object_step::ObjectBuffers::default(),
             resolution_divisor: None,
             gaussian_budget,
+            fit_check: fit_check::FitCheck::default(),
         };
         trainer.rng = ChaCha8Rng::seed_from_u64(trainer.config.seed);
         if let Some(deformation) = trainer.config.deformation.clone() {
@@ -573,12 +583,16 @@ impl Trainer {
         last_step: u32,
         mut on_progress: impl FnMut(&TrainProgress) -> bool,
     ) -> Result<TrainProgress, TrainError> {
-        let last_step = last_step.min(self.config.steps);
+        let last_step = last_step.min(self.end_step());
         self.started = Instant::now();
         self.steps_at_start = self.step;
         while self.step < last_step {
             let step = self.train_step()?;
-            let progress = if step == last_step {
+            // Checked on every step, the turn's last included: a caller's turns may end on
+            // check steps.
+            let converged = self.check_convergence(step)?;
+            let last = step == last_step || converged;
+            let progress = if last {
                 self.progress()?
             } else if step % SYNC_EVERY == 0 {
                 self.progress_without_waiting()?
@@ -586,7 +600,7 @@ impl Trainer {
                 continue;
             };
             // The last step's report is exact and final: no second read-back after it.
-            if !on_progress(&progress) || step == last_step {
+            if !on_progress(&progress) || last {
                 return Ok(progress);
             }
         }
@@ -639,7 +653,7 @@ impl Trainer {
         let elapsed = self.started.elapsed().as_secs_f64();
         TrainProgress {
             step: self.step,
-            total_steps: self.config.steps,
+            total_steps: self.end_step(),
             loss: losses.first().copied().unwrap_or(f32::NAN),
             object_loss: losses.iter().skip(1).sum(),
             gaussians: self.gaussians.count(),

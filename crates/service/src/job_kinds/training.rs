@@ -9,7 +9,9 @@ use crate::jobs::{JobContext, JobFailure, Progress};
 use segsplat_engine::GaussianModel;
 use segsplat_engine::checkpoint::Checkpoint;
 use segsplat_engine::model::ModelError;
-use segsplat_engine::train::{EvalReport, TrainError, TrainProgress, Trainer, TrainerMeta};
+use segsplat_engine::train::{
+    ConvergedAt, EvalReport, TrainError, TrainProgress, Trainer, TrainerMeta,
+};
 use segsplat_gpu::HostCostReading;
 use segsplat_method::cameras::CAMERAS_FILE;
 use segsplat_method::scene_files::write_scene_files;
@@ -200,6 +202,12 @@ pub struct TrainingStageReport {
     /// its masks and its first step.
     #[serde(default)]
     pub setup_seconds: f64,
+    /// Where the convergence stop ended training before its steps (a job that left `steps`
+    /// out), and the check views' fit at every check: (step, mean PSNR).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub converged_at: Option<ConvergedAt>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub fit_checks: Vec<(u32, f64)>,
 }
 
 /// Steps timed with timestamp queries for [`TrainingStageReport::gpu_busy_fraction`]: few
@@ -269,7 +277,7 @@ fn train_stage(
     // Heard inside a step's long passes (the partial-mask filter), not only between reports.
     let stop = StopSignal::of(ctx);
     trainer.set_stop_check(Arc::new(move || stop.requested()));
-    while trainer.step() < total {
+    while trainer.step() < trainer.end_step() {
         let next_checkpoint = match checkpoint_every {
             0 => total,
             every => (trainer.step() / every + 1) * every,
@@ -340,6 +348,8 @@ fn train_stage(
         ),
         gpu_busy_fraction,
         setup_seconds: 0.0,
+        converged_at: trainer.converged_at(),
+        fit_checks: trainer.fit_checks().to_vec(),
     })
 }
 

@@ -28,6 +28,7 @@ impl Trainer {
             train_views: self.views.train.len(),
             skipped_pairs: self.skipped_pairs.iter().copied().collect(),
             gaussian_budget: Some(self.gaussian_budget),
+            converged_at: self.converged_at(),
         });
         put_model(&mut checkpoint, "model", &model);
         put_model(&mut checkpoint, "adam.m", &first);
@@ -75,6 +76,7 @@ impl Trainer {
         trainer.rng = meta.rng.clone();
         trainer.view_queue = meta.view_queue.clone();
         trainer.skipped_pairs = meta.skipped_pairs.iter().copied().collect();
+        trainer.fit_check.restore(meta.converged_at);
         if let Some(budget) = meta.gaussian_budget {
             trainer.gaussian_budget = budget;
         }

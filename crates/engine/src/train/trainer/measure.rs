@@ -66,48 +66,10 @@ impl Trainer {
 
     /// Renders every held-out view and compares it with its image.
     pub fn evaluate(&mut self) -> Result<EvalReport, TrainError> {
-        let settings = RenderSettings {
-            filter: ObjectFilter::All,
-            background: self.config.background,
-            sh_degree: self.schedule.sh_degree_at(self.step),
-        };
         let mut report = EvalReport::default();
-        for view in &self.views.test {
-            if self.dynamics.is_some() {
-                let mut encoder =
-                    self.ctx
-                        .device
-                        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                            label: Some("deform for evaluation"),
-                        });
-                dynamics::deform_to(
-                    &self.ctx,
-                    self.step,
-                    &mut self.dynamics,
-                    &self.gaussians,
-                    &mut encoder,
-                    view.time,
-                )?;
-                self.ctx.submit_untimed(encoder.finish());
-            }
-            let output = self.renderer.render_checked(
-                &self.ctx,
-                dynamics::render_view(&self.gaussians, &self.dynamics),
-                &view.camera,
-                &settings,
-            )?;
-            let image = output.read_image(&self.ctx)?;
-            let rendered: Vec<[f32; 3]> = image
-                .iter()
-                .take(view.camera.pixel_count())
-                .map(|p| {
-                    [
-                        p[0].clamp(0.0, 1.0),
-                        p[1].clamp(0.0, 1.0),
-                        p[2].clamp(0.0, 1.0),
-                    ]
-                })
-                .collect();
+        for index in 0..self.views.test.len() {
+            let rendered = self.rendered_rgb(true, index)?;
+            let view = &self.views.test[index];
             let psnr = crate::image_metrics::psnr(&rendered, &view.target_rgb);
             if report.views == 0 || psnr < report.worst_psnr {
                 report.worst_psnr = psnr;
@@ -129,5 +91,59 @@ impl Trainer {
             report.ssim /= report.views as f64;
         }
         Ok(report)
+    }
+
+    /// A held-out (`held_out`) or training view rendered at full resolution (at its own time in
+    /// a dynamic scene), clamped to 0..1 RGB, row-major.
+    pub(super) fn rendered_rgb(
+        &mut self,
+        held_out: bool,
+        index: usize,
+    ) -> Result<Vec<[f32; 3]>, TrainError> {
+        let settings = RenderSettings {
+            filter: ObjectFilter::All,
+            background: self.config.background,
+            sh_degree: self.schedule.sh_degree_at(self.step),
+        };
+        let view = if held_out {
+            &self.views.test[index]
+        } else {
+            &self.views.train[index]
+        };
+        if self.dynamics.is_some() {
+            let mut encoder =
+                self.ctx
+                    .device
+                    .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                        label: Some("deform for evaluation"),
+                    });
+            dynamics::deform_to(
+                &self.ctx,
+                self.step,
+                &mut self.dynamics,
+                &self.gaussians,
+                &mut encoder,
+                view.time,
+            )?;
+            self.ctx.submit_untimed(encoder.finish());
+        }
+        let output = self.renderer.render_checked(
+            &self.ctx,
+            dynamics::render_view(&self.gaussians, &self.dynamics),
+            &view.camera,
+            &settings,
+        )?;
+        let image = output.read_image(&self.ctx)?;
+        Ok(image
+            .iter()
+            .take(view.camera.pixel_count())
+            .map(|p| {
+                [
+                    p[0].clamp(0.0, 1.0),
+                    p[1].clamp(0.0, 1.0),
+                    p[2].clamp(0.0, 1.0),
+                ]
+            })
+            .collect())
     }
 }

@@ -27,10 +27,7 @@ impl Trainer {
 
     /// Whether the partial-mask filter runs after `step`.
     pub(super) fn partial_filter_due(&self, step: u32) -> bool {
-        match (&self.config.object_loss, &self.object_targets) {
-            (Some(config), Some(_)) => step == config.partial_filter_step(self.config.steps),
-            _ => false,
-        }
+        self.object_targets.is_some() && self.partial_filter_step() == Some(step)
     }
 
     /// Renders every (object, view) pair alone and leaves out those whose rendered mask
