@@ -14,5 +14,6 @@ pub use config::TrainConfig;
 pub use object_loss::{ObjectLossConfig, ObjectTargets, SkippedPair, ViewIdMaps};
 pub use schedule::TrainSchedule;
 pub use trainer::{
-    EvalReport, PartialFilterCost, StopCheck, TrainError, TrainProgress, Trainer, TrainerMeta,
+    EvalReport, PartialFilterCost, PendingCheckpoint, StopCheck, TrainError, TrainProgress,
+    Trainer, TrainerMeta,
 };
