@@ -5,6 +5,7 @@
 //! mask (mIoU, the paper's way: mean over objects in a frame, then over frames), every object
 //! must keep Gaussians, and a mask planted as a partial view must be filtered out.
 
+mod gpu_support;
 mod segment_then_splat_support;
 
 use image::{GrayImage, Luma};
@@ -13,12 +14,18 @@ use segsplat_engine::ObjectFilter;
 use segsplat_engine::render::Renderer;
 use segsplat_engine::train::convergence::ConvergenceStop;
 use segsplat_engine::train::{SkippedPair, TrainConfig, TrainError};
+use segsplat_method::segment_then_splat::id_voting::VotingRule;
 use segsplat_method::segment_then_splat::objects::{
     full_mask, render_layer, summarize_objects, visible_mask,
 };
-use segsplat_method::segment_then_splat::training::{
-    SegmentedTrainingOptions, segmented_trainer_from_user_masks,
+use segsplat_method::segment_then_splat::track_merge::{
+    TrackMergeRule, merge_lost_tracks_keeping_hulls,
 };
+use segsplat_method::segment_then_splat::training::{
+    SegmentedTrainingOptions, initial_segmented_model, initial_segmented_model_reusing,
+    segmented_trainer_from_user_masks, training_frames,
+};
+use segsplat_method::segment_then_splat::view_masks::ViewMaskSet;
 use segsplat_scene::{Level, load_instance_mask};
 
 /// Held-out mIoU the trained full (amodal) object masks must reach against the true silhouettes.
@@ -165,13 +172,29 @@ fn trained_object_masks_match_held_out_truth() {
     );
 }
 
-/// The test config trained for `steps` without densification.
-fn without_densification(steps: u32) -> TrainConfig {
+/// The tests' config cut to `steps`, densifying from `densify_from`.
+fn short_config(steps: u32, densify_from: u32) -> TrainConfig {
     TrainConfig {
         steps,
-        densify_from: Some(1000),
+        densify_from: Some(densify_from),
         ..config()
     }
+}
+
+/// A trainer on the user's masks with [`short_config`].
+fn short_trainer(
+    ctx: &segsplat_gpu::GpuContext,
+    scene: &segsplat_scene::Scene,
+    steps: u32,
+    densify_from: u32,
+) -> segsplat_engine::train::Trainer {
+    segmented_trainer_from_user_masks(
+        ctx,
+        scene,
+        short_config(steps, densify_from),
+        &SegmentedTrainingOptions::default(),
+    )
+    .unwrap()
 }
 
 /// The partial-mask filter, which renders every (object, view) pair inside one training step,
@@ -183,13 +206,7 @@ fn the_partial_mask_filter_stops_when_asked() {
     let dir = tempfile::tempdir().unwrap();
     let scene = synthetic_scene(dir.path(), |_| {});
     // A few steps, no densification: the filter's step comes at once.
-    let mut trainer = segmented_trainer_from_user_masks(
-        &ctx,
-        &scene,
-        without_densification(20),
-        &SegmentedTrainingOptions::default(),
-    )
-    .unwrap();
+    let mut trainer = short_trainer(&ctx, &scene, 20, 1000);
     let asked = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
     let counter = std::sync::Arc::clone(&asked);
     trainer.set_stop_check(std::sync::Arc::new(move || {
@@ -217,7 +234,7 @@ fn an_early_convergence_verdict_brings_the_partial_mask_filter_forward() {
     let scene = synthetic_scene(dir.path(), |_| {});
     // No densification; the SH bands by step 30; the large level joins at 50 (a quarter of
     // 200) and the filter would run at 150 (three quarters).
-    let mut short = without_densification(200);
+    let mut short = short_config(200, 1000);
     short.sh_degree_interval = Some(10);
     short.stop_when_converged = Some(ConvergenceStop {
         min_gain_db: 1000.0,
@@ -250,4 +267,77 @@ fn an_early_convergence_verdict_brings_the_partial_mask_filter_forward() {
         trainer.partial_filter_cost().dispatches > 0,
         "the partial-mask filter ran"
     );
+}
+
+/// A trainer with the object loss: its snapshot (object ids, left-out pairs and all) is the
+/// blocking checkpoint's bit for bit (issue 38, item 4).
+#[test]
+fn checkpoint_snapshot_holds_the_object_state() {
+    let Some(ctx) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let scene = synthetic_scene(dir.path(), |_| {});
+    let mut trainer = short_trainer(&ctx, &scene, 150, 100);
+    trainer.run_until(110, |_| true).unwrap();
+    gpu_support::assert_snapshot_equals_checkpoint(&ctx, &mut trainer, 5);
+}
+
+/// The trainer's initial model, built with the hull points the lost-track merge carved where the
+/// merge left them valid, is the model carved afresh from the merged masks: the same Gaussians
+/// with the same ids (issue 38, item 5). The third sphere has lost its sparse points (it is
+/// carved) and the first sphere's small id is lost after view 5 (it is merged back).
+#[test]
+fn the_trainers_model_reuses_the_merges_hull_points() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut scene = synthetic_scene(dir.path(), |_| {});
+    let missing = segsplat_scene::synthetic::synthetic_objects()[2];
+    let mut points = scene.points.take().unwrap();
+    let keep: Vec<bool> = points
+        .positions
+        .iter()
+        .map(|p| p.distance(missing.center) > missing.radius * 1.05)
+        .collect();
+    let mut flags = keep.iter();
+    points.positions.retain(|_| *flags.next().unwrap_or(&true));
+    let mut flags = keep.iter();
+    points.colors.retain(|_| *flags.next().unwrap_or(&true));
+    let mut flags = keep.iter();
+    points.tracks.retain(|_| *flags.next().unwrap_or(&true));
+    scene.points = Some(points);
+    let config = config();
+    let frames = training_frames(&scene, &config);
+    let mut masks = ViewMaskSet::from_user_masks(&scene, &frames, None).unwrap();
+    let renamed = segsplat_scene::synthetic::synthetic_objects()[0].ids[0];
+    let views = std::mem::take(&mut masks.views);
+    masks.views = views
+        .into_iter()
+        .enumerate()
+        .map(|(index, view)| {
+            let mut ids = view.level_ids();
+            if index >= 6 {
+                ids[0]
+                    .iter_mut()
+                    .filter(|id| **id == renamed)
+                    .for_each(|id| *id = 90);
+            }
+            view.with_level_ids(ids).unwrap()
+        })
+        .collect();
+    let (merges, mut carved) =
+        merge_lost_tracks_keeping_hulls(&scene, &mut masks, &config, TrackMergeRule::default())
+            .unwrap();
+    assert!(
+        merges[0] >= 1,
+        "the renamed track was not merged: {merges:?}"
+    );
+    let voting = VotingRule::default();
+    let fresh = initial_segmented_model(&scene, &masks, &config, voting, 100).unwrap();
+    let reusing =
+        initial_segmented_model_reusing(&scene, &masks, &config, voting, 100, &mut carved).unwrap();
+    eprintln!(
+        "{} objects' hull points reused, {} Gaussians",
+        carved.reused(),
+        fresh.len()
+    );
+    assert!(carved.reused() > 0, "nothing reused");
+    assert_eq!(reusing, fresh);
 }

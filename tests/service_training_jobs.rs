@@ -51,12 +51,9 @@ async fn run_short_segment_then_splat(
     (job_id, job)
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn reconstruct_job_trains_and_stores_artifacts() {
-    let data = tempfile::tempdir().unwrap();
-    let Some(client) = start_service(data.path()).await else {
-        return;
-    };
+/// Uploads the small synthetic COLMAP scene (9 views of 48 x 36) the reconstruct tests train on;
+/// returns its id.
+async fn upload_small_scene(client: &TestService) -> String {
     let spec = SyntheticSpec {
         frame_count: 9,
         width: 48,
@@ -66,7 +63,16 @@ async fn reconstruct_job_trains_and_stores_artifacts() {
     let archive = archives::zip_of(&archives::colmap_files(spec, ColmapEncoding::Binary));
     let (status, scene) = client.upload(archive, "application/zip").await;
     assert_eq!(status, 201, "{scene}");
-    let scene_id = scene["id"].as_str().unwrap();
+    scene["id"].as_str().unwrap().to_string()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn reconstruct_job_trains_and_stores_artifacts() {
+    let data = tempfile::tempdir().unwrap();
+    let Some(client) = start_service(data.path()).await else {
+        return;
+    };
+    let scene_id = &upload_small_scene(&client).await;
 
     let (status, body) = client
         .post_json(
@@ -213,6 +219,86 @@ async fn reconstruct_job_trains_and_stores_artifacts() {
         "{job}"
     );
     client.shutdown().await;
+}
+
+/// A training job handed back at a shutdown after its first checkpoints resumes from the newest
+/// on the next start and finishes. The checkpoints are written the job's way: the step loop
+/// submits GPU copies of the trainer's state and the writer thread reads them back, encodes and
+/// stores them (issue 38, item 4).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_job_resumes_from_a_checkpoint_read_back_beside_the_step_loop() {
+    let data = tempfile::tempdir().unwrap();
+    let Some(first) = start_service(data.path()).await else {
+        return;
+    };
+    let scene_id = &upload_small_scene(&first).await;
+    let steps = 1500;
+    let job_id = first
+        .create_job(
+            scene_id,
+            "reconstruct",
+            serde_json::json!({"steps": steps, "checkpoint_every": 20, "densify_from": 20,
+                               "densify_interval": 20, "densify_until": 200}),
+        )
+        .await;
+    let checkpoints = format!("jobs/{job_id}/checkpoints/");
+    let started = std::time::Instant::now();
+    loop {
+        let job = first.job(&job_id).await;
+        let stored = !first
+            .service
+            .blobs()
+            .list_prefix(&checkpoints)
+            .unwrap()
+            .is_empty();
+        if stored && job["progress"]["step"].as_u64().unwrap_or(0) >= 50 {
+            break;
+        }
+        assert_ne!(job["state"], "succeeded", "finished before the shutdown");
+        assert!(started.elapsed().as_secs() < 240, "no checkpoint: {job}");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    first.shutdown().await;
+
+    let second = start_service(data.path())
+        .await
+        .expect("the GPU is still there");
+    let job = second
+        .wait_for_state(&job_id, "succeeded", Duration::from_secs(300))
+        .await;
+    let (status, events) = second.get_bytes(&format!("/v1/jobs/{job_id}/events")).await;
+    assert_eq!(status, 200);
+    let resumed: Vec<u64> = String::from_utf8_lossy(&events)
+        .lines()
+        .filter_map(|line| line.strip_prefix("data:"))
+        .filter_map(|data| serde_json::from_str::<serde_json::Value>(data.trim()).ok())
+        .filter(|event| event["kind"] == "resumed")
+        .filter_map(|event| event["payload"]["from_step"].as_u64())
+        .collect();
+    assert_eq!(resumed.len(), 1, "{job}");
+    assert!(
+        resumed[0] >= 20 && resumed[0] % 20 == 0,
+        "resumed from step {}",
+        resumed[0]
+    );
+    let metrics: serde_json::Value = serde_json::from_slice(
+        &second
+            .service
+            .blobs()
+            .get_bytes(&format!("jobs/{job_id}/output/metrics.json"))
+            .unwrap(),
+    )
+    .unwrap();
+    assert_eq!(
+        metrics["training"]["steps"].as_u64(),
+        Some(steps - resumed[0]),
+        "the resumed attempt trains from its checkpoint: {metrics}"
+    );
+    assert!(
+        metrics["held_out"]["psnr"].as_f64().unwrap() > 10.0,
+        "{metrics}"
+    );
+    second.shutdown().await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -126,17 +126,23 @@ fn steady_dynamic_steps_create_no_buffers_and_no_bind_groups() {
     gpu_support::assert_steps_allocate_nothing(ctx, &mut trainer, views);
 }
 
+/// A 60-step dynamic trainer on `scene` whose field warms up in 10 steps, trained to step 30.
+fn trainer_with_a_trained_field(ctx: &segsplat_gpu::GpuContext, scene: &Scene) -> Trainer {
+    let mut config = config(scene, 60, true);
+    if let Some(deformation) = config.deformation.as_mut() {
+        deformation.warm_up_steps = Some(10);
+    }
+    let mut trainer = Trainer::new(ctx, scene, config, Some(initial())).expect("trainer");
+    trainer.run_until(30, |_| true).expect("train");
+    trainer
+}
+
 #[test]
 fn checkpoint_restores_the_field_exactly() {
     let Some(ctx) = gpu_context() else { return };
     let dir = tempfile::tempdir().expect("tempdir");
     let scene = dynamic_scene(dir.path());
-    let mut config = config(&scene, 60, true);
-    if let Some(deformation) = config.deformation.as_mut() {
-        deformation.warm_up_steps = Some(10);
-    }
-    let mut trainer = Trainer::new(ctx, &scene, config, Some(initial())).expect("trainer");
-    trainer.run_until(30, |_| true).expect("train");
+    let trainer = trainer_with_a_trained_field(ctx, &scene);
     let saved = trainer.checkpoint().expect("checkpoint");
     assert!(saved.sections.contains_key("deform.parameters"));
     let bytes = saved.to_bytes().expect("encode");
@@ -150,6 +156,28 @@ fn checkpoint_restores_the_field_exactly() {
     );
     let progress = resumed.run(|_| true).expect("train");
     assert_eq!(progress.step, 60);
+}
+
+/// A dynamic trainer's snapshot holds the deformation field's weights and moments as the
+/// blocking checkpoint does, bit for bit (issue 38, item 4).
+#[test]
+fn checkpoint_snapshot_holds_the_field() {
+    if gpu_context().is_none() {
+        return;
+    }
+    // A context of its own: the shared one counts the other tests' read-backs too.
+    let ctx = &segsplat_gpu::GpuContext::new_default().expect("GPU context");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let scene = dynamic_scene(dir.path());
+    let mut trainer = trainer_with_a_trained_field(ctx, &scene);
+    assert!(
+        trainer
+            .checkpoint()
+            .expect("checkpoint")
+            .sections
+            .contains_key("deform.parameters")
+    );
+    gpu_support::assert_snapshot_equals_checkpoint(ctx, &mut trainer, 5);
 }
 
 /// `segsplat synthetic-scene --dynamic` writes a D-NeRF scene and `segsplat bench

@@ -307,6 +307,20 @@ fn the_convergence_stop_ends_a_run_when_the_fit_stops_gaining() {
     );
 }
 
+/// A job's checkpoint, GPU copies of the state read back on the writer's thread while the trainer
+/// goes on, is the blocking checkpoint's bit for bit, and taking it reads nothing back and waits
+/// for nothing on the step loop's thread (issue 38, item 4).
+#[test]
+fn checkpoint_snapshot_is_the_blocking_checkpoint() {
+    let Some(ctx) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let scene = synthetic_scene(dir.path());
+    let mut trainer = Trainer::new(&ctx, &scene, config(150), None).unwrap();
+    // Past the first densification, so the moments and statistics are not all zero.
+    trainer.run_until(110, |_| true).unwrap();
+    gpu_support::assert_snapshot_equals_checkpoint(&ctx, &mut trainer, 5);
+}
+
 /// `segsplat train` writes a trained scene and `segsplat bench --init-ply` times steps starting
 /// from its Gaussians (the trained-density benchmark of docs/benchmarks.md), and
 /// `--profile-kernels` breaks a step's GPU time down by kernel.

@@ -90,3 +90,53 @@ pub fn assert_steps_allocate_nothing(
     assert_eq!(during.bind_groups_created, 0);
     assert_eq!(during.buffers_created, 0);
 }
+
+/// Takes `trainer`'s checkpoint the job's way ([`Trainer::checkpoint_snapshot`]: GPU copies,
+/// finished on another thread after `more_steps` further steps) and asserts that it equals the
+/// blocking [`Trainer::checkpoint`] taken at the same step, bit for bit; that taking it read
+/// nothing back and waited for nothing on this thread; and that a second snapshot reuses the
+/// first one's staging buffers. `ctx` should be the trainer's own context (a shared one counts
+/// other tests' work too).
+pub fn assert_snapshot_equals_checkpoint(
+    ctx: &GpuContext,
+    trainer: &mut segsplat_engine::train::Trainer,
+    more_steps: u32,
+) {
+    use segsplat_gpu::snapshot_copies::CopyStaging;
+    let blocking = trainer.checkpoint().expect("blocking checkpoint");
+    let before = ctx.host_costs.reading();
+    let pending = trainer
+        .checkpoint_snapshot(CopyStaging::new())
+        .expect("snapshot");
+    let taken = ctx.host_costs.reading().since(&before);
+    assert_eq!(
+        (taken.read_backs, taken.bytes_read_back, taken.wait_nanos),
+        (0, 0, 0),
+        "the snapshot read back or waited on the loop's thread: {taken:?}"
+    );
+    assert_eq!(pending.step(), trainer.step());
+    // The trainer moves on before the copies are read: the snapshot keeps its step's state.
+    let until = trainer.step() + more_steps;
+    trainer.run_until(until, |_| true).expect("train on");
+    let (snapshot, staging) = std::thread::spawn(move || pending.finish())
+        .join()
+        .expect("writer thread")
+        .expect("finish the snapshot");
+    assert_eq!(snapshot.sections, blocking.sections, "arrays differ");
+    assert_eq!(
+        serde_json::to_value(&snapshot.meta).expect("meta"),
+        serde_json::to_value(&blocking.meta).expect("meta"),
+    );
+    let before = ctx.host_costs.reading();
+    let again = trainer.checkpoint_snapshot(staging).expect("snapshot");
+    let taken = ctx.host_costs.reading().since(&before);
+    assert_eq!(
+        taken.buffers_created, 0,
+        "the staging buffers were not reused"
+    );
+    let (again, _) = again.finish().expect("finish the snapshot");
+    assert_eq!(
+        again.sections,
+        trainer.checkpoint().expect("checkpoint").sections
+    );
+}

@@ -259,15 +259,48 @@ fn download_parameters(
     buffers: &GaussianParameterBuffers,
     count: usize,
 ) -> Result<GaussianModel, ModelError> {
-    let means: Vec<f32> = ctx.read_vec(&buffers.means)?;
-    let log_scales: Vec<f32> = ctx.read_vec(&buffers.log_scales)?;
-    let rotations: Vec<f32> = ctx.read_vec(&buffers.rotations)?;
-    let opacity_logits: Vec<f32> = ctx.read_vec(&buffers.opacity_logits)?;
-    let sh_dc: Vec<f32> = ctx.read_vec(&buffers.sh_dc)?;
-    let mut sh_rest = Vec::with_capacity(SH_REST_GROUPS);
-    for buffer in &buffers.sh_rest {
-        sh_rest.push(ctx.read_vec::<f32>(buffer)?);
+    let mut words: [Vec<f32>; 8] = Default::default();
+    for (target, buffer) in words.iter_mut().zip(buffers.all()) {
+        *target = ctx.read_vec(buffer)?;
     }
+    Ok(parameters_from_words(&words, count))
+}
+
+/// Words per Gaussian in each of [`GaussianParameterBuffers::all`]'s buffers.
+pub const PARAMETER_WORDS: [usize; 8] = [
+    3,
+    3,
+    4,
+    1,
+    3,
+    SH_REST_COEFFICIENTS_PER_GROUP * 3,
+    SH_REST_COEFFICIENTS_PER_GROUP * 3,
+    SH_REST_COEFFICIENTS_PER_GROUP * 3,
+];
+
+impl GaussianParameterBuffers {
+    /// Each buffer of [`Self::all`] with the bytes its first `count` entries take: what a copy
+    /// of `count` Gaussians reads.
+    pub fn extents(&self, count: usize) -> [(&wgpu::Buffer, u64); 8] {
+        let buffers = self.all();
+        std::array::from_fn(|index| (buffers[index], (count * PARAMETER_WORDS[index] * 4) as u64))
+    }
+}
+
+/// The first `count` Gaussians' parameters (object ids empty) from the words of
+/// [`GaussianParameterBuffers::all`]'s buffers, each at least `count` entries long.
+pub fn parameters_from_words(words: &[Vec<f32>; 8], count: usize) -> GaussianModel {
+    let [
+        means,
+        log_scales,
+        rotations,
+        opacity_logits,
+        sh_dc,
+        rest0,
+        rest1,
+        rest2,
+    ] = words;
+    let sh_rest = [rest0, rest1, rest2];
     let rest_words = SH_REST_COEFFICIENTS_PER_GROUP * 3;
     let mut model = GaussianModel::default();
     for i in 0..count {
@@ -300,7 +333,7 @@ fn download_parameters(
         }
         model.sh_coefficients.push(sh);
     }
-    Ok(model)
+    model
 }
 
 /// A Gaussian scene in GPU storage.

@@ -420,22 +420,24 @@ impl GpuContext {
 
     /// Submits `commands`, timing the call into [`Self::host_costs`] (the training loop's
     /// submissions go through here, so a step's host time can be told from its device time).
-    pub fn submit(&self, commands: wgpu::CommandBuffer) {
+    pub fn submit(&self, commands: wgpu::CommandBuffer) -> wgpu::SubmissionIndex {
         let started = std::time::Instant::now();
-        self.submit_untimed(commands);
+        let submission = self.submit_untimed(commands);
         let took = u64::try_from(started.elapsed().as_nanos()).unwrap_or(u64::MAX);
         self.host_costs
             .submit_nanos
             .fetch_add(took, Ordering::Relaxed);
+        submission
     }
 
     /// Submits with the kernel parameters pushed so far written first. Every submission of work
     /// recorded with [`crate::Kernel`]s must come through here (or [`Self::submit`]), never
     /// `queue.submit`, or it reads parameters that were never written.
-    pub fn submit_untimed(&self, commands: wgpu::CommandBuffer) {
+    pub fn submit_untimed(&self, commands: wgpu::CommandBuffer) -> wgpu::SubmissionIndex {
         locked(&self.uniforms).before_submit(&self.queue);
-        self.queue.submit([commands]);
+        let submission = self.queue.submit([commands]);
         locked(&self.bind_groups).after_submit();
+        submission
     }
 
     /// `bytes` as kernel parameters: appended to the uniform ring (written at the next

@@ -10,6 +10,7 @@ pub mod kernel_layout;
 pub mod profiler;
 pub mod release;
 pub mod scan;
+pub mod snapshot_copies;
 pub mod sort;
 pub mod uniform_ring;
 pub mod validation;

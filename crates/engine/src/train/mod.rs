@@ -15,6 +15,6 @@ pub use config::TrainConfig;
 pub use object_loss::{ObjectLossConfig, ObjectTargets, SkippedPair, ViewIdMaps};
 pub use schedule::TrainSchedule;
 pub use trainer::{
-    ConvergedAt, EvalReport, PartialFilterCost, StopCheck, TrainError, TrainProgress, Trainer,
-    TrainerMeta,
+    ConvergedAt, EvalReport, PartialFilterCost, PendingCheckpoint, StopCheck, TrainError,
+    TrainProgress, Trainer, TrainerMeta,
 };

@@ -9,10 +9,11 @@
 //!
 //! This file holds the step loop; each other concern has its own file under `trainer/`: the
 //! Adam update (`adam_step`), densification within the Gaussian budget (`densification`),
-//! checkpoints (`checkpointing`), timing and evaluation (`measure`), the object loss
+//! checkpoints (`checkpointing`, and `checkpoint_snapshot` for jobs), timing and evaluation (`measure`), the object loss
 //! (`object_step`, `object_separate`, `partial_filter`) and the deformation field (`dynamics`).
 
 mod adam_step;
+mod checkpoint_snapshot;
 mod checkpointing;
 mod densification;
 mod dynamics;
@@ -56,6 +57,7 @@ use segsplat_gpu::deferred_read::DeferredRead;
 use segsplat_gpu::{GpuContext, GpuError};
 use segsplat_scene::Scene;
 
+pub use checkpoint_snapshot::PendingCheckpoint;
 pub use fit_check::ConvergedAt;
 
 /// Steps between loss / capacity read-backs.

@@ -10,6 +10,7 @@ use std::collections::BTreeMap;
 use glam::Vec3;
 use rayon::prelude::*;
 
+use super::carved_hulls::CarvedHulls;
 use super::view_masks::{ViewMaskSet, ViewMasks};
 use segsplat_engine::GaussianModel;
 use segsplat_scene::Level;
@@ -57,6 +58,19 @@ pub fn hull_points_for_missed_objects(
     model: &GaussianModel,
     fill: HullFill,
 ) -> Vec<Vec3> {
+    hull_points_reusing(masks, model, fill, &mut CarvedHulls::default())
+}
+
+/// [`hull_points_for_missed_objects`], taking the points of objects `carved` holds (from an
+/// earlier carve on the same points, views and fill; see [`CarvedHulls`]) instead of carving
+/// them again, and keeping the ones it carves there.
+pub fn hull_points_reusing(
+    masks: &ViewMaskSet,
+    model: &GaussianModel,
+    fill: HullFill,
+    carved: &mut CarvedHulls,
+) -> Vec<Vec3> {
+    carved.carving_from(masks, model, fill);
     let depth_ranges: Vec<std::sync::OnceLock<(f32, f32)>> = masks
         .views
         .iter()
@@ -74,15 +88,31 @@ pub fn hull_points_for_missed_objects(
             .filter(|(id, _)| voted.get(id).copied().unwrap_or(0) < fill.min_gaussians)
             .filter_map(|(&id, per_view)| Some((id, largest_view(per_view)?)))
             .collect();
-        let carved: Vec<Vec<Vec3>> = missed
+        let fresh: Vec<Option<Vec<Vec3>>> = missed
             .par_iter()
             .map(|&(object_id, source_index)| {
+                if carved.get(level, object_id).is_some() {
+                    return None;
+                }
                 let source = &masks.views[source_index];
                 let depths = *depth_ranges[source_index].get_or_init(|| depth_range(source, model));
-                carve_object(masks, level, object_id, source_index, depths, fill)
+                let object_points =
+                    carve_object(masks, level, object_id, source_index, depths, fill);
+                Some(object_points)
             })
             .collect();
-        points.extend(carved.into_iter().flatten());
+        for (&(object_id, _), fresh) in missed.iter().zip(fresh) {
+            match fresh {
+                Some(object_points) => {
+                    points.extend_from_slice(&object_points);
+                    carved.keep(level, object_id, object_points);
+                }
+                None => {
+                    points.extend(carved.get(level, object_id).into_iter().flatten());
+                    carved.note_reused();
+                }
+            }
+        }
     }
     points
 }

@@ -14,8 +14,9 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use glam::Vec3;
 
+use super::carved_hulls::CarvedHulls;
 use super::id_voting::VotingRule;
-use super::training::{SegmentedTrainingError, initial_segmented_model};
+use super::training::{SegmentedTrainingError, initial_segmented_model_reusing};
 use super::view_masks::{ViewMaskSet, ViewMaskSetError};
 use segsplat_engine::model::SH_C0;
 use segsplat_engine::schedule::scene_extent;
@@ -62,7 +63,27 @@ pub fn merge_lost_tracks(
     config: &TrainConfig,
     rule: TrackMergeRule,
 ) -> Result<[usize; 3], SegmentedTrainingError> {
-    let model = initial_segmented_model(scene, masks, config, VotingRule::default(), 0)?;
+    merge_lost_tracks_keeping_hulls(scene, masks, config, rule).map(|(merges, _)| merges)
+}
+
+/// [`merge_lost_tracks`], also returning the hull points it carved for objects the points
+/// missed that the merge left valid, for the trainer's initial model
+/// ([`super::training::segmented_trainer_with_hulls`]) to reuse.
+pub fn merge_lost_tracks_keeping_hulls(
+    scene: &Scene,
+    masks: &mut ViewMaskSet,
+    config: &TrainConfig,
+    rule: TrackMergeRule,
+) -> Result<([usize; 3], CarvedHulls), SegmentedTrainingError> {
+    let mut carved = CarvedHulls::default();
+    let model = initial_segmented_model_reusing(
+        scene,
+        masks,
+        config,
+        VotingRule::default(),
+        0,
+        &mut carved,
+    )?;
     let centers: Vec<Vec3> = scene
         .frames
         .iter()
@@ -74,8 +95,9 @@ pub fn merge_lost_tracks(
         let views_of = views_of_objects(masks, level);
         merge_ids(&appearance, &views_of, extent, rule)
     });
+    carved.forget_remapped(masks, &remaps);
     apply_remaps(masks, &remaps).map_err(SegmentedTrainingError::Masks)?;
-    Ok(remaps.map(|remap| remap.len()))
+    Ok((remaps.map(|remap| remap.len()), carved))
 }
 
 /// Centroid and mean colour (SH band 0) of each object's Gaussians at `level`.

@@ -6,9 +6,10 @@ use super::association::{
     AssociationError, AssociationOptions, AssociationReport, generated_view_masks,
 };
 use super::background_shell::background_shell_points;
-use super::hull_points::{HullFill, append_points, hull_points_for_missed_objects};
+use super::carved_hulls::CarvedHulls;
+use super::hull_points::{HullFill, append_points, hull_points_reusing};
 use super::id_voting::{Observations, VotingRule, vote_object_ids};
-use super::track_merge::{TrackMergeRule, merge_lost_tracks};
+use super::track_merge::{TrackMergeRule, merge_lost_tracks_keeping_hulls};
 use super::view_masks::{ViewMaskSet, ViewMaskSetError};
 use segsplat_engine::GaussianModel;
 use segsplat_engine::densify::ObjectFloor;
@@ -82,6 +83,26 @@ pub fn initial_segmented_model(
     voting: VotingRule,
     background_shell: usize,
 ) -> Result<GaussianModel, SegmentedTrainingError> {
+    initial_segmented_model_reusing(
+        scene,
+        masks,
+        config,
+        voting,
+        background_shell,
+        &mut CarvedHulls::default(),
+    )
+}
+
+/// [`initial_segmented_model`], with the hull points of objects `carved` holds from an earlier
+/// carve (the lost-track merge's) reused, and the ones carved here kept in it.
+pub fn initial_segmented_model_reusing(
+    scene: &Scene,
+    masks: &ViewMaskSet,
+    config: &TrainConfig,
+    voting: VotingRule,
+    background_shell: usize,
+    carved: &mut CarvedHulls,
+) -> Result<GaussianModel, SegmentedTrainingError> {
     let mut model = initial_model(scene, config)?;
     let masks = &voting_views(scene, masks);
     // Tracks in mask-view indices; only meaningful when the model is the sparse points in order.
@@ -98,7 +119,7 @@ pub fn initial_segmented_model(
     let positions: Vec<glam::Vec3> = model.means.iter().map(|m| glam::Vec3::from(*m)).collect();
     model.object_ids = vote_object_ids(&positions, &observations, masks, voting);
     // Objects the points missed get points carved from their visual hull, voted like the rest.
-    let hull = hull_points_for_missed_objects(masks, &model, HullFill::default());
+    let hull = hull_points_reusing(masks, &model, HullFill::default(), carved);
     if !hull.is_empty() {
         let first_new = model.len();
         append_points(&mut model, &hull);
@@ -210,8 +231,9 @@ pub fn segmented_trainer_from_generated_masks(
         config.max_resolution,
         association,
     )?;
-    merge_lost_tracks(scene, &mut masks, &config, TrackMergeRule::default())?;
-    let trainer = segmented_trainer_from_view_masks(ctx, scene, config, &masks, options)?;
+    let (_, carved) =
+        merge_lost_tracks_keeping_hulls(scene, &mut masks, &config, TrackMergeRule::default())?;
+    let trainer = segmented_trainer_with_hulls(ctx, scene, config, &masks, options, carved)?;
     Ok((trainer, report))
 }
 
@@ -221,21 +243,40 @@ pub fn segmented_trainer_from_generated_masks(
 pub fn segmented_trainer_from_view_masks(
     ctx: &GpuContext,
     scene: &Scene,
+    config: TrainConfig,
+    masks: &ViewMaskSet,
+    options: &SegmentedTrainingOptions,
+) -> Result<Trainer, SegmentedTrainingError> {
+    segmented_trainer_with_hulls(ctx, scene, config, masks, options, CarvedHulls::default())
+}
+
+/// [`segmented_trainer_from_view_masks`] reusing the hull points `carved` holds from the
+/// lost-track merge ([`super::track_merge::merge_lost_tracks_keeping_hulls`]) where the merge left
+/// them valid: the same model, without carving them twice.
+pub fn segmented_trainer_with_hulls(
+    ctx: &GpuContext,
+    scene: &Scene,
     mut config: TrainConfig,
     masks: &ViewMaskSet,
     options: &SegmentedTrainingOptions,
+    mut carved: CarvedHulls,
 ) -> Result<Trainer, SegmentedTrainingError> {
     config
         .object_loss
         .get_or_insert_with(ObjectLossConfig::default);
     resolve_random_init(&mut config, scene, ctx);
-    let model = initial_segmented_model(
+    let model = initial_segmented_model_reusing(
         scene,
         masks,
         &config,
         options.voting,
         options.background_shell,
+        &mut carved,
     )?;
+    tracing::debug!(
+        reused = carved.reused(),
+        "hull points reused from the lost-track merge"
+    );
     let mut trainer = Trainer::new(ctx, scene, config, Some(model))?;
     attach_object_training(ctx, &mut trainer, masks, options)?;
     Ok(trainer)

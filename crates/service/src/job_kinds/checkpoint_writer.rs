@@ -1,20 +1,23 @@
-//! Checkpoints encoded and stored by a thread of their own, so the step loop pays only for the
-//! read-back of the model (the snapshot) and goes on training while the object store takes the
-//! bytes (issue 38, item 4). One write at a time: a snapshot handed over while the previous one
-//! is still being written waits for it, so at most two checkpoints are in memory.
+//! Checkpoints read back, encoded and stored by a thread of their own (issue 38, item 4). The
+//! step loop only records GPU copies of the trainer's state ([`Trainer::checkpoint_snapshot`])
+//! and hands them over; this thread waits for those copies, builds the checkpoint and stores it
+//! while training goes on. One write at a time: a snapshot handed over while the previous one is
+//! still being written waits for it, so at most two snapshots (and two sets of staging buffers,
+//! handed back here for reuse) exist.
 
-use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
+use std::sync::mpsc::{Receiver, Sender, SyncSender, channel, sync_channel};
 use std::sync::{Arc, Mutex};
 use std::thread::{Scope, ScopedJoinHandle};
 
 use segsplat_engine::checkpoint::Checkpoint;
-use segsplat_engine::train::TrainerMeta;
+use segsplat_engine::train::{PendingCheckpoint, Trainer, TrainerMeta};
+use segsplat_gpu::snapshot_copies::CopyStaging;
 
 use crate::jobs::{JobContext, JobFailure};
 use crate::store::BlobError;
 
-/// A checkpoint and the step it was taken at; boxed, as the channel moves it whole.
-type Snapshot = (u32, Box<Checkpoint<TrainerMeta>>);
+/// A snapshot on its way from the GPU; boxed, as the channel moves it whole.
+type Snapshot = Box<PendingCheckpoint>;
 
 /// What the writer did, read when the stage ends.
 #[derive(Debug, Default)]
@@ -22,12 +25,15 @@ struct Outcome {
     /// The first write that failed for a reason other than the store being unavailable: the
     /// stage fails with it at the next checkpoint or at its end.
     failure: Option<JobFailure>,
-    /// Seconds spent encoding and storing, off the step loop.
+    /// Seconds spent waiting for the snapshots' copies, encoding and storing, off the step
+    /// loop.
     seconds: f64,
 }
 
 pub struct CheckpointWriter<'scope> {
     sender: Option<SyncSender<Snapshot>>,
+    /// Staging buffers of written snapshots, for the next ones.
+    staging: Receiver<CopyStaging>,
     outcome: Arc<Mutex<Outcome>>,
     thread: Option<ScopedJoinHandle<'scope, ()>>,
 }
@@ -41,33 +47,36 @@ impl<'scope> CheckpointWriter<'scope> {
     ) -> Self {
         // A rendezvous channel: a hand-over waits until the writer is free.
         let (sender, receiver) = sync_channel(0);
+        let (staging_back, staging) = channel();
         let outcome = Arc::new(Mutex::new(Outcome::default()));
         let shared = Arc::clone(&outcome);
         // Progress notes spawn onto the job's runtime, which a plain thread has not entered.
         let runtime = tokio::runtime::Handle::try_current().ok();
         let thread = scope.spawn(move || {
             let _entered = runtime.as_ref().map(tokio::runtime::Handle::enter);
-            write_all(ctx, name, &receiver, &shared);
+            write_all(ctx, name, &receiver, &staging_back, &shared);
         });
         Self {
             sender: Some(sender),
+            staging,
             outcome,
             thread: Some(thread),
         }
     }
 
-    /// Hands `checkpoint` (taken at `step`) to the writer, after the previous one is written;
-    /// fails with an earlier write's failure.
-    pub fn write(
-        &mut self,
-        step: u32,
-        checkpoint: Checkpoint<TrainerMeta>,
-    ) -> Result<(), JobFailure> {
+    /// Takes `trainer`'s snapshot (GPU copies, no read-back here) into staging buffers an
+    /// earlier snapshot used, when one is free, and hands it to the writer once the previous
+    /// one is written; fails with an earlier write's failure.
+    pub fn write(&mut self, trainer: &Trainer) -> Result<(), JobFailure> {
         self.take_failure()?;
+        let staging = self.staging.try_recv().unwrap_or_default();
+        let snapshot = trainer
+            .checkpoint_snapshot(staging)
+            .map_err(super::training::train_failure)?;
         let sent = self
             .sender
             .as_ref()
-            .map(|sender| sender.send((step, Box::new(checkpoint))));
+            .map(|sender| sender.send(Box::new(snapshot)));
         match sent {
             Some(Ok(())) => Ok(()),
             // The writer ended early: only a panic does that.
@@ -109,11 +118,22 @@ fn write_all(
     ctx: &JobContext,
     name: &str,
     receiver: &Receiver<Snapshot>,
+    staging_back: &Sender<CopyStaging>,
     outcome: &Mutex<Outcome>,
 ) {
-    for (step, checkpoint) in receiver {
+    for snapshot in receiver {
         let started = std::time::Instant::now();
-        let written = store(ctx, name, step, &checkpoint);
+        let step = snapshot.step();
+        let written = snapshot
+            .finish()
+            .map_err(|error| {
+                JobFailure::Retryable(format!("reading the checkpoint at step {step}: {error}"))
+            })
+            .and_then(|(checkpoint, staging)| {
+                // The step loop may be gone already: the buffers are then simply dropped.
+                let _ = staging_back.send(staging);
+                store(ctx, name, step, &checkpoint)
+            });
         let mut outcome = lock(outcome);
         outcome.seconds += started.elapsed().as_secs_f64();
         if let Err(failure) = written {

@@ -33,13 +33,16 @@ use segsplat_gpu::GpuContext;
 use segsplat_method::segment_then_splat::association::{
     AssociationOptions, generated_view_masks_with_progress,
 };
+use segsplat_method::segment_then_splat::carved_hulls::CarvedHulls;
 use segsplat_method::segment_then_splat::objects::{ObjectSummary, summarize_objects};
 use segsplat_method::segment_then_splat::propagated_masks::propagated_view_masks;
 use segsplat_method::segment_then_splat::scene_size::{SceneSize, SceneSizedFields};
-use segsplat_method::segment_then_splat::track_merge::{TrackMergeRule, merge_lost_tracks};
+use segsplat_method::segment_then_splat::track_merge::{
+    TrackMergeRule, merge_lost_tracks_keeping_hulls,
+};
 use segsplat_method::segment_then_splat::training::{
     DEFAULT_OBJECT_FLOORS, SegmentedTrainingOptions, attach_object_training,
-    segmented_trainer_from_view_masks, training_frames,
+    segmented_trainer_with_hulls, training_frames,
 };
 use segsplat_method::segment_then_splat::view_masks::ViewMaskSet;
 use segsplat_scene::sequence::video_order;
@@ -234,7 +237,7 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
     record_settings(ctx, &settings);
     // Stage 1 runs again on a resumed attempt: every mask source is deterministic, and the
     // masks are cheaper to rebuild than to store.
-    let (masks, segmented) = view_masks_for(ctx, &scene, &config, &frames)?;
+    let (masks, segmented, carved_hulls) = view_masks_for(ctx, &scene, &config, &frames)?;
     // Between stages too: building the trainer uploads and sorts every view's masks.
     ctx.stop_requested()?;
     let options = SegmentedTrainingOptions {
@@ -245,10 +248,15 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
     let setup_started = Instant::now();
     let mut trainer = match load_resume_point(ctx, CHECKPOINT_NAME)? {
         Some(checkpoint) => resume_segmented(&gpu, &scene, &checkpoint, &masks, &options)?,
-        None => {
-            segmented_trainer_from_view_masks(&gpu, &scene, config.train.clone(), &masks, &options)
-                .map_err(fatal)?
-        }
+        None => segmented_trainer_with_hulls(
+            &gpu,
+            &scene,
+            config.train.clone(),
+            &masks,
+            &options,
+            carved_hulls,
+        )
+        .map_err(fatal)?,
     };
     let setup_seconds = setup_started.elapsed().as_secs_f64();
     ctx.stop_requested()?;
@@ -263,6 +271,10 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
 
 /// The stage's figures as reported: views, objects per level, merges, and what the source adds.
 type SegmentFigures = BTreeMap<String, f64>;
+
+/// Stage 1's masks and figures, with the hull points the lost-track merge carved that the
+/// trainer's initial model can reuse (none for the user's masks, which are not merged).
+type Stage1 = (ViewMaskSet, SegmentFigures, CarvedHulls);
 
 /// What stage 1 did, kept in `metrics.json` (the job record only holds the latest stage).
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
@@ -280,14 +292,14 @@ fn view_masks_for(
     scene: &Scene,
     config: &SegmentThenSplatConfig,
     frames: &[usize],
-) -> Result<(ViewMaskSet, SegmentReport), JobFailure> {
+) -> Result<(ViewMaskSet, SegmentReport, CarvedHulls), JobFailure> {
     let source = resolved_mask_source(ctx, scene, config.masks);
-    let (masks, figures) = masks_from(ctx, scene, config, frames, source)?;
+    let (masks, figures, carved_hulls) = masks_from(ctx, scene, config, frames, source)?;
     let report = SegmentReport {
         masks: source,
         figures,
     };
-    Ok((masks, report))
+    Ok((masks, report, carved_hulls))
 }
 
 /// `auto` made concrete for this scene and model directory.
@@ -312,7 +324,7 @@ fn masks_from(
     config: &SegmentThenSplatConfig,
     frames: &[usize],
     source: MaskSource,
-) -> Result<(ViewMaskSet, SegmentFigures), JobFailure> {
+) -> Result<Stage1, JobFailure> {
     let max_side = config.train.max_resolution;
     let views = frames.len() as u64;
     report(ctx, "segment", 0, views, &[]);
@@ -326,7 +338,7 @@ fn masks_from(
             let masks = ViewMaskSet::from_user_masks(scene, frames, max_side).map_err(fatal)?;
             let objects = Level::ALL.map(|level| masks.object_count(level));
             let figures = report_segmented(ctx, &masks, objects, &[]);
-            return Ok((masks, figures));
+            return Ok((masks, figures, CarvedHulls::default()));
         }
         MaskSource::Automatic => {
             let model = sam_model(ctx).ok_or_else(|| {
@@ -395,17 +407,22 @@ fn merge_and_report(
     mut masks: ViewMaskSet,
     objects: [usize; 3],
     extra: &[(&str, f64)],
-) -> Result<(ViewMaskSet, SegmentFigures), JobFailure> {
+) -> Result<Stage1, JobFailure> {
     let started = Instant::now();
-    let merges = merge_lost_tracks(scene, &mut masks, &config.train, TrackMergeRule::default())
-        .map_err(fatal)?;
+    let (merges, carved_hulls) = merge_lost_tracks_keeping_hulls(
+        scene,
+        &mut masks,
+        &config.train,
+        TrackMergeRule::default(),
+    )
+    .map_err(fatal)?;
     let mut figures = vec![
         ("lost_track_merges", merges.iter().sum::<usize>() as f64),
         ("merge_seconds", started.elapsed().as_secs_f64()),
     ];
     figures.extend_from_slice(extra);
     let figures = report_segmented(ctx, &masks, objects, &figures);
-    Ok((masks, figures))
+    Ok((masks, figures, carved_hulls))
 }
 
 /// Reports the finished "segment" stage: views, objects per level (found, before the lost-track
@@ -438,7 +455,7 @@ fn propagated_masks(
     config: &SegmentThenSplatConfig,
     frames: &[usize],
     model: SamModel,
-) -> Result<(ViewMaskSet, SegmentFigures), JobFailure> {
+) -> Result<Stage1, JobFailure> {
     tracing::info!(views = frames.len(), "propagating masks");
     // Masks are carried in video order (by time, camera by camera for a rig); the views go back
     // to the training order afterwards, which the object targets follow.

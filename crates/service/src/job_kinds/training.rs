@@ -162,10 +162,12 @@ pub struct TrainingStageReport {
     pub steps: u32,
     /// Gaussians densification could grow to (the config's, or the scene's).
     pub gaussian_budget: usize,
-    /// Wall seconds the step loop spent on checkpoints (inside `seconds`): reading the model
-    /// back, and waiting for the writer when a checkpoint came before the last was stored.
+    /// Wall seconds the step loop spent on checkpoints (inside `seconds`): recording and
+    /// submitting the snapshot's GPU copies, and waiting for the writer when a checkpoint came
+    /// before the last was stored.
     pub checkpoint_seconds: f64,
-    /// Seconds the checkpoint writer spent encoding and storing, beside the step loop.
+    /// Seconds the checkpoint writer spent waiting for the snapshots' copies, reading them,
+    /// encoding and storing, beside the step loop.
     #[serde(default)]
     pub checkpoint_write_seconds: f64,
     /// Wall seconds spent reporting progress (inside `seconds`).
@@ -218,8 +220,9 @@ pub const BUSY_SAMPLE_STEPS: u32 = 10;
 /// `checkpoint_every` steps (0 = only at the end) and stopping at the next report when the job
 /// is cancelled or the service shuts down. Returns how this attempt's training went.
 ///
-/// The step loop takes each checkpoint's snapshot (the model's read-back) and hands it to a
-/// [`CheckpointWriter`] thread, which encodes and stores it while training goes on; a store
+/// The step loop takes each checkpoint's snapshot (GPU copies of the trainer's state, no
+/// read-back) and hands it to a [`CheckpointWriter`] thread, which reads the copies back,
+/// encodes and stores them while training goes on; a store
 /// that is unreachable skips that checkpoint with a `warning` job event and the next one tries
 /// again (a crash meanwhile costs the steps since the last stored one, as always).
 pub fn train_with_checkpoints(
@@ -312,8 +315,7 @@ fn train_stage(
         ctx.stop_requested()?;
         let checkpoint_started = std::time::Instant::now();
         let host_at_checkpoint = gpu.host_costs.reading();
-        let snapshot = trainer.checkpoint().map_err(train_failure)?;
-        writer.write(trainer.step(), snapshot)?;
+        writer.write(trainer)?;
         checkpoint_seconds += checkpoint_started.elapsed().as_secs_f64();
         checkpoint_host.add(&gpu.host_costs.reading().since(&host_at_checkpoint));
     }

@@ -10,7 +10,8 @@ use crate::densify::DensifyStats;
 use crate::model::GaussianModel;
 
 impl Trainer {
-    /// Everything needed to continue exactly here.
+    /// Everything needed to continue exactly here, read back at once (the queue drained on
+    /// this thread); [`Self::checkpoint_snapshot`] takes the same without waiting.
     pub fn checkpoint(&self) -> Result<Checkpoint<TrainerMeta>, TrainError> {
         let ctx = &self.ctx;
         let count = self.gaussians.count();
@@ -18,9 +19,32 @@ impl Trainer {
         let first = self.first_moments.download(ctx, count)?;
         let second = self.second_moments.download(ctx, count)?;
         let stats = self.accumulators.download(ctx, count)?;
-        let mut checkpoint = Checkpoint::new(TrainerMeta {
+        let field = match &self.dynamics {
+            Some(dynamics) => {
+                let field = &dynamics.field;
+                Some([
+                    field.read(ctx, &field.parameters)?,
+                    field.read(ctx, &field.first_moment)?,
+                    field.read(ctx, &field.second_moment)?,
+                ])
+            }
+            None => None,
+        };
+        Ok(checkpoint_from_state(
+            self.checkpoint_meta(),
+            &model,
+            &first,
+            &second,
+            &stats,
+            field,
+        ))
+    }
+
+    /// The host-side state a checkpoint records besides the arrays.
+    pub(super) fn checkpoint_meta(&self) -> TrainerMeta {
+        TrainerMeta {
             step: self.step,
-            gaussians: count,
+            gaussians: self.gaussians.count(),
             rng: self.rng.clone(),
             view_queue: self.view_queue.clone(),
             intersection_capacity: self.renderer.intersection_capacity(),
@@ -29,21 +53,7 @@ impl Trainer {
             skipped_pairs: self.skipped_pairs.iter().copied().collect(),
             gaussian_budget: Some(self.gaussian_budget),
             converged_at: self.converged_at(),
-        });
-        put_model(&mut checkpoint, "model", &model);
-        put_model(&mut checkpoint, "adam.m", &first);
-        put_model(&mut checkpoint, "adam.v", &second);
-        checkpoint.put("object_ids", &model.object_ids);
-        checkpoint.put("densify.gradient_sums", &stats.gradient_sums);
-        checkpoint.put("densify.visible_counts", &stats.visible_counts);
-        checkpoint.put("densify.max_radii", &stats.max_radii);
-        if let Some(dynamics) = &self.dynamics {
-            let field = &dynamics.field;
-            checkpoint.put("deform.parameters", &field.read(ctx, &field.parameters)?);
-            checkpoint.put("deform.m", &field.read(ctx, &field.first_moment)?);
-            checkpoint.put("deform.v", &field.read(ctx, &field.second_moment)?);
         }
-        Ok(checkpoint)
     }
 
     /// A trainer continuing from `checkpoint` (same scene; the config it was made with).
@@ -92,6 +102,32 @@ impl Trainer {
         }
         Ok(trainer)
     }
+}
+
+/// A checkpoint of `meta` and the arrays read back: the model (with object ids), the Adam
+/// moments, the densification statistics and the deformation field's parameters and moments.
+pub(super) fn checkpoint_from_state(
+    meta: TrainerMeta,
+    model: &GaussianModel,
+    first: &GaussianModel,
+    second: &GaussianModel,
+    stats: &DensifyStats,
+    field: Option<[Vec<f32>; 3]>,
+) -> Checkpoint<TrainerMeta> {
+    let mut checkpoint = Checkpoint::new(meta);
+    put_model(&mut checkpoint, "model", model);
+    put_model(&mut checkpoint, "adam.m", first);
+    put_model(&mut checkpoint, "adam.v", second);
+    checkpoint.put("object_ids", &model.object_ids);
+    checkpoint.put("densify.gradient_sums", &stats.gradient_sums);
+    checkpoint.put("densify.visible_counts", &stats.visible_counts);
+    checkpoint.put("densify.max_radii", &stats.max_radii);
+    if let Some([parameters, first, second]) = field {
+        checkpoint.put("deform.parameters", &parameters);
+        checkpoint.put("deform.m", &first);
+        checkpoint.put("deform.v", &second);
+    }
+    checkpoint
 }
 
 fn put_model(checkpoint: &mut Checkpoint<TrainerMeta>, prefix: &str, model: &GaussianModel) {
