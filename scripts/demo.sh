@@ -15,7 +15,8 @@
 # Everything it writes (the service's data, the server log, the mask, the summary) goes into one
 # folder, demo-output in the current directory unless SEGSPLAT_DEMO_OUT names another. SEGSPLAT_BIN=path/to/segsplat
 # uses that binary as it is (no bootstrap, no build); otherwise the release build is made first.
-# SEGSPLAT_DEMO_PORT picks the HTTP port (8080). The server stops when the demo ends, unless
+# SEGSPLAT_DEMO_PORT picks the HTTP port (8080). SEGSPLAT_GEMM_KERNEL / SEGSPLAT_RASTER_KERNEL
+# force the server's kernels as they do the one-shot commands'. The server stops when the demo ends, unless
 # SEGSPLAT_DEMO_KEEP_SERVER=1 (or, on a terminal, the answer to the question at the end) keeps it
 # running for the web console until Ctrl-C.
 set -euo pipefail
@@ -49,6 +50,14 @@ if [ -z "$dataset" ]; then
   else dataset=$out/synthetic-scene; "$bin" synthetic-scene "$dataset" >/dev/null; fi
 fi
 
+# SEGSPLAT_GEMM_KERNEL / SEGSPLAT_RASTER_KERNEL force the one-shot commands' kernels; the server
+# reads the same choice from workers.adapters.kernels, so the demo passes them on.
+if [ -n "${SEGSPLAT_GEMM_KERNEL:-}" ]; then
+  export SEGSPLAT_WORKERS__ADAPTERS__KERNELS__GEMM=$SEGSPLAT_GEMM_KERNEL
+fi
+if [ -n "${SEGSPLAT_RASTER_KERNEL:-}" ]; then
+  export SEGSPLAT_WORKERS__ADAPTERS__KERNELS__RASTER=$SEGSPLAT_RASTER_KERNEL
+fi
 # The server's own log goes to a file, without colour codes, so the walk-through stays readable.
 NO_COLOR=1 "$bin" serve --data-dir "$out/data" --http "$http" --grpc 127.0.0.1:0 \
   >"$out/server.log" 2>&1 &

@@ -186,6 +186,7 @@ fn run_service(
     let config = Config::load(config_file.as_deref(), std::env::vars(), &overrides)
         .context("invalid configuration")?;
     init_logging(&config)?;
+    warn_about_command_kernel_variables();
     let runtime = tokio::runtime::Runtime::new().context("cannot start the async runtime")?;
     let served = runtime.block_on(async move {
         let service = ServiceBuilder::new(config)
@@ -210,6 +211,30 @@ fn run_service(
     // main exits 0 with nothing on the GPU left to the driver's exit handlers.
     runtime.shutdown_timeout(BLOCKING_WORK_AT_EXIT);
     served
+}
+
+/// `SEGSPLAT_GEMM_KERNEL` / `SEGSPLAT_RASTER_KERNEL` force kernels in the one-shot commands
+/// (`train`, `bench`); the service's workers take theirs from `workers.adapters.kernels`. A
+/// service started with one set would silently run the adapter's own kernels (a before/after
+/// comparison of two jobs would compare a kernel with itself), so it says so.
+fn warn_about_command_kernel_variables() {
+    for (variable, key) in [
+        (
+            "SEGSPLAT_GEMM_KERNEL",
+            "SEGSPLAT_WORKERS__ADAPTERS__KERNELS__GEMM",
+        ),
+        (
+            "SEGSPLAT_RASTER_KERNEL",
+            "SEGSPLAT_WORKERS__ADAPTERS__KERNELS__RASTER",
+        ),
+    ] {
+        if std::env::var_os(variable).is_some() {
+            tracing::warn!(
+                "{variable} is read by the one-shot commands only and is ignored here: \
+                 the service's workers take {key} (workers.adapters.kernels)"
+            );
+        }
+    }
 }
 
 /// How long a stopped service waits for blocking work still running (a job stage that ignored

@@ -727,7 +727,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
                 step_time_ratio: static_steps_per_sec / run.steps_per_sec(),
                 field_forward_ms,
                 field_backward_ms,
-                gemm_kernel: format!("{kernel:?}").to_lowercase(),
+                gemm_kernel: kernel.name().to_string(),
                 field_gflop_per_step,
                 field_gflops,
                 field_rate_fraction: field_gflops / matmul.gflops,

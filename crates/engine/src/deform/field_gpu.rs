@@ -68,6 +68,7 @@ fn storage_buffer(ctx: &GpuContext, label: &str, words: usize) -> Result<wgpu::B
 pub struct DeformationField {
     shape: FieldShape,
     layers: Vec<LinearLayer>,
+    gemm: GemmKernel,
     kernels: DeformKernels,
     pub parameters: wgpu::Buffer,
     pub grads: wgpu::Buffer,
@@ -113,6 +114,7 @@ impl DeformationField {
         let binding_rows = (ctx.limits.max_storage_buffer_binding_size as usize / widest).max(1);
         let field = Self {
             layers: shape.layers(),
+            gemm,
             kernels: DeformKernels::with_gemm(ctx, gemm)?,
             parameters: storage_buffer(ctx, "deform.parameters", expected)?,
             grads: storage_buffer(ctx, "deform.grads", expected)?,
@@ -125,6 +127,11 @@ impl DeformationField {
         };
         field.write_parameters(ctx, parameters)?;
         Ok(field)
+    }
+
+    /// The GEMM kernel this field's products run on.
+    pub fn gemm_kernel(&self) -> GemmKernel {
+        self.gemm
     }
 
     pub fn shape(&self) -> &FieldShape {

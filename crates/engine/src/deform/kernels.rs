@@ -151,6 +151,15 @@ pub enum GemmKernel {
 }
 
 impl GemmKernel {
+    /// The name `SEGSPLAT_GEMM_KERNEL` and `workers.adapters.kernels.gemm` give it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Tiled => "tiled",
+            Self::Rows => "rows",
+            Self::Broadcast => "broadcast",
+        }
+    }
+
     /// The kernel that suits the adapter, unless the context forces one
     /// ([`segsplat_gpu::KernelChoices`]).
     pub fn for_adapter(ctx: &GpuContext) -> Self {

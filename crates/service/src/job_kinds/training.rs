@@ -199,6 +199,17 @@ pub struct TrainingStageReport {
     /// adapter has no timestamp queries or the stage was too short to sample.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gpu_busy_fraction: Option<f64>,
+    /// The deformation field's GEMM kernel (`tiled`, `rows`, `broadcast`: docs/engine.md), for
+    /// a dynamic scene.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gemm_kernel: Option<String>,
+    /// GPU milliseconds a step spent in the deformation field's passes (its GEMMs, reductions,
+    /// encoding and warp; not its Adam step), from the same sample as `gpu_busy_fraction`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub field_gpu_ms_per_step: Option<f64>,
+    /// `field_gpu_ms_per_step` over the sampled steps' whole GPU time: the field's share.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub field_gpu_fraction: Option<f64>,
     /// Wall seconds of building the trainer before the stage (the initial model, the views'
     /// images and masks on the GPU, the kernels), outside `seconds`: what a job waits between
     /// its masks and its first step.
@@ -276,7 +287,7 @@ fn train_stage(
     // allocations and cache fills.
     let mut busy_sample_at = (gpu.profiler.is_some() && total - first_step > 2 * BUSY_SAMPLE_STEPS)
         .then(|| first_step + (total - first_step) / 2);
-    let mut gpu_busy_fraction = None;
+    let mut busy_sample = None;
     // Heard inside a step's long passes (the partial-mask filter), not only between reports.
     let stop = StopSignal::of(ctx);
     trainer.set_stop_check(Arc::new(move || stop.requested()));
@@ -307,7 +318,7 @@ fn train_stage(
             busy_sample_at = None;
             run_to(trainer, at)?;
             ctx.stop_requested()?;
-            gpu_busy_fraction = sample_gpu_busy(&gpu, trainer, |trainer, last| {
+            busy_sample = sample_gpu_busy(&gpu, trainer, |trainer, last| {
                 run_to(trainer, last).map(|_| ())
             })?;
         }
@@ -325,6 +336,7 @@ fn train_stage(
     let per_step = |value: f64| value / f64::from(steps.max(1));
     let waited = host.wait_seconds() - checkpoint_host.wait_seconds();
     let submitted = host.submit_seconds() - checkpoint_host.submit_seconds();
+    let field_sample = busy_sample.filter(|sample| sample.field_ms_per_step > 0.0);
     Ok(TrainingStageReport {
         seconds,
         steps,
@@ -348,34 +360,71 @@ fn train_stage(
         buffers_created_per_step: per_step(
             (host.buffers_created - checkpoint_host.buffers_created) as f64,
         ),
-        gpu_busy_fraction,
+        gpu_busy_fraction: busy_sample.map(|sample| sample.busy_fraction),
+        gemm_kernel: trainer
+            .deformation_gemm_kernel()
+            .map(|kernel| kernel.name().to_string()),
+        field_gpu_ms_per_step: field_sample.map(|sample| sample.field_ms_per_step),
+        field_gpu_fraction: field_sample.map(|sample| sample.field_fraction),
         setup_seconds: 0.0,
         converged_at: trainer.converged_at(),
         fit_checks: trainer.fit_checks().to_vec(),
     })
 }
 
+/// What the timed steps of [`sample_gpu_busy`] show.
+#[derive(Debug, Clone, Copy)]
+struct BusySample {
+    /// GPU time over wall time.
+    busy_fraction: f64,
+    /// GPU milliseconds a step in the deformation field's passes (0 for a static scene).
+    field_ms_per_step: f64,
+    /// Those over the steps' whole GPU time.
+    field_fraction: f64,
+}
+
+/// Whether a profiled kernel is one of the deformation field's passes (`deform/kernels.rs`
+/// labels them `mlp_*` and `deform_*`).
+fn is_field_kernel(label: &str) -> bool {
+    label.starts_with("mlp_") || label.starts_with("deform_")
+}
+
 /// Trains [`BUSY_SAMPLE_STEPS`] steps with every pass timed and returns the GPU's time in them
-/// over the wall time; `None` when the profiler dropped passes (the fraction would be low).
+/// over the wall time, and the deformation field's share of it; `None` when the profiler
+/// dropped passes (the fraction would be low).
 fn sample_gpu_busy(
     gpu: &segsplat_gpu::GpuContext,
     trainer: &mut Trainer,
     mut run_to: impl FnMut(&mut Trainer, u32) -> Result<(), JobFailure>,
-) -> Result<Option<f64>, JobFailure> {
+) -> Result<Option<BusySample>, JobFailure> {
     let Some(profiler) = gpu.profiler.as_ref() else {
         return Ok(None);
     };
     gpu.wait_idle().map_err(retryable)?;
     profiler.start();
     let started = std::time::Instant::now();
-    let last = (trainer.step() + BUSY_SAMPLE_STEPS).min(trainer.config().steps);
+    let first = trainer.step();
+    let last = (first + BUSY_SAMPLE_STEPS).min(trainer.config().steps);
     let trained = run_to(trainer, last);
     // Taken even when training failed, so the profiler is left idle.
     let profile = profiler.take(gpu).map_err(retryable)?;
     trained?;
     let wall_ms = started.elapsed().as_secs_f64() * 1e3;
-    Ok((profile.untimed_passes == 0 && wall_ms > 0.0)
-        .then(|| (profile.total_ms / wall_ms).min(1.0)))
+    if profile.untimed_passes != 0 || wall_ms <= 0.0 {
+        return Ok(None);
+    }
+    let field_ms: f64 = profile
+        .kernels
+        .iter()
+        .filter(|kernel| is_field_kernel(&kernel.kernel))
+        .map(|kernel| kernel.ms)
+        .sum();
+    let steps = f64::from((last - first).max(1));
+    Ok(Some(BusySample {
+        busy_fraction: (profile.total_ms / wall_ms).min(1.0),
+        field_ms_per_step: field_ms / steps,
+        field_fraction: field_ms / profile.total_ms.max(1e-9),
+    }))
 }
 
 /// Stores a finished job's outputs under its output prefix: the trained scene (`scene.ply`,

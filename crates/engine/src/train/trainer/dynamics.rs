@@ -163,6 +163,14 @@ impl Trainer {
             .map(|dynamics| (*dynamics.field.shape(), dynamics.field.parameter_count()))
     }
 
+    /// The GEMM kernel the deformation field runs on, for a dynamic scene (a job's metrics say
+    /// which one trained it).
+    pub fn deformation_gemm_kernel(&self) -> Option<crate::deform::GemmKernel> {
+        self.dynamics
+            .as_ref()
+            .map(|dynamics| dynamics.field.gemm_kernel())
+    }
+
     /// Times the deformation field alone over every Gaussian, without changing the model: its
     /// forward pass (deformed geometry written), then its backward pass (weight gradients zeroed
     /// and recomputed from whatever the Gaussian gradients hold; their values do not change the
