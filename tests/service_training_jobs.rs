@@ -277,7 +277,7 @@ async fn a_job_resumes_from_a_checkpoint_read_back_beside_the_step_loop() {
         .collect();
     assert_eq!(resumed.len(), 1, "{job}");
     assert!(
-        resumed[0] >= 20 && resumed[0] % 20 == 0,
+        resumed[0] >= 20 && resumed[0].is_multiple_of(20),
         "resumed from step {}",
         resumed[0]
     );
