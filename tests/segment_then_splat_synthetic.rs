@@ -14,16 +14,15 @@ use segsplat_engine::ObjectFilter;
 use segsplat_engine::render::Renderer;
 use segsplat_engine::train::convergence::ConvergenceStop;
 use segsplat_engine::train::{SkippedPair, TrainConfig, TrainError};
+use segsplat_method::segment_then_splat::carved_hulls::CarvedHulls;
 use segsplat_method::segment_then_splat::id_voting::VotingRule;
 use segsplat_method::segment_then_splat::objects::{
     full_mask, render_layer, summarize_objects, visible_mask,
 };
-use segsplat_method::segment_then_splat::track_merge::{
-    TrackMergeRule, merge_lost_tracks_keeping_hulls,
-};
+use segsplat_method::segment_then_splat::track_merge::{TrackMergeRule, merge_lost_tracks};
 use segsplat_method::segment_then_splat::training::{
-    SegmentedTrainingOptions, initial_segmented_model, initial_segmented_model_reusing,
-    segmented_trainer_from_user_masks, training_frames,
+    SegmentedTrainingOptions, initial_segmented_model, segmented_trainer_from_user_masks,
+    training_frames,
 };
 use segsplat_method::segment_then_splat::view_masks::ViewMaskSet;
 use segsplat_scene::{Level, load_instance_mask};
@@ -290,49 +289,32 @@ fn the_trainers_model_reuses_the_merges_hull_points() {
     let dir = tempfile::tempdir().unwrap();
     let mut scene = synthetic_scene(dir.path(), |_| {});
     let missing = segsplat_scene::synthetic::synthetic_objects()[2];
-    let mut points = scene.points.take().unwrap();
-    let keep: Vec<bool> = points
-        .positions
-        .iter()
-        .map(|p| p.distance(missing.center) > missing.radius * 1.05)
-        .collect();
-    let mut flags = keep.iter();
-    points.positions.retain(|_| *flags.next().unwrap_or(&true));
-    let mut flags = keep.iter();
-    points.colors.retain(|_| *flags.next().unwrap_or(&true));
-    let mut flags = keep.iter();
-    points.tracks.retain(|_| *flags.next().unwrap_or(&true));
-    scene.points = Some(points);
+    if let Some(points) = scene.points.as_mut() {
+        points.retain(|p| p.distance(missing.center) > missing.radius * 1.05);
+    }
     let config = config();
     let frames = training_frames(&scene, &config);
     let mut masks = ViewMaskSet::from_user_masks(&scene, &frames, None).unwrap();
     let renamed = segsplat_scene::synthetic::synthetic_objects()[0].ids[0];
-    let views = std::mem::take(&mut masks.views);
-    masks.views = views
-        .into_iter()
-        .enumerate()
-        .map(|(index, view)| {
-            let mut ids = view.level_ids();
-            if index >= 6 {
-                ids[0]
-                    .iter_mut()
-                    .filter(|id| **id == renamed)
-                    .for_each(|id| *id = 90);
-            }
-            view.with_level_ids(ids).unwrap()
-        })
-        .collect();
+    masks.rename_from_view(6, Level::Small, renamed, 90);
     let (merges, mut carved) =
-        merge_lost_tracks_keeping_hulls(&scene, &mut masks, &config, TrackMergeRule::default())
-            .unwrap();
+        merge_lost_tracks(&scene, &mut masks, &config, TrackMergeRule::default()).unwrap();
     assert!(
         merges[0] >= 1,
         "the renamed track was not merged: {merges:?}"
     );
     let voting = VotingRule::default();
-    let fresh = initial_segmented_model(&scene, &masks, &config, voting, 100).unwrap();
+    let fresh = initial_segmented_model(
+        &scene,
+        &masks,
+        &config,
+        voting,
+        100,
+        &mut CarvedHulls::default(),
+    )
+    .unwrap();
     let reusing =
-        initial_segmented_model_reusing(&scene, &masks, &config, voting, 100, &mut carved).unwrap();
+        initial_segmented_model(&scene, &masks, &config, voting, 100, &mut carved).unwrap();
     eprintln!(
         "{} objects' hull points reused, {} Gaussians",
         carved.reused(),

@@ -137,6 +137,7 @@ fn object_loss_trainer(
     use segsplat_method::segment_then_splat::association::{
         AssociationOptions, generated_view_masks,
     };
+    use segsplat_method::segment_then_splat::carved_hulls::CarvedHulls;
     use segsplat_method::segment_then_splat::training::{
         SegmentedTrainingOptions, attach_object_training, segmented_trainer_from_view_masks,
         training_frames,
@@ -184,7 +185,14 @@ fn object_loss_trainer(
             attach_object_training(ctx, &mut trainer, &masks, &options)?;
             trainer
         }
-        None => segmented_trainer_from_view_masks(ctx, scene, config, &masks, &options)?,
+        None => segmented_trainer_from_view_masks(
+            ctx,
+            scene,
+            config,
+            &masks,
+            &options,
+            CarvedHulls::default(),
+        )?,
     };
     trainer.set_separate_object_renders(separate_renders);
     let objects = segsplat_scene::Level::ALL.map(|level| masks.object_count(level));

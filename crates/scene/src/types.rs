@@ -129,6 +129,19 @@ pub struct SparsePoints {
     pub tracks: Vec<Vec<TrackObservation>>,
 }
 
+impl SparsePoints {
+    /// Keeps the points whose position `keep` accepts, with their colours and tracks.
+    pub fn retain(&mut self, mut keep: impl FnMut(Vec3) -> bool) {
+        let kept: Vec<bool> = self.positions.iter().map(|&p| keep(p)).collect();
+        let mut flags = kept.iter();
+        self.positions.retain(|_| *flags.next().unwrap_or(&true));
+        let mut flags = kept.iter();
+        self.colors.retain(|_| *flags.next().unwrap_or(&true));
+        let mut flags = kept.iter();
+        self.tracks.retain(|_| *flags.next().unwrap_or(&true));
+    }
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct TrackObservation {
     pub frame_index: u32,

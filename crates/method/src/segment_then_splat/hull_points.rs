@@ -46,7 +46,9 @@ impl Default for HullFill {
 }
 
 /// Hull points for every object of every level that `model` (with voted ids) leaves with fewer
-/// than `fill.min_gaussians` Gaussians.
+/// than `fill.min_gaussians` Gaussians. The points of objects `carved` holds (from an earlier
+/// carve on the same points, views and fill; see [`CarvedHulls`]) are taken instead of carved
+/// again, and the ones carved here are kept there.
 ///
 /// The figurine at 256 px has hundreds of such objects; each used to rescan every view's mask
 /// for its area and project every point for its depth range (4.9 s of the job's lost-track merge
@@ -54,17 +56,6 @@ impl Default for HullFill {
 /// are now counted once, and the objects are carved in parallel: the same points, in the same
 /// order.
 pub fn hull_points_for_missed_objects(
-    masks: &ViewMaskSet,
-    model: &GaussianModel,
-    fill: HullFill,
-) -> Vec<Vec3> {
-    hull_points_reusing(masks, model, fill, &mut CarvedHulls::default())
-}
-
-/// [`hull_points_for_missed_objects`], taking the points of objects `carved` holds (from an
-/// earlier carve on the same points, views and fill; see [`CarvedHulls`]) instead of carving
-/// them again, and keeping the ones it carves there.
-pub fn hull_points_reusing(
     masks: &ViewMaskSet,
     model: &GaussianModel,
     fill: HullFill,
@@ -336,28 +327,26 @@ mod tests {
     ) {
         let mut scene = synthetic_scene(dir, 12);
         let missing = synthetic_objects()[2];
-        let mut points = scene.points.take().expect("points");
-        let keep: Vec<bool> = points
-            .positions
-            .iter()
-            .map(|p| p.distance(missing.center) > missing.radius * 1.05)
-            .collect();
-        fn filter<T>(values: &mut Vec<T>, keep: &[bool]) {
-            let mut flags = keep.iter();
-            values.retain(|_| *flags.next().unwrap_or(&true));
-        }
-        filter(&mut points.positions, &keep);
-        filter(&mut points.colors, &keep);
-        filter(&mut points.tracks, &keep);
-        scene.points = Some(points);
+        scene
+            .points
+            .as_mut()
+            .expect("points")
+            .retain(|p| p.distance(missing.center) > missing.radius * 1.05);
         let frames: Vec<usize> = (0..scene.frames.len()).collect();
         let masks = ViewMaskSet::from_user_masks(&scene, &frames, None).expect("masks");
         let config = TrainConfig {
             max_resolution: None,
             ..TrainConfig::default()
         };
-        let model = initial_segmented_model(&scene, &masks, &config, VotingRule::default(), 0)
-            .expect("model");
+        let model = initial_segmented_model(
+            &scene,
+            &masks,
+            &config,
+            VotingRule::default(),
+            0,
+            &mut CarvedHulls::default(),
+        )
+        .expect("model");
         (masks, model, missing)
     }
 
@@ -370,7 +359,8 @@ mod tests {
             min_gaussians: 200,
             ..HullFill::default()
         };
-        let fast = hull_points_for_missed_objects(&masks, &model, fill);
+        let fast =
+            hull_points_for_missed_objects(&masks, &model, fill, &mut CarvedHulls::default());
         assert!(!fast.is_empty());
         assert_eq!(fast, reference_hull_points(&masks, &model, fill));
     }

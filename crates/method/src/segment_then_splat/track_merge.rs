@@ -16,7 +16,7 @@ use glam::Vec3;
 
 use super::carved_hulls::CarvedHulls;
 use super::id_voting::VotingRule;
-use super::training::{SegmentedTrainingError, initial_segmented_model_reusing};
+use super::training::{SegmentedTrainingError, initial_segmented_model};
 use super::view_masks::{ViewMaskSet, ViewMaskSetError};
 use segsplat_engine::model::SH_C0;
 use segsplat_engine::schedule::scene_extent;
@@ -56,34 +56,18 @@ pub struct ObjectAppearance {
 pub type IdRemap = BTreeMap<u32, u32>;
 
 /// Merges lost tracks in `masks`: votes ids onto the scene's initial points, describes every
-/// object by its points, and rewrites the id maps with merged ids. Returns the merges per level.
+/// object by its points, and rewrites the id maps with merged ids. Returns the merges per level,
+/// and the hull points it carved for objects the points missed that the merge left valid, for
+/// the trainer's initial model ([`super::training::segmented_trainer_from_view_masks`]) to reuse.
 pub fn merge_lost_tracks(
-    scene: &Scene,
-    masks: &mut ViewMaskSet,
-    config: &TrainConfig,
-    rule: TrackMergeRule,
-) -> Result<[usize; 3], SegmentedTrainingError> {
-    merge_lost_tracks_keeping_hulls(scene, masks, config, rule).map(|(merges, _)| merges)
-}
-
-/// [`merge_lost_tracks`], also returning the hull points it carved for objects the points
-/// missed that the merge left valid, for the trainer's initial model
-/// ([`super::training::segmented_trainer_with_hulls`]) to reuse.
-pub fn merge_lost_tracks_keeping_hulls(
     scene: &Scene,
     masks: &mut ViewMaskSet,
     config: &TrainConfig,
     rule: TrackMergeRule,
 ) -> Result<([usize; 3], CarvedHulls), SegmentedTrainingError> {
     let mut carved = CarvedHulls::default();
-    let model = initial_segmented_model_reusing(
-        scene,
-        masks,
-        config,
-        VotingRule::default(),
-        0,
-        &mut carved,
-    )?;
+    let model =
+        initial_segmented_model(scene, masks, config, VotingRule::default(), 0, &mut carved)?;
     let centers: Vec<Vec3> = scene
         .frames
         .iter()
@@ -278,22 +262,9 @@ mod tests {
         let frames: Vec<usize> = (0..scene.frames.len()).collect();
         let mut masks = ViewMaskSet::from_user_masks(&scene, &frames, None).expect("masks");
         // Sphere 1 (small id 1) is "lost" after view 5 and "found again" as id 9.
-        let views = std::mem::take(&mut masks.views);
-        masks.views = views
-            .into_iter()
-            .enumerate()
-            .map(|(index, view)| {
-                let mut ids = view.level_ids();
-                if index >= 6 {
-                    ids[0]
-                        .iter_mut()
-                        .filter(|id| **id == 1)
-                        .for_each(|id| *id = 9);
-                }
-                view.with_level_ids(ids).expect("same size")
-            })
-            .collect();
+        masks.rename_from_view(6, Level::Small, 1, 9);
         let merges = merge_lost_tracks(&scene, &mut masks, &config, TrackMergeRule::default())
+            .map(|(merges, _)| merges)
             .expect("merge");
         assert_eq!(merges, [1, 0, 0]);
         assert!(
@@ -316,6 +287,7 @@ mod tests {
         let frames: Vec<usize> = (0..scene.frames.len()).collect();
         let mut masks = ViewMaskSet::from_user_masks(&scene, &frames, None).expect("masks");
         let merges = merge_lost_tracks(&scene, &mut masks, &config, TrackMergeRule::default())
+            .map(|(merges, _)| merges)
             .expect("merge");
         assert_eq!(merges, [0, 0, 0]);
     }

@@ -7,9 +7,9 @@ use super::association::{
 };
 use super::background_shell::background_shell_points;
 use super::carved_hulls::CarvedHulls;
-use super::hull_points::{HullFill, append_points, hull_points_reusing};
+use super::hull_points::{HullFill, append_points, hull_points_for_missed_objects};
 use super::id_voting::{Observations, VotingRule, vote_object_ids};
-use super::track_merge::{TrackMergeRule, merge_lost_tracks_keeping_hulls};
+use super::track_merge::{TrackMergeRule, merge_lost_tracks};
 use super::view_masks::{ViewMaskSet, ViewMaskSetError};
 use segsplat_engine::GaussianModel;
 use segsplat_engine::densify::ObjectFloor;
@@ -75,27 +75,10 @@ pub fn training_frames(scene: &Scene, config: &TrainConfig) -> Vec<usize> {
 }
 
 /// The initial model with object ids voted from the training views' masks. Sparse points vote
-/// with their tracks where they have them (the views that really saw them).
+/// with their tracks where they have them (the views that really saw them). The hull points of
+/// objects `carved` holds from an earlier carve (the lost-track merge's) are reused, and the ones
+/// carved here are kept in it; pass an empty [`CarvedHulls`] to carve everything.
 pub fn initial_segmented_model(
-    scene: &Scene,
-    masks: &ViewMaskSet,
-    config: &TrainConfig,
-    voting: VotingRule,
-    background_shell: usize,
-) -> Result<GaussianModel, SegmentedTrainingError> {
-    initial_segmented_model_reusing(
-        scene,
-        masks,
-        config,
-        voting,
-        background_shell,
-        &mut CarvedHulls::default(),
-    )
-}
-
-/// [`initial_segmented_model`], with the hull points of objects `carved` holds from an earlier
-/// carve (the lost-track merge's) reused, and the ones carved here kept in it.
-pub fn initial_segmented_model_reusing(
     scene: &Scene,
     masks: &ViewMaskSet,
     config: &TrainConfig,
@@ -119,7 +102,7 @@ pub fn initial_segmented_model_reusing(
     let positions: Vec<glam::Vec3> = model.means.iter().map(|m| glam::Vec3::from(*m)).collect();
     model.object_ids = vote_object_ids(&positions, &observations, masks, voting);
     // Objects the points missed get points carved from their visual hull, voted like the rest.
-    let hull = hull_points_reusing(masks, &model, HullFill::default(), carved);
+    let hull = hull_points_for_missed_objects(masks, &model, HullFill::default(), carved);
     if !hull.is_empty() {
         let first_new = model.len();
         append_points(&mut model, &hull);
@@ -209,7 +192,7 @@ pub fn segmented_trainer_from_user_masks(
 ) -> Result<Trainer, SegmentedTrainingError> {
     let frames = training_frames(scene, &config);
     let masks = ViewMaskSet::from_user_masks(scene, &frames, config.max_resolution)?;
-    segmented_trainer_from_view_masks(ctx, scene, config, &masks, options)
+    segmented_trainer_from_view_masks(ctx, scene, config, &masks, options, CarvedHulls::default())
 }
 
 /// A trainer like [`segmented_trainer_from_user_masks`], with masks made by `generator` on the
@@ -231,29 +214,17 @@ pub fn segmented_trainer_from_generated_masks(
         config.max_resolution,
         association,
     )?;
-    let (_, carved) =
-        merge_lost_tracks_keeping_hulls(scene, &mut masks, &config, TrackMergeRule::default())?;
-    let trainer = segmented_trainer_with_hulls(ctx, scene, config, &masks, options, carved)?;
+    let (_, carved) = merge_lost_tracks(scene, &mut masks, &config, TrackMergeRule::default())?;
+    let trainer = segmented_trainer_from_view_masks(ctx, scene, config, &masks, options, carved)?;
     Ok((trainer, report))
 }
 
 /// The trainer for masks of exactly the training views, in training order: ids voted onto the
 /// initial Gaussians, the object loss on (its default config unless `config.object_loss` is
-/// set), the persistence floor guarding pruning.
+/// set), the persistence floor guarding pruning. The hull points `carved` holds from the
+/// lost-track merge ([`super::track_merge::merge_lost_tracks`]) are reused where the merge left
+/// them valid: the same model, without carving them twice (an empty [`CarvedHulls`] carves all).
 pub fn segmented_trainer_from_view_masks(
-    ctx: &GpuContext,
-    scene: &Scene,
-    config: TrainConfig,
-    masks: &ViewMaskSet,
-    options: &SegmentedTrainingOptions,
-) -> Result<Trainer, SegmentedTrainingError> {
-    segmented_trainer_with_hulls(ctx, scene, config, masks, options, CarvedHulls::default())
-}
-
-/// [`segmented_trainer_from_view_masks`] reusing the hull points `carved` holds from the
-/// lost-track merge ([`super::track_merge::merge_lost_tracks_keeping_hulls`]) where the merge left
-/// them valid: the same model, without carving them twice.
-pub fn segmented_trainer_with_hulls(
     ctx: &GpuContext,
     scene: &Scene,
     mut config: TrainConfig,
@@ -265,7 +236,7 @@ pub fn segmented_trainer_with_hulls(
         .object_loss
         .get_or_insert_with(ObjectLossConfig::default);
     resolve_random_init(&mut config, scene, ctx);
-    let model = initial_segmented_model_reusing(
+    let model = initial_segmented_model(
         scene,
         masks,
         &config,

@@ -253,6 +253,18 @@ impl ViewMaskSet {
         Ok(Self { views })
     }
 
+    /// Renames object `from` to `to` at `level` in the views from index `first_view` on: the
+    /// masks of a tracker that lost the object there and found it again under a new id, which
+    /// is what the lost-track merge ([`super::track_merge`]) undoes.
+    pub fn rename_from_view(&mut self, first_view: usize, level: Level, from: u32, to: u32) {
+        for view in self.views.iter_mut().skip(first_view) {
+            view.ids[level.index()]
+                .iter_mut()
+                .filter(|id| **id == from)
+                .for_each(|id| *id = to);
+        }
+    }
+
     /// The view of `frame_index`, if it is one of these.
     pub fn view_of_frame(&self, frame_index: usize) -> Option<&ViewMasks> {
         self.views

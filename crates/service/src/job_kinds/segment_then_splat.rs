@@ -37,12 +37,10 @@ use segsplat_method::segment_then_splat::carved_hulls::CarvedHulls;
 use segsplat_method::segment_then_splat::objects::{ObjectSummary, summarize_objects};
 use segsplat_method::segment_then_splat::propagated_masks::propagated_view_masks;
 use segsplat_method::segment_then_splat::scene_size::{SceneSize, SceneSizedFields};
-use segsplat_method::segment_then_splat::track_merge::{
-    TrackMergeRule, merge_lost_tracks_keeping_hulls,
-};
+use segsplat_method::segment_then_splat::track_merge::{TrackMergeRule, merge_lost_tracks};
 use segsplat_method::segment_then_splat::training::{
     DEFAULT_OBJECT_FLOORS, SegmentedTrainingOptions, attach_object_training,
-    segmented_trainer_with_hulls, training_frames,
+    segmented_trainer_from_view_masks, training_frames,
 };
 use segsplat_method::segment_then_splat::view_masks::ViewMaskSet;
 use segsplat_scene::sequence::video_order;
@@ -248,7 +246,7 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
     let setup_started = Instant::now();
     let mut trainer = match load_resume_point(ctx, CHECKPOINT_NAME)? {
         Some(checkpoint) => resume_segmented(&gpu, &scene, &checkpoint, &masks, &options)?,
-        None => segmented_trainer_with_hulls(
+        None => segmented_trainer_from_view_masks(
             &gpu,
             &scene,
             config.train.clone(),
@@ -409,13 +407,9 @@ fn merge_and_report(
     extra: &[(&str, f64)],
 ) -> Result<Stage1, JobFailure> {
     let started = Instant::now();
-    let (merges, carved_hulls) = merge_lost_tracks_keeping_hulls(
-        scene,
-        &mut masks,
-        &config.train,
-        TrackMergeRule::default(),
-    )
-    .map_err(fatal)?;
+    let (merges, carved_hulls) =
+        merge_lost_tracks(scene, &mut masks, &config.train, TrackMergeRule::default())
+            .map_err(fatal)?;
     let mut figures = vec![
         ("lost_track_merges", merges.iter().sum::<usize>() as f64),
         ("merge_seconds", started.elapsed().as_secs_f64()),

@@ -181,16 +181,14 @@ impl Trainer {
                 self.fit_check.targets.push((index, rgb));
             }
         }
+        // By position, not by iterator: rendering needs `&mut self`, the targets stay in place.
+        let count = self.fit_check.targets.len();
         let mut total = 0.0;
-        let targets = std::mem::take(&mut self.fit_check.targets);
-        let result = (|| {
-            for (index, target) in &targets {
-                let rendered = self.rendered_rgb(false, *index)?;
-                total += crate::image_metrics::psnr(&rendered, target);
-            }
-            Ok(total / targets.len().max(1) as f64)
-        })();
-        self.fit_check.targets = targets;
-        result
+        for slot in 0..count {
+            let index = self.fit_check.targets[slot].0;
+            let rendered = self.rendered_rgb(false, index)?;
+            total += crate::image_metrics::psnr(&rendered, &self.fit_check.targets[slot].1);
+        }
+        Ok(total / count.max(1) as f64)
     }
 }
