@@ -222,6 +222,7 @@ impl ServiceBuilder {
             bus.clone(),
             job_queued.clone(),
             (lease / 4).clamp(Duration::from_millis(50), Duration::from_secs(5)),
+            lease,
         );
         // Ends with `shutdown`; on SQLite there is nothing to listen to.
         let _wakeups =

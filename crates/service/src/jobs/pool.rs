@@ -1,5 +1,4 @@
-//! The worker pool (one worker per GPU slot, plus optional CPU-only slots) and the lease reaper
-//! that re-queues jobs whose worker stopped renewing its lease.
+//! The worker pool: one worker per GPU slot, plus optional CPU-only slots.
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -120,68 +119,6 @@ impl WorkerPool {
             }
         }
         self.gpus
-    }
-}
-
-/// Periodically re-queues (or fails) jobs whose lease expired or whose worker's process on this
-/// host has exited.
-pub struct LeaseReaper {
-    shutdown: CancellationToken,
-    task: JoinHandle<()>,
-}
-
-impl LeaseReaper {
-    pub fn start(
-        database: Database,
-        identity: super::ProcessIdentity,
-        bus: JobEventBus,
-        job_queued: Arc<Notify>,
-        every: Duration,
-    ) -> Self {
-        let shutdown = CancellationToken::new();
-        let stop = shutdown.clone();
-        let task = tokio::spawn(async move {
-            let mut ticker = tokio::time::interval(every);
-            loop {
-                tokio::select! {
-                    _ = ticker.tick() => {}
-                    _ = stop.cancelled() => break,
-                }
-                let reaped = match database.requeue_expired_leases().await {
-                    Ok(mut expired) => database
-                        .requeue_leases_of_gone_owners(|owner| {
-                            identity.owned_by_a_stopped_local_process(owner)
-                        })
-                        .await
-                        .map(|gone| {
-                            expired.extend(gone);
-                            expired
-                        }),
-                    Err(error) => Err(error),
-                };
-                match reaped {
-                    Ok(expired) => {
-                        for lease in &expired {
-                            warn!(job_id = %lease.job_id, owner = ?lease.previous_owner,
-                                state = lease.new_state.as_str(), "job lease expired");
-                            bus.notify(&lease.job_id);
-                        }
-                        if !expired.is_empty() {
-                            metrics::counter!("segsplat_job_leases_expired_total")
-                                .increment(expired.len() as u64);
-                            job_queued.notify_waiters();
-                        }
-                    }
-                    Err(error) => warn!(%error, "re-queueing expired leases failed"),
-                }
-            }
-        });
-        Self { shutdown, task }
-    }
-
-    pub async fn shutdown(self) {
-        self.shutdown.cancel();
-        let _ = self.task.await;
     }
 }
 
