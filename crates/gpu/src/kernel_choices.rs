@@ -64,20 +64,30 @@ impl FromStr for RasterLayout {
     }
 }
 
+impl GemmLayout {
+    /// The name `SEGSPLAT_GEMM_KERNEL`, `workers.adapters.kernels.gemm` and a job's metrics use:
+    /// the one table both parsing and printing read.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Tiled => "tiled",
+            Self::Rows => "rows",
+            Self::Broadcast => "broadcast",
+        }
+    }
+}
+
 impl FromStr for GemmLayout {
     type Err = UnknownKernel;
 
     fn from_str(value: &str) -> Result<Self, Self::Err> {
-        match value {
-            "tiled" => Ok(Self::Tiled),
-            "rows" => Ok(Self::Rows),
-            "broadcast" => Ok(Self::Broadcast),
-            _ => Err(UnknownKernel {
+        [Self::Tiled, Self::Rows, Self::Broadcast]
+            .into_iter()
+            .find(|layout| layout.name() == value)
+            .ok_or_else(|| UnknownKernel {
                 what: "GEMM",
                 value: value.to_string(),
                 expected: "tiled, rows, broadcast",
-            }),
-        }
+            })
     }
 }
 

@@ -151,13 +151,15 @@ pub enum GemmKernel {
 }
 
 impl GemmKernel {
-    /// The name `SEGSPLAT_GEMM_KERNEL` and `workers.adapters.kernels.gemm` give it.
+    /// The name `SEGSPLAT_GEMM_KERNEL` and `workers.adapters.kernels.gemm` give it
+    /// ([`GemmLayout::name`]).
     pub fn name(self) -> &'static str {
-        match self {
-            Self::Tiled => "tiled",
-            Self::Rows => "rows",
-            Self::Broadcast => "broadcast",
-        }
+        let layout = match self {
+            Self::Tiled => GemmLayout::Tiled,
+            Self::Rows => GemmLayout::Rows,
+            Self::Broadcast => GemmLayout::Broadcast,
+        };
+        layout.name()
     }
 
     /// The kernel that suits the adapter, unless the context forces one
