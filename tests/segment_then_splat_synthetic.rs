@@ -164,6 +164,13 @@ fn trained_object_masks_match_held_out_truth() {
         object_id: PLANTED_OBJECT,
     }));
     let pairs = trainer.views().train.len() * (3 + 2 + 1);
+    // Every object has Gaussians here, so nothing left out is an object rendering nothing.
+    let report = trainer.partial_filter_report().unwrap();
+    eprintln!("partial-mask filter: {report:?}");
+    assert_eq!(report.skipped_total(), skipped.len());
+    assert!(report.pairs.iter().sum::<usize>() <= pairs, "{report:?}");
+    assert_eq!(report.skipped_rendering_nothing, 0);
+    assert!(report.iou_quartiles[1] > 0.5, "{report:?}");
     assert!(
         skipped.len() * 10 <= pairs,
         "{} of {pairs} pairs skipped",

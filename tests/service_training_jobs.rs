@@ -377,6 +377,22 @@ async fn segment_then_splat_job_stores_objects_at_three_levels() {
         stored["training"]["setup_seconds"].as_f64() > Some(0.0),
         "{stored}"
     );
+    // What the partial-mask filter found (after the last step): pairs per level, the left-out
+    // ones adding up to `skipped_pairs`, and how many of those render nothing.
+    let filter = &stored["partial_filter"];
+    assert_eq!(filter["after_step"], 10, "{stored}");
+    let total = |field: &str| -> u64 {
+        filter[field]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .filter_map(|count| count.as_u64())
+            .sum()
+    };
+    assert!(total("pairs") > 0, "{stored}");
+    assert_eq!(Some(total("skipped")), stored["skipped_pairs"].as_u64());
+    assert!(filter["skipped_rendering_nothing"].as_u64() <= Some(total("skipped")));
+    assert_eq!(filter["iou_quartiles"].as_array().map(Vec::len), Some(3));
     // The segmentation stage reports each view as it is segmented, not only its start and end.
     let steps = segment_steps(&client, &job_id).await;
     let train_views = steps.last().copied().unwrap_or_default();

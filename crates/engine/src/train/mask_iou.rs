@@ -5,6 +5,7 @@
 use bytemuck::{Pod, Zeroable};
 
 use crate::render::ObjectBatchOutput;
+use crate::train::partial_filter_report::PairOverlap;
 use segsplat_gpu::kernel::{Kernel, workgroups_for};
 use segsplat_gpu::{GpuContext, GpuError};
 
@@ -86,21 +87,34 @@ impl MaskIouCounts {
         );
     }
 
-    /// Reads every pair's IoU back (one read-back; waits for the recorded work). A pair whose
-    /// render and mask are both empty scores 0.
-    pub fn read_ious(&self, ctx: &GpuContext) -> Result<Vec<f32>, GpuError> {
+    /// Reads every pair's counts back (one read-back; waits for the recorded work), with each
+    /// pair's mask size from `mask_pixels` (in pair order).
+    pub fn read_overlaps(
+        &self,
+        ctx: &GpuContext,
+        mask_pixels: &[u32],
+    ) -> Result<Vec<PairOverlap>, GpuError> {
         let counts: Vec<u32> = ctx.read_vec(&self.counts)?;
         Ok(counts
             .chunks_exact(2)
             .take(self.pairs)
-            .map(|pair| {
-                let (intersection, union) = (pair[0], pair[1]);
-                if union == 0 {
-                    0.0
-                } else {
-                    intersection as f32 / union as f32
-                }
+            .zip(mask_pixels)
+            .map(|(pair, &mask_pixels)| PairOverlap {
+                intersection: pair[0],
+                union: pair[1],
+                mask_pixels,
             })
+            .collect())
+    }
+
+    /// Reads every pair's IoU back (one read-back; waits for the recorded work). A pair whose
+    /// render and mask are both empty scores 0.
+    pub fn read_ious(&self, ctx: &GpuContext) -> Result<Vec<f32>, GpuError> {
+        let unknown_masks = vec![0; self.pairs];
+        Ok(self
+            .read_overlaps(ctx, &unknown_masks)?
+            .into_iter()
+            .map(PairOverlap::iou)
             .collect())
     }
 }

@@ -49,6 +49,7 @@ use crate::train::budget::{scene_gaussian_budget, scene_random_init_count};
 use crate::train::config::{ConfigError, TrainConfig};
 use crate::train::densify_stats::DensifyAccumulators;
 use crate::train::object_loss::{MAX_OBJECTS_PER_LEVEL, ObjectTargets, SkippedPair};
+use crate::train::partial_filter_report::PartialFilterReport;
 use crate::train::random_init::{camera_centres, has_sparse_points, random_visible_gaussians};
 use crate::train::schedule::{DeformationSchedule, SPARSE_CAPTURE_VIEWS, TrainSchedule};
 use crate::train::views::{Views, ViewsError, training_pixels};
@@ -157,6 +158,9 @@ pub struct TrainerMeta {
     /// checks' history is not kept, so a run resumed before its stop refills its window).
     #[serde(default)]
     pub converged_at: Option<ConvergedAt>,
+    /// What the partial-mask filter found, when it has run (absent in older checkpoints).
+    #[serde(default)]
+    pub partial_filter: Option<PartialFilterReport>,
 }
 
 pub struct Trainer {
@@ -189,6 +193,8 @@ pub struct Trainer {
     skipped_pairs: BTreeSet<SkippedPair>,
     /// What the partial-mask filter has cost (a one-off of the job, not a step).
     partial_filter_cost: PartialFilterCost,
+    /// What the partial-mask filter found, once it has run.
+    partial_filter_report: Option<PartialFilterReport>,
     started: Instant,
     steps_at_start: u32,
     /// The deformation field of a dynamic scene.
@@ -351,6 +357,7 @@ impl Trainer {
             object_targets: None,
             skipped_pairs: BTreeSet::new(),
             partial_filter_cost: PartialFilterCost::default(),
+            partial_filter_report: None,
             started: Instant::now(),
             steps_at_start: 0,
             dynamics: None,

@@ -28,7 +28,9 @@ use crate::store::objects::{ObjectEmbedding, ObjectRecord};
 use segsplat_engine::checkpoint::Checkpoint;
 use segsplat_engine::deform::{DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE};
 use segsplat_engine::train::trainer::resolve_random_init;
-use segsplat_engine::train::{EvalReport, ObjectLossConfig, TrainConfig, Trainer, TrainerMeta};
+use segsplat_engine::train::{
+    EvalReport, ObjectLossConfig, PartialFilterReport, TrainConfig, Trainer, TrainerMeta,
+};
 use segsplat_gpu::GpuContext;
 use segsplat_method::segment_then_splat::association::{
     AssociationOptions, generated_view_masks_with_progress,
@@ -121,6 +123,11 @@ pub struct SegmentThenSplatMetrics {
     /// Objects per level (small, middle, large).
     pub objects: [usize; 3],
     pub skipped_pairs: usize,
+    /// What the partial-mask filter found: pairs checked and left out per level, IoU quartiles,
+    /// and the left-out pairs whose object renders nothing in the view (absent when it did not
+    /// run, and in metrics written before it was reported).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub partial_filter: Option<PartialFilterReport>,
     /// Stage 1: the mask source used and its figures (as the "segment" stage reported them).
     pub segment: SegmentReport,
     /// The settings the job ran with (also the job's `settings`; absent in metrics written
@@ -636,6 +643,7 @@ fn finish(
         held_out,
         objects: Level::ALL.map(|level| summaries.iter().filter(|s| s.level == level).count()),
         skipped_pairs: skipped.len(),
+        partial_filter: trainer.partial_filter_report().cloned(),
         segment,
         settings: Some(settings),
     };

@@ -53,6 +53,7 @@ impl Trainer {
             skipped_pairs: self.skipped_pairs.iter().copied().collect(),
             gaussian_budget: Some(self.gaussian_budget),
             converged_at: self.converged_at(),
+            partial_filter: self.partial_filter_report.clone(),
         }
     }
 
@@ -86,6 +87,7 @@ impl Trainer {
         trainer.rng = meta.rng.clone();
         trainer.view_queue = meta.view_queue.clone();
         trainer.skipped_pairs = meta.skipped_pairs.iter().copied().collect();
+        trainer.partial_filter_report = meta.partial_filter.clone();
         trainer.fit_check.restore(meta.converged_at);
         if let Some(budget) = meta.gaussian_budget {
             trainer.gaussian_budget = budget;

@@ -7,6 +7,7 @@ use super::{TrainError, Trainer};
 use crate::loss::{LossOutputs, ObjectContentHints, ObjectLossImages, ObjectLossSlot};
 use crate::render::{ObjectSlot, RenderOutput};
 use crate::train::object_loss::{ObjectTargets, SkippedPair, sample_objects};
+use crate::train::partial_filter_report::PartialFilterReport;
 use segsplat_scene::Level;
 
 #[derive(Debug, thiserror::Error)]
@@ -72,6 +73,11 @@ impl Trainer {
     /// What the partial-mask filter has cost so far.
     pub fn partial_filter_cost(&self) -> super::PartialFilterCost {
         self.partial_filter_cost
+    }
+
+    /// What the partial-mask filter found, once it has run.
+    pub fn partial_filter_report(&self) -> Option<&PartialFilterReport> {
+        self.partial_filter_report.as_ref()
     }
 
     /// (object, view) pairs the partial-mask filter has left out so far, sorted.

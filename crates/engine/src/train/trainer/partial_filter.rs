@@ -5,6 +5,7 @@ use super::{StopCheck, TrainError, Trainer};
 use crate::render::{ObjectSlot, RENDER_ATTEMPTS, RenderError};
 use crate::train::mask_iou::MaskIouCounts;
 use crate::train::object_loss::{ObjectTargets, SkippedPair};
+use crate::train::partial_filter_report::PartialFilterReport;
 use crate::{ObjectFilter, RenderSettings};
 use segsplat_gpu::GpuContext;
 use segsplat_scene::Level;
@@ -43,7 +44,7 @@ impl Trainer {
         let started = std::time::Instant::now();
         let dispatches_before = self.ctx.dispatch_count();
         let threshold = config.partial_iou_threshold;
-        let pairs = collect_pairs(targets);
+        let (pairs, mask_pixels) = collect_pairs(targets);
         let counts = MaskIouCounts::new(&self.ctx, pairs.len())?;
         // A pending report of the training steps' renders is not the filter's.
         self.renderer.sync_capacity(&self.ctx)?;
@@ -130,16 +131,14 @@ impl Trainer {
             }
             first_pair += view_pairs.len();
         }
-        let ious = counts.read_ious(&self.ctx)?;
-        let newly_skipped: Vec<SkippedPair> = pairs
-            .iter()
-            .zip(&ious)
-            .filter(|(_, iou)| **iou < threshold)
-            .map(|(pair, _)| *pair)
-            .collect();
+        let overlaps = counts.read_overlaps(&self.ctx, &mask_pixels)?;
+        let (newly_skipped, report) =
+            PartialFilterReport::judge(self.step, threshold, &pairs, &overlaps);
         tracing::info!(
             checked = pairs.len(),
             skipped = newly_skipped.len(),
+            skipped_rendering_nothing = report.skipped_rendering_nothing,
+            iou_median = report.iou_quartiles[1],
             rerendered_views,
             seconds = started.elapsed().as_secs_f64(),
             "partial-mask filter"
@@ -147,6 +146,7 @@ impl Trainer {
         self.partial_filter_cost.seconds += started.elapsed().as_secs_f64();
         self.partial_filter_cost.dispatches += self.ctx.dispatch_count() - dispatches_before;
         self.skipped_pairs.extend(newly_skipped);
+        self.partial_filter_report = Some(report);
         Ok(())
     }
 
@@ -157,24 +157,31 @@ impl Trainer {
     }
 }
 
-/// Every (object, view) pair, grouped by view (the batches are per view).
-fn collect_pairs(targets: &ObjectTargets) -> Vec<SkippedPair> {
+/// Every (object, view) pair, grouped by view (the batches are per view), and each pair's mask
+/// pixels.
+fn collect_pairs(targets: &ObjectTargets) -> (Vec<SkippedPair>, Vec<u32>) {
     targets
         .views
         .iter()
         .enumerate()
         .flat_map(|(train_view, masks)| {
             Level::ALL.into_iter().flat_map(move |level| {
-                masks.present[level.index()]
+                let present = &masks.present[level.index()];
+                let pixels = &masks.mask_pixels[level.index()];
+                present
                     .iter()
-                    .map(move |&object_id| SkippedPair {
-                        train_view,
-                        level,
-                        object_id,
+                    .zip(pixels)
+                    .map(move |(&object_id, &pixels)| {
+                        let pair = SkippedPair {
+                            train_view,
+                            level,
+                            object_id,
+                        };
+                        (pair, pixels)
                     })
             })
         })
-        .collect()
+        .unzip()
 }
 
 /// Object renders per batch for images of `pixels` pixels: as many as fit the share of one
