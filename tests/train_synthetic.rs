@@ -469,6 +469,10 @@ fn bench_times_the_object_loss_against_plain_steps_in_one_invocation() {
     let with_filter = number(&plain["step_time_ratio_with_filter"]);
     assert!(ratio > 0.0 && ratio <= with_filter, "{report}");
     assert!(number(&plain["partial_filter_seconds"]) > 0.0, "{report}");
+    assert!(
+        plain["partial_filter"]["iou_quartiles"].is_array(),
+        "{report}"
+    );
     // The object slots add their renders' and their batched loss's dispatches to a step.
     assert!(
         number(&report["dispatches_per_step"]) > number(&plain["dispatches_per_step"]),

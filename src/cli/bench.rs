@@ -22,7 +22,7 @@ use segsplat_engine::init::random_gaussians;
 use segsplat_engine::ply::read_ply_file;
 use segsplat_engine::train::convergence::ConvergenceStop;
 use segsplat_engine::train::trainer::initial_model;
-use segsplat_engine::train::{ConvergedAt, TrainConfig, Trainer};
+use segsplat_engine::train::{ConvergedAt, PartialFilterReport, TrainConfig, Trainer};
 use segsplat_gpu::profiler::KernelTime;
 use segsplat_gpu::{GpuContext, HostCostReading};
 use segsplat_scene::Scene;
@@ -346,6 +346,10 @@ struct PlainBaselineReport {
     partial_filter_seconds: f64,
     /// Its kernel dispatches (not in `dispatches_per_step`).
     partial_filter_dispatches: u64,
+    /// What it found: pairs and left-out pairs per level, IoU quartiles, left-out pairs whose
+    /// object renders nothing (as in a job's metrics.json).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    partial_filter: Option<PartialFilterReport>,
     /// Object-loss dispatches per step over plain dispatches per step.
     dispatch_ratio: f64,
     /// With `--profile-kernels`: the plain trainer's kernels over as many more steps, after its
@@ -691,6 +695,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
                 step_time_ratio_with_filter: with_filter,
                 partial_filter_seconds,
                 partial_filter_dispatches: filter.dispatches,
+                partial_filter: trainer.partial_filter_report().cloned(),
                 dispatch_ratio: run.dispatches_per_step / plain_run.dispatches_per_step.max(1.0),
                 kernel_profile: match args.profile_kernels {
                     Some(steps) => Some(profile_kernels(&ctx, plain, steps)?),
