@@ -1,10 +1,9 @@
 //! The Segment-then-Splat object loss (docs/method.md, stage 3): every step, for each active level,
 //! `m` objects present in the view's masks are rendered alone (only their Gaussians, on black)
 //! and compared with `image x mask` by the same fused L1 + D-SSIM loss as the full render. The
-//! levels join coarse-ward in stages (small; + middle; + large), and at the end of training (the
-//! released code: at 75%) the (object, view) pairs whose render disagrees with the mask (IoU < 0.3:
-//! the 2D mask is a partial, occluded view) are found and recorded, so the language stage skips
-//! them.
+//! levels join coarse-ward in stages (small; + middle; + large), and near the end of training the
+//! (object, view) pairs whose render disagrees with the mask (IoU < 0.3: the 2D mask is a partial,
+//! occluded view) are left out and recorded, so the language stage can skip them too.
 
 use rand::Rng;
 use rand::seq::IndexedRandom;
@@ -27,11 +26,8 @@ pub struct ObjectLossConfig {
     pub middle_from: f32,
     /// Fraction of the steps after which the large level joins.
     pub large_from: f32,
-    /// Fraction of the steps after which partial masks are filtered (released: 30k of 40k).
-    /// The default, 1.0, filters after the last step: the left-out pairs are recorded and kept
-    /// out of the objects' embeddings, but no step trains without them. On a sparse capture the
-    /// steps after a filter at 75% lost 0.9-1.3 dB of held-out PSNR at twice the job's steps,
-    /// and twice the steps gained 0.37 dB without them (docs/segment_then_splat.md).
+    /// Fraction of the steps from which partial masks are filtered (released: 30k of 40k). 1.0
+    /// filters after the last step: the left-out pairs then only leave the embeddings.
     pub partial_filter_from: f32,
     /// An (object, view) pair whose rendered mask (alpha > 0.5) has IoU below this with the
     /// 2D mask is skipped from then on.
@@ -45,7 +41,7 @@ impl Default for ObjectLossConfig {
             weight: 1.0,
             middle_from: 0.125,
             large_from: 0.25,
-            partial_filter_from: 1.0,
+            partial_filter_from: 0.75,
             partial_iou_threshold: 0.3,
         }
     }
@@ -255,13 +251,12 @@ mod tests {
             vec![Level::Small, Level::Middle]
         );
         assert_eq!(config.active_levels(200, 800), Level::ALL.to_vec());
-        // After the last step (the released code's 75% is a config away).
-        assert_eq!(config.partial_filter_step(800), 800);
-        let released = ObjectLossConfig {
-            partial_filter_from: 0.75,
+        assert_eq!(config.partial_filter_step(800), 600);
+        let at_the_end = ObjectLossConfig {
+            partial_filter_from: 1.0,
             ..config
         };
-        assert_eq!(released.partial_filter_step(800), 600);
+        assert_eq!(at_the_end.partial_filter_step(800), 800);
     }
 
     #[test]
