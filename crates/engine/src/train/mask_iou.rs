@@ -87,22 +87,15 @@ impl MaskIouCounts {
         );
     }
 
-    /// Reads every pair's counts back (one read-back; waits for the recorded work), with each
-    /// pair's mask size from `mask_pixels` (in pair order).
-    pub fn read_overlaps(
-        &self,
-        ctx: &GpuContext,
-        mask_pixels: &[u32],
-    ) -> Result<Vec<PairOverlap>, GpuError> {
+    /// Reads every pair's counts back (one read-back; waits for the recorded work).
+    pub fn read_overlaps(&self, ctx: &GpuContext) -> Result<Vec<PairOverlap>, GpuError> {
         let counts: Vec<u32> = ctx.read_vec(&self.counts)?;
         Ok(counts
             .chunks_exact(2)
             .take(self.pairs)
-            .zip(mask_pixels)
-            .map(|(pair, &mask_pixels)| PairOverlap {
+            .map(|pair| PairOverlap {
                 intersection: pair[0],
                 union: pair[1],
-                mask_pixels,
             })
             .collect())
     }
@@ -110,9 +103,8 @@ impl MaskIouCounts {
     /// Reads every pair's IoU back (one read-back; waits for the recorded work). A pair whose
     /// render and mask are both empty scores 0.
     pub fn read_ious(&self, ctx: &GpuContext) -> Result<Vec<f32>, GpuError> {
-        let unknown_masks = vec![0; self.pairs];
         Ok(self
-            .read_overlaps(ctx, &unknown_masks)?
+            .read_overlaps(ctx)?
             .into_iter()
             .map(PairOverlap::iou)
             .collect())

@@ -151,11 +151,10 @@ impl ObjectTargets {
             .into_iter()
             .map(|view| {
                 let levels = &view.ids;
-                let present: [Vec<u32>; 3] =
+                let [small, middle, large] =
                     std::array::from_fn(|level| present_objects(&levels[level]));
-                let mask_pixels = std::array::from_fn(|level| {
-                    object_pixel_counts(&levels[level], &present[level])
-                });
+                let present = [small.0, middle.0, large.0];
+                let mask_pixels = [small.1, middle.1, large.1];
                 ViewObjectMasks {
                     ids: std::array::from_fn(|level| buffer("object mask", &levels[level])),
                     cell_maps: std::array::from_fn(|level| {
@@ -175,22 +174,14 @@ impl ObjectTargets {
     }
 }
 
-fn present_objects(ids: &[u32]) -> Vec<u32> {
-    let mut present: Vec<u32> = ids.iter().copied().filter(|&id| id != 0).collect();
-    present.sort_unstable();
-    present.dedup();
-    present
-}
-
-/// The pixels of each of `objects` (sorted) in an id map.
-fn object_pixel_counts(ids: &[u32], objects: &[u32]) -> Vec<u32> {
-    let mut counts = vec![0; objects.len()];
-    for id in ids {
-        if let Ok(index) = objects.binary_search(id) {
-            counts[index] += 1;
-        }
-    }
-    counts
+/// The objects of an id map, sorted, and each one's pixels.
+fn present_objects(ids: &[u32]) -> (Vec<u32>, Vec<u32>) {
+    let mut sorted: Vec<u32> = ids.iter().copied().filter(|&id| id != 0).collect();
+    sorted.sort_unstable();
+    sorted
+        .chunk_by(|a, b| a == b)
+        .map(|run| (run[0], run.len() as u32))
+        .unzip()
 }
 
 /// An (object, view) pair left out as a partial mask.
@@ -277,9 +268,9 @@ mod tests {
     #[test]
     fn object_pixels_are_counted_in_present_order() {
         let ids = [0, 7, 3, 7, 0, 7];
-        let present = present_objects(&ids);
+        let (present, pixels) = present_objects(&ids);
         assert_eq!(present, vec![3, 7]);
-        assert_eq!(object_pixel_counts(&ids, &present), vec![1, 3]);
+        assert_eq!(pixels, vec![1, 3]);
     }
 
     #[test]

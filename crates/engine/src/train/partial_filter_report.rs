@@ -7,15 +7,13 @@
 use serde::{Deserialize, Serialize};
 
 use crate::train::SkippedPair;
-use segsplat_scene::Level;
 
 /// The overlap of one pair: pixels where the object's render alone covers (alpha > 0.5) and its
-/// mask holds it, where either does, and the mask's own pixels.
+/// mask holds it, and where either does.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct PairOverlap {
     pub intersection: u32,
     pub union: u32,
-    pub mask_pixels: u32,
 }
 
 impl PairOverlap {
@@ -28,9 +26,9 @@ impl PairOverlap {
         }
     }
 
-    /// Pixels the object's render covers (alpha > 0.5) in the view.
-    pub fn rendered_pixels(self) -> u32 {
-        (self.union + self.intersection).saturating_sub(self.mask_pixels)
+    /// Pixels the object's render covers (alpha > 0.5) in the view, given its mask's pixels.
+    pub fn rendered_pixels(self, mask_pixels: u32) -> u32 {
+        (self.union + self.intersection).saturating_sub(mask_pixels)
     }
 }
 
@@ -53,12 +51,13 @@ pub struct PartialFilterReport {
 }
 
 impl PartialFilterReport {
-    /// Judges every pair (`pairs[i]` with `overlaps[i]`) against `threshold` and returns the
-    /// left-out pairs with the report.
+    /// Judges every pair (`pairs[i]`, its mask's pixels `mask_pixels[i]`, `overlaps[i]`) against
+    /// `threshold` and returns the left-out pairs with the report.
     pub fn judge(
         after_step: u32,
         threshold: f32,
         pairs: &[SkippedPair],
+        mask_pixels: &[u32],
         overlaps: &[PairOverlap],
     ) -> (Vec<SkippedPair>, Self) {
         let mut report = Self {
@@ -71,7 +70,7 @@ impl PartialFilterReport {
         };
         let mut skipped = Vec::new();
         let mut ious = Vec::with_capacity(pairs.len());
-        for (pair, overlap) in pairs.iter().zip(overlaps) {
+        for ((pair, &mask_pixels), overlap) in pairs.iter().zip(mask_pixels).zip(overlaps) {
             let level = pair.level.index();
             let iou = overlap.iou();
             ious.push(iou);
@@ -79,7 +78,7 @@ impl PartialFilterReport {
             if iou < threshold {
                 skipped.push(*pair);
                 report.skipped[level] += 1;
-                if overlap.rendered_pixels() == 0 {
+                if overlap.rendered_pixels(mask_pixels) == 0 {
                     report.skipped_rendering_nothing += 1;
                 }
             }
@@ -93,11 +92,6 @@ impl PartialFilterReport {
     pub fn skipped_total(&self) -> usize {
         self.skipped.iter().sum()
     }
-
-    /// Pairs left out at `level`.
-    pub fn skipped_at(&self, level: Level) -> usize {
-        self.skipped[level.index()]
-    }
 }
 
 fn nearest_rank(sorted: &[f32], q: f32) -> f32 {
@@ -110,6 +104,7 @@ fn nearest_rank(sorted: &[f32], q: f32) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use segsplat_scene::Level;
 
     fn pair(level: Level, object_id: u32) -> SkippedPair {
         SkippedPair {
@@ -125,16 +120,14 @@ mod tests {
         let overlap = PairOverlap {
             intersection: 4,
             union: 12,
-            mask_pixels: 10,
         };
-        assert_eq!(overlap.rendered_pixels(), 6);
+        assert_eq!(overlap.rendered_pixels(10), 6);
         assert!((overlap.iou() - 1.0 / 3.0).abs() < 1e-6);
         let nothing = PairOverlap {
             intersection: 0,
             union: 10,
-            mask_pixels: 10,
         };
-        assert_eq!((nothing.rendered_pixels(), nothing.iou()), (0, 0.0));
+        assert_eq!((nothing.rendered_pixels(10), nothing.iou()), (0, 0.0));
     }
 
     #[test]
@@ -150,33 +143,31 @@ mod tests {
             PairOverlap {
                 intersection: 9,
                 union: 10,
-                mask_pixels: 10,
             },
             // Renders nothing where its mask is.
             PairOverlap {
                 intersection: 0,
                 union: 8,
-                mask_pixels: 8,
             },
             // A partial view: the render covers far more than the mask (IoU 0.2).
             PairOverlap {
                 intersection: 2,
                 union: 10,
-                mask_pixels: 2,
             },
             // Fits: IoU 0.5.
             PairOverlap {
                 intersection: 5,
                 union: 10,
-                mask_pixels: 8,
             },
         ];
-        let (skipped, report) = PartialFilterReport::judge(300, 0.3, &pairs, &overlaps);
+        let mask_pixels = [10, 8, 2, 8];
+        let (skipped, report) =
+            PartialFilterReport::judge(300, 0.3, &pairs, &mask_pixels, &overlaps);
         assert_eq!(skipped, vec![pairs[1], pairs[2]]);
         assert_eq!(report.pairs, [2, 1, 1]);
         assert_eq!(report.skipped, [1, 1, 0]);
         assert_eq!(report.skipped_total(), 2);
-        assert_eq!(report.skipped_at(Level::Middle), 1);
+        assert_eq!(report.skipped[Level::Middle.index()], 1);
         assert_eq!(report.skipped_rendering_nothing, 1);
         assert_eq!(report.iou_quartiles, [0.0, 0.2, 0.5]);
         assert_eq!(report.after_step, 300);
@@ -184,7 +175,7 @@ mod tests {
 
     #[test]
     fn no_pairs_report_zeros() {
-        let (skipped, report) = PartialFilterReport::judge(10, 0.3, &[], &[]);
+        let (skipped, report) = PartialFilterReport::judge(10, 0.3, &[], &[], &[]);
         assert!(skipped.is_empty());
         assert_eq!(report.iou_quartiles, [0.0; 3]);
     }

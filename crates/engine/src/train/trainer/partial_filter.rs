@@ -131,9 +131,9 @@ impl Trainer {
             }
             first_pair += view_pairs.len();
         }
-        let overlaps = counts.read_overlaps(&self.ctx, &mask_pixels)?;
+        let overlaps = counts.read_overlaps(&self.ctx)?;
         let (newly_skipped, report) =
-            PartialFilterReport::judge(self.step, threshold, &pairs, &overlaps);
+            PartialFilterReport::judge(self.step, threshold, &pairs, &mask_pixels, &overlaps);
         tracing::info!(
             checked = pairs.len(),
             skipped = newly_skipped.len(),
