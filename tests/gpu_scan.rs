@@ -1,11 +1,12 @@
-//! `ExclusiveScan` against a CPU prefix sum (exact: integer sums, wrapping like the GPU), and
-//! the deferred read-back the training loop reads its progress with (`DeferredRead`).
+//! `ExclusiveScan` against a CPU prefix sum (exact: integer sums, wrapping like the GPU), the
+//! deferred read-back the training loop reads its progress with (`DeferredRead`), and the
+//! context's kernel cache every kernel is built through.
 
 mod gpu_support;
 
 use gpu_support::{gpu_context, new_encoder, seeded_rng, storage_buffer, submit};
 use rand::Rng;
-use segsplat_gpu::{ExclusiveScan, WorkgroupSum};
+use segsplat_gpu::{ExclusiveScan, Kernel, WorkgroupSum};
 
 fn cpu_exclusive_scan(input: &[u32]) -> Vec<u32> {
     let mut output = Vec::with_capacity(input.len() + 1);
@@ -163,4 +164,44 @@ fn deferred_reads_deliver_the_newest_copy() {
     assert_eq!(read.take(ctx).unwrap().map(as_u32), Some(vec![4; 4]));
     let counted = ctx.host_costs.reading().since(&before);
     assert_eq!((counted.read_backs, counted.bytes_read_back), (1, 16));
+}
+
+/// A kernel compiles once per context (`segsplat_gpu::kernel_cache`): asking again reuses the
+/// pipeline, which still runs; a source the device rejects is an error every time and is never
+/// kept. On a context of its own, so the counts are this test's alone.
+#[test]
+fn kernels_compile_once_per_context_and_rejected_ones_are_not_kept() {
+    if gpu_context().is_none() {
+        return;
+    }
+    let ctx = segsplat_gpu::GpuContext::new_default().expect("a second context on the adapter");
+    let source = "@group(0) @binding(0) var<storage, read_write> data: array<u32>;\n\
+                  @compute @workgroup_size(1) fn main() { data[0] = data[0] + 7u; }";
+    let first = Kernel::new(&ctx, "cache_probe", &[source], "main", &[]).unwrap();
+    let compiles = ctx.kernel_compiles();
+    assert_eq!((compiles.compiled, compiles.reused), (1, 0));
+    assert!(compiles.compile_seconds > 0.0);
+    let second = Kernel::new(&ctx, "cache_probe", &[source], "main", &[]).unwrap();
+    let compiles = ctx.kernel_compiles();
+    assert_eq!((compiles.compiled, compiles.reused), (1, 1));
+
+    let data = storage_buffer(&ctx, "cache probe data", &[1u32]);
+    let mut encoder = new_encoder(&ctx);
+    for kernel in [&first, &second] {
+        let bound = kernel.bind(&ctx, &[&data]);
+        kernel.dispatch(&mut encoder, &bound, [1, 1, 1]);
+    }
+    submit(&ctx, encoder);
+    assert_eq!(ctx.read_vec::<u32>(&data).unwrap(), vec![15]);
+
+    let broken = "@compute @workgroup_size(1) fn main() { let x: u32 = 1.5; }";
+    for _ in 0..2 {
+        let error = Kernel::new(&ctx, "cache_probe_broken", &[broken], "main", &[]).unwrap_err();
+        assert!(
+            error.to_string().contains("cache_probe_broken"),
+            "the error names the kernel: {error}"
+        );
+    }
+    let compiles = ctx.kernel_compiles();
+    assert_eq!((compiles.compiled, compiles.reused), (1, 1));
 }

@@ -377,6 +377,15 @@ async fn segment_then_splat_job_stores_objects_at_three_levels() {
         stored["training"]["setup_seconds"].as_f64() > Some(0.0),
         "{stored}"
     );
+    // The trainer's kernels were compiled beside the masks (or by an earlier job on this
+    // worker's context), so building the trainer compiled none and reused every one.
+    let training = &stored["training"];
+    assert!(training["kernels_compiled_ahead"].is_object(), "{stored}");
+    assert_eq!(training["setup_kernels_compiled"], 0, "{stored}");
+    assert!(
+        training["setup_kernels_reused"].as_u64() > Some(0),
+        "{stored}"
+    );
     // What the partial-mask filter found (after step 8 of 10): pairs per level, the left-out
     // ones adding up to `skipped_pairs`, and how many of those render nothing.
     let filter = &stored["partial_filter"];

@@ -126,6 +126,31 @@ fn steady_dynamic_steps_create_no_buffers_and_no_bind_groups() {
     gpu_support::assert_steps_allocate_nothing(ctx, &mut trainer, views);
 }
 
+/// A job compiles its trainer's kernels while it makes its masks (`Trainer::compile_kernels`,
+/// issue 38, item 5): that must cover every kernel building the trainer needs, the
+/// deformation field's included, so the trainer compiles none; and asking again compiles none.
+#[test]
+fn kernels_compiled_ahead_leave_the_trainer_nothing_to_compile() {
+    if gpu_context().is_none() {
+        return;
+    }
+    // A context of its own: its kernel cache starts empty.
+    let ctx = &segsplat_gpu::GpuContext::new_default().expect("GPU context");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let scene = dynamic_scene(dir.path());
+    let config = config(&scene, 60, true);
+    let ahead = Trainer::compile_kernels(ctx, &config).expect("compile ahead");
+    assert!(ahead.compiled > 10, "{ahead:?}");
+    let before = ctx.kernel_compiles();
+    let mut trainer = Trainer::new(ctx, &scene, config.clone(), Some(initial())).expect("trainer");
+    trainer.run_until(2, |_| true).expect("train");
+    let setup = ctx.kernel_compiles().since(&before);
+    assert_eq!(setup.compiled, 0, "the trainer compiled what was not ahead: {setup:?}");
+    assert!(setup.reused >= ahead.compiled, "{setup:?} after {ahead:?}");
+    let again = Trainer::compile_kernels(ctx, &config).expect("compile again");
+    assert_eq!(again.compiled, 0, "{again:?}");
+}
+
 /// A 60-step dynamic trainer on `scene` whose field warms up in 10 steps, trained to step 30.
 fn trainer_with_a_trained_field(ctx: &segsplat_gpu::GpuContext, scene: &Scene) -> Trainer {
     let mut config = config(scene, 60, true);

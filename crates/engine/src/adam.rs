@@ -11,7 +11,6 @@
 mod groups;
 
 use segsplat_gpu::kernel::{wgsl_u32_constants, workgroups_2d};
-use segsplat_gpu::validation::validated;
 use segsplat_gpu::{GpuContext, GpuError, Kernel};
 
 const ADAM_STEP: &str = include_str!("adam_step.wgsl");
@@ -127,16 +126,14 @@ pub struct Adam {
 
 impl Adam {
     pub fn new(ctx: &GpuContext, settings: AdamSettings) -> Result<Self, AdamError> {
-        let kernel = validated(ctx, "adam_step", || {
-            let constants = wgsl_u32_constants(&[("ADAM_WORKGROUP", ADAM_WORKGROUP)]);
-            Kernel::new(
-                ctx,
-                "adam_step",
-                &[&constants, ADAM_UPDATE, ADAM_STEP],
-                "adam_step",
-                &[],
-            )
-        })?;
+        let constants = wgsl_u32_constants(&[("ADAM_WORKGROUP", ADAM_WORKGROUP)]);
+        let kernel = Kernel::new(
+            ctx,
+            "adam_step",
+            &[&constants, ADAM_UPDATE, ADAM_STEP],
+            "adam_step",
+            &[],
+        )?;
         let groups_kernel = groups::AdamGroupsKernel::new(ctx)?;
         Ok(Self {
             kernel,

@@ -26,7 +26,6 @@
 use wgpu::util::DeviceExt;
 
 use segsplat_gpu::kernel::wgsl_u32_constants;
-use segsplat_gpu::validation::validated;
 use segsplat_gpu::{GpuContext, GpuError, Kernel, UniformParams};
 
 /// Weight of the L1 term.
@@ -339,9 +338,7 @@ fn slot_table(images: &ObjectLossImages<'_>) -> Result<Vec<[u32; 4]>, LossError>
 impl RenderLoss {
     pub fn new(ctx: &GpuContext) -> Result<Self, LossError> {
         let constants = loss_constants_wgsl();
-        let kernel = |label, sources: &[&str], entry| {
-            validated(ctx, label, || Kernel::new(ctx, label, sources, entry, &[]))
-        };
+        let kernel = |label, sources: &[&str], entry| Kernel::new(ctx, label, sources, entry, &[]);
         let pass = |source| {
             [
                 constants.as_str(),

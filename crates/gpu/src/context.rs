@@ -8,10 +8,13 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Duration;
 
 use serde::Serialize;
 
+use crate::Kernel;
 use crate::bind_cache::{BindGroupCache, BindKey};
+use crate::kernel_cache::{KernelCache, KernelCompiles, KernelKey};
 use crate::kernel_choices::KernelChoices;
 use crate::uniform_ring::{UniformParams, UniformRing};
 use wgpu::util::DeviceExt;
@@ -202,6 +205,8 @@ pub struct GpuContext {
     pub(crate) uniforms: Arc<Mutex<UniformRing>>,
     /// Bind groups reused while their buffers are (see [`crate::bind_cache`]).
     pub(crate) bind_groups: Arc<Mutex<BindGroupCache>>,
+    /// Every kernel compiled on this device (see [`crate::kernel_cache`]).
+    pub(crate) kernels: Arc<Mutex<KernelCache>>,
 }
 
 /// A lock that a panic elsewhere did not make unusable: the ring and the cache hold no invariant
@@ -339,6 +344,7 @@ impl GpuContext {
         Ok(Self {
             uniforms: Arc::new(Mutex::new(uniforms)),
             bind_groups: Arc::new(Mutex::new(BindGroupCache::default())),
+            kernels: Arc::new(Mutex::new(KernelCache::default())),
             device,
             queue,
             report,
@@ -486,6 +492,22 @@ impl GpuContext {
             offset,
             bytes.len() as u64,
         );
+    }
+
+    /// The kernel compiled on this device under `key`, if one was.
+    pub(crate) fn cached_kernel(&self, key: &KernelKey) -> Option<Kernel> {
+        locked(&self.kernels).reuse(key)
+    }
+
+    /// Keeps a kernel compiled (and validated) in `took` for later builders.
+    pub(crate) fn keep_kernel(&self, key: KernelKey, kernel: Kernel, took: Duration) {
+        locked(&self.kernels).insert(key, kernel, took);
+    }
+
+    /// Kernels compiled on this device so far, kernels reused instead, and the compiles' time:
+    /// a trainer built on a warm context compiles nothing.
+    pub fn kernel_compiles(&self) -> KernelCompiles {
+        locked(&self.kernels).compiles()
     }
 
     /// The cached bind group for `key`, or the one `create` makes.

@@ -7,12 +7,15 @@
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
 
-use crate::GpuContext;
 use crate::bind_cache::{BindKey, BoundRange};
+use crate::kernel_cache::KernelKey;
 use crate::kernel_layout::{BindingKind, layout_entries, reflect_bindings};
 use crate::profiler::KernelProfiler;
 use crate::uniform_ring::UniformParams;
+use crate::validation::validated;
+use crate::{GpuContext, GpuError};
 
 /// Uniform bindings a kernel may have with dynamic offsets; more keep the automatic layout.
 const MAX_DYNAMIC_UNIFORMS: usize = 4;
@@ -65,16 +68,42 @@ impl Bound {
 }
 
 impl Kernel {
-    /// Compiles `entry_point` from the concatenation of `sources` (snippets first, kernel last).
-    /// `constants` fill WGSL `override` declarations (e.g. workgroup sizes).
+    /// The pipeline of `entry_point` in the concatenation of `sources` (snippets first, kernel
+    /// last), compiled on first use and then reused from the context's cache (see
+    /// [`crate::kernel_cache`]). `constants` fill WGSL `override` declarations (e.g. workgroup
+    /// sizes). A source the device rejects is an error naming the kernel, and is not kept.
     pub fn new(
         ctx: &GpuContext,
         label: &'static str,
         sources: &[&str],
         entry_point: &str,
         constants: &[(&str, f64)],
-    ) -> Self {
+    ) -> Result<Self, GpuError> {
         let source = sources.concat();
+        let key = KernelKey::new(label, &source, entry_point, constants);
+        if let Some(kernel) = ctx.cached_kernel(&key) {
+            // Profiling may have been turned on since the kernel was compiled.
+            return Ok(Self {
+                profiler: ctx.profiler.clone(),
+                dispatches: Arc::clone(&ctx.dispatches),
+                ..kernel
+            });
+        }
+        let started = Instant::now();
+        let kernel = validated(ctx, label, || {
+            Self::compile(ctx, label, source, entry_point, constants)
+        })?;
+        ctx.keep_kernel(key, kernel.clone(), started.elapsed());
+        Ok(kernel)
+    }
+
+    fn compile(
+        ctx: &GpuContext,
+        label: &'static str,
+        source: String,
+        entry_point: &str,
+        constants: &[(&str, f64)],
+    ) -> Self {
         // Read before the source moves into the module.
         let reflected = reflect_bindings(&source, entry_point).filter(|bindings| {
             let uniforms = bindings

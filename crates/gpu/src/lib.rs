@@ -5,6 +5,7 @@ pub mod bind_cache;
 pub mod context;
 pub mod deferred_read;
 pub mod kernel;
+pub mod kernel_cache;
 pub mod kernel_choices;
 pub mod kernel_layout;
 pub mod profiler;
@@ -17,6 +18,7 @@ pub mod validation;
 
 pub use context::{AdapterFilter, AdapterReport, GpuContext, GpuError, HostCostReading};
 pub use kernel::{Binding, Bound, Kernel};
+pub use kernel_cache::KernelCompiles;
 pub use kernel_choices::{GemmLayout, KernelChoices, RasterLayout};
 pub use profiler::{KernelProfile, KernelProfiler};
 pub use release::{release_context, sole_owner};

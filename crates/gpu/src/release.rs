@@ -50,10 +50,13 @@ pub fn release_context(ctx: Arc<GpuContext>, wait: Duration) -> Result<(), Arc<G
         profiler,
         uniforms,
         bind_groups,
+        kernels,
         ..
     } = ctx;
-    // Cached bind groups hold the last references to buffers of scenes and models: first.
+    // Cached bind groups hold the last references to buffers of scenes and models: first. The
+    // compiled kernels' pipelines go with them, before the device.
     drop(bind_groups);
+    drop(kernels);
     drop(uniforms);
     drop(profiler);
     drop(queue);

@@ -13,7 +13,6 @@ use std::sync::Mutex;
 use wgpu::util::DeviceExt;
 
 use crate::kernel::{wgsl_u32_constants, workgroups_2d};
-use crate::validation::validated;
 use crate::{GpuContext, GpuError, Kernel};
 
 /// Elements one workgroup scans (prepended to the scan kernels as `SCAN_BLOCK`).
@@ -208,24 +207,20 @@ impl ExclusiveScan {
 
     /// A scan whose blocks add up their threads' totals the given way.
     pub fn with_sum(ctx: &GpuContext, sum: WorkgroupSum) -> Result<Self, GpuError> {
-        let (scan_blocks, add_block_offsets) = validated(ctx, "building scan kernels", || {
-            (
-                Kernel::new(
-                    ctx,
-                    "scan_blocks",
-                    &[&block_constant(), SCAN_COMMON, sum.source(), SCAN_BLOCKS],
-                    "scan_blocks",
-                    &[],
-                ),
-                Kernel::new(
-                    ctx,
-                    "add_block_offsets",
-                    &[&block_constant(), SCAN_COMMON, SCAN_ADD],
-                    "add_block_offsets",
-                    &[],
-                ),
-            )
-        })?;
+        let scan_blocks = Kernel::new(
+            ctx,
+            "scan_blocks",
+            &[&block_constant(), SCAN_COMMON, sum.source(), SCAN_BLOCKS],
+            "scan_blocks",
+            &[],
+        )?;
+        let add_block_offsets = Kernel::new(
+            ctx,
+            "add_block_offsets",
+            &[&block_constant(), SCAN_COMMON, SCAN_ADD],
+            "add_block_offsets",
+            &[],
+        )?;
         let level_params = (0..MAX_SCAN_LEVELS)
             .map(|level| {
                 let params = [level_counts_index(level), 0, 0, 0];

@@ -23,7 +23,6 @@ use crate::scan::{
     LEVEL_COUNTS_LEN, MAX_SCAN_LEVELS, ScanDispatch, ScanLevels, ScanScratch, WorkgroupSum,
     block_constant, level_output_counts_without_total,
 };
-use crate::validation::validated;
 use crate::{Binding, ExclusiveScan, GpuContext, GpuError, Kernel};
 
 /// Elements per sort block and key bits per pass, prepended to the sort kernels
@@ -88,9 +87,7 @@ impl RadixSort {
     /// A sort whose scatter and histogram scan add up thread totals the given way.
     pub fn with_sum(ctx: &GpuContext, sum: WorkgroupSum) -> Result<Self, GpuError> {
         let scan = ExclusiveScan::with_sum(ctx, sum)?;
-        let kernel = |label, sources: &[&str], entry| {
-            validated(ctx, label, || Kernel::new(ctx, label, sources, entry, &[]))
-        };
+        let kernel = |label, sources: &[&str], entry| Kernel::new(ctx, label, sources, entry, &[]);
         let common = format!(
             "{}{SORT_COMMON}",
             wgsl_u32_constants(&[

@@ -11,7 +11,6 @@
 use std::fmt::Write as _;
 
 use segsplat_gpu::kernel::{wgsl_u32_constants, workgroups_2d};
-use segsplat_gpu::validation::validated;
 use segsplat_gpu::{GpuContext, GpuError, Kernel};
 
 use super::{ADAM_UPDATE, ADAM_WORKGROUP, AdamConstants, AdamGroup, AdamSettings};
@@ -79,16 +78,14 @@ impl AdamGroupsKernel {
         let constants = wgsl_u32_constants(&[("ADAM_WORKGROUP", ADAM_WORKGROUP)]);
         let mut kernels = Vec::new();
         for groups in 2..=bindable.min(ADAM_GROUPS) {
-            let kernel = validated(ctx, "adam_step_groups", || {
-                let source = group_source(groups);
-                Kernel::new(
-                    ctx,
-                    "adam_step_groups",
-                    &[&constants, ADAM_UPDATE, &source, ADAM_GROUPS_KERNEL],
-                    "adam_groups",
-                    &[],
-                )
-            })?;
+            let source = group_source(groups);
+            let kernel = Kernel::new(
+                ctx,
+                "adam_step_groups",
+                &[&constants, ADAM_UPDATE, &source, ADAM_GROUPS_KERNEL],
+                "adam_groups",
+                &[],
+            )?;
             kernels.push(kernel);
         }
         Ok(Self { kernels })

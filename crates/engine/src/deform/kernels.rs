@@ -2,7 +2,6 @@
 
 use segsplat_gpu::GemmLayout;
 use segsplat_gpu::kernel::{workgroups_2d, workgroups_for};
-use segsplat_gpu::validation::validated;
 use segsplat_gpu::{GpuContext, GpuError, Kernel};
 
 use super::gemm_broadcast::{BroadcastBlock, SUBGROUP_LANES};
@@ -242,7 +241,7 @@ fn per_item_grid(ctx: &GpuContext, items: u32) -> [u32; 3] {
 impl DeformKernels {
     pub fn with_gemm(ctx: &GpuContext, gemm_kind: GemmKernel) -> Result<Self, GpuError> {
         let build = |label: &'static str, sources: &[&str], entry: &str| {
-            validated(ctx, label, || Kernel::new(ctx, label, sources, entry, &[]))
+            Kernel::new(ctx, label, sources, entry, &[])
         };
         if !gemm_kind.runs_on(ctx) {
             return Err(GpuError::Device(format!(

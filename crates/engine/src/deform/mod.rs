@@ -27,5 +27,6 @@ pub use field::{FieldShape, WarpKind};
 pub use field_gpu::{DeformError, DeformationField};
 pub use file::{DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE, DeformationHeader, StoredDeformation};
 pub use geometry::DeformedGeometry;
+pub(crate) use kernels::DeformKernels;
 pub use kernels::GemmKernel;
 pub use matmul_bench::{MatmulReport, measure_matmul};

@@ -115,7 +115,7 @@ pub struct GpuDensifier {
     sort: RadixSort,
 }
 
-fn kernel(ctx: &GpuContext, label: &'static str, source: &str) -> Kernel {
+fn kernel(ctx: &GpuContext, label: &'static str, source: &str) -> Result<Kernel, GpuError> {
     Kernel::new(ctx, label, &[COMMON, source], "main", &[])
 }
 
@@ -186,44 +186,44 @@ impl GpuDensifier {
                 ctx,
                 "densify_classify",
                 include_str!("shaders/densify_classify.wgsl"),
-            ),
+            )?,
             rank_adds: kernel(
                 ctx,
                 "densify_rank_adds",
                 include_str!("shaders/densify_rank_adds.wgsl"),
-            ),
+            )?,
             admit: kernel(
                 ctx,
                 "densify_admit",
                 include_str!("shaders/densify_admit.wgsl"),
-            ),
+            )?,
             outputs: kernel(
                 ctx,
                 "densify_outputs",
                 include_str!("shaders/densify_outputs.wgsl"),
-            ),
+            )?,
             origins: kernel(
                 ctx,
                 "densify_origins",
                 include_str!("shaders/densify_origins.wgsl"),
-            ),
+            )?,
             gather: Kernel::new(
                 ctx,
                 "densify_gather",
                 &[include_str!("shaders/densify_gather.wgsl")],
                 "main",
                 &[],
-            ),
+            )?,
             split: kernel(
                 ctx,
                 "densify_split",
                 include_str!("shaders/densify_split.wgsl"),
-            ),
+            )?,
             reset: kernel(
                 ctx,
                 "densify_reset",
                 include_str!("shaders/densify_reset.wgsl"),
-            ),
+            )?,
             scan: ExclusiveScan::new(ctx)?,
             sort: RadixSort::new(ctx)?,
         })

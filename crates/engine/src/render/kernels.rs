@@ -1,7 +1,6 @@
 //! The render pipelines, compiled once per device.
 
 use segsplat_gpu::RasterLayout;
-use segsplat_gpu::validation::validated;
 use segsplat_gpu::{GpuContext, GpuError, Kernel};
 
 const COMMON: &str = include_str!("shaders/project_common.wgsl");
@@ -105,7 +104,7 @@ impl RasterVariant {
 impl RenderKernels {
     pub fn new(ctx: &GpuContext, variant: RasterVariant) -> Result<Self, GpuError> {
         let build = |label: &'static str, sources: &[&str], entry: &str| {
-            validated(ctx, label, || Kernel::new(ctx, label, sources, entry, &[]))
+            Kernel::new(ctx, label, sources, entry, &[])
         };
         // Native f32 atomics where the device has them, a CAS loop where it does not.
         let atomics = if ctx.has_float32_atomics() {

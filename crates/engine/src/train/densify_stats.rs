@@ -42,7 +42,7 @@ impl DensifyAccumulators {
                 &[include_str!("densify_stats.wgsl")],
                 "main",
                 &[],
-            ),
+            )?,
             uniforms: ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("densify_stats.uniforms"),
                 size: std::mem::size_of::<StatsUniforms>() as u64,

@@ -38,7 +38,7 @@ impl MaskIouCounts {
                 &[include_str!("mask_iou.wgsl")],
                 "main",
                 &[],
-            ),
+            )?,
             counts: ctx.storage_buffer("mask_iou.counts", pairs as u64 * 8)?,
             pairs,
         })

@@ -22,6 +22,7 @@ mod measure;
 mod object_separate;
 mod object_step;
 mod partial_filter;
+mod warm_kernels;
 
 use std::collections::BTreeSet;
 use std::sync::Arc;

@@ -6,6 +6,7 @@ pub mod checkpoint_writer;
 pub mod reconstruct;
 pub mod segment_then_splat;
 pub mod stop_aware;
+pub mod trainer_setup;
 pub mod training;
 
 pub use reconstruct::ReconstructHandler;

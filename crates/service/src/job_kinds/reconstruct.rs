@@ -12,6 +12,7 @@ use super::training::{
     TrainingStageReport, fatal, load_resume_point, note_undistortion, record_settings,
     report_evaluation, store_outputs, train_failure, train_with_checkpoints,
 };
+use crate::job_kinds::trainer_setup::SetupTimer;
 use crate::jobs::{JobContext, JobFailure, JobHandler};
 use segsplat_engine::deform::{DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE};
 use segsplat_engine::train::{TrainConfig, Trainer};
@@ -89,7 +90,9 @@ fn run_blocking(ctx: &JobContext) -> Result<(), JobFailure> {
     if config.deformation_from_scene && scene.is_dynamic() && config.train.deformation.is_none() {
         config.train.deformation = Some(Default::default());
     }
-    let setup_started = std::time::Instant::now();
+    // No stage comes before the trainer to compile its kernels beside; a worker's context
+    // still keeps them for its later jobs.
+    let setup = SetupTimer::start(&gpu, None);
     let mut trainer = match load_resume_point(ctx, CHECKPOINT_NAME)? {
         Some(checkpoint) => Trainer::resume(&gpu, &scene, &checkpoint).map_err(train_failure)?,
         None => Trainer::new(&gpu, &scene, config.train.clone(), None).map_err(train_failure)?,
@@ -99,12 +102,11 @@ fn run_blocking(ctx: &JobContext) -> Result<(), JobFailure> {
         gaussian_budget: trainer.gaussian_budget(),
         checkpoint_every: config.checkpoint_every,
     };
-    let setup_seconds = setup_started.elapsed().as_secs_f64();
+    let setup = setup.finish(&gpu);
     record_settings(ctx, &settings);
-    let training = TrainingStageReport {
-        setup_seconds,
-        ..train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?
-    };
+    let training =
+        train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?
+            .with_setup(setup);
     finish(ctx, &scene, &mut trainer, training, settings)
 }
 

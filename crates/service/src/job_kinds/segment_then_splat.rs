@@ -19,6 +19,7 @@ use futures::future::BoxFuture;
 use serde::{Deserialize, Serialize};
 
 use crate::job_kinds::stop_aware::{StopAware, StopSignal, stop_or};
+use crate::job_kinds::trainer_setup::{KernelWarmUp, SetupTimer};
 use crate::job_kinds::training::{
     TrainingStageReport, fatal, load_resume_point, note_undistortion, record_settings, report,
     report_evaluation, retryable, store_outputs, train_failure, train_with_checkpoints,
@@ -242,6 +243,8 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
     record_settings(ctx, &settings);
     // Stage 1 runs again on a resumed attempt: every mask source is deterministic, and the
     // masks are cheaper to rebuild than to store.
+    // The trainer's kernels compile beside the masks (they need nothing from them).
+    let warm_up = KernelWarmUp::start(&gpu, &config.train);
     let (masks, segmented, carved_hulls) = view_masks_for(ctx, &scene, &config, &frames)?;
     // Between stages too: building the trainer uploads and sorts every view's masks.
     ctx.stop_requested()?;
@@ -250,7 +253,7 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
         background_shell: config.train.background_shell,
         ..SegmentedTrainingOptions::default()
     };
-    let setup_started = Instant::now();
+    let setup = SetupTimer::start(&gpu, Some(warm_up));
     let mut trainer = match load_resume_point(ctx, CHECKPOINT_NAME)? {
         Some(checkpoint) => resume_segmented(&gpu, &scene, &checkpoint, &masks, &options)?,
         None => segmented_trainer_from_view_masks(
@@ -263,12 +266,11 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
         )
         .map_err(fatal)?,
     };
-    let setup_seconds = setup_started.elapsed().as_secs_f64();
+    let setup = setup.finish(&gpu);
     ctx.stop_requested()?;
-    let training = TrainingStageReport {
-        setup_seconds,
-        ..train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?
-    };
+    let training =
+        train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?
+            .with_setup(setup);
     let objects = finish(ctx, &scene, &mut trainer, training, segmented, settings)?;
     let embeddings = embed_objects(ctx, &scene, &trainer, &masks, &objects)?;
     Ok((objects, embeddings))

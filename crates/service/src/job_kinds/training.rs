@@ -4,6 +4,7 @@
 use std::sync::Arc;
 
 use super::stop_aware::StopSignal;
+use super::trainer_setup::KernelsCompiledAhead;
 use crate::job_kinds::checkpoint_writer::CheckpointWriter;
 use crate::jobs::{JobContext, JobFailure, Progress};
 use segsplat_engine::GaussianModel;
@@ -215,6 +216,20 @@ pub struct TrainingStageReport {
     /// its masks and its first step.
     #[serde(default)]
     pub setup_seconds: f64,
+    /// Kernels the setup compiled, the seconds those compiles took (inside `setup_seconds`),
+    /// and the kernels it reused instead: a worker's context keeps every kernel it compiled
+    /// (`segsplat_gpu::kernel_cache`), and a job compiles its trainer's kernels while it makes
+    /// its masks (`kernels_compiled_ahead`), so the setup itself should compile none.
+    #[serde(default)]
+    pub setup_kernels_compiled: u64,
+    #[serde(default)]
+    pub setup_kernel_compile_seconds: f64,
+    #[serde(default)]
+    pub setup_kernels_reused: u64,
+    /// Kernels compiled on another thread before the setup (while the masks were made or the
+    /// scene loaded), and the seconds that took there; absent when it did not run or failed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kernels_compiled_ahead: Option<KernelsCompiledAhead>,
     /// Where the convergence stop ended training before its steps (a job that left `steps`
     /// out), and the check views' fit at every check: (step, mean PSNR).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -367,6 +382,10 @@ fn train_stage(
         field_gpu_ms_per_step: field_sample.map(|sample| sample.field_ms_per_step),
         field_gpu_fraction: field_sample.map(|sample| sample.field_fraction),
         setup_seconds: 0.0,
+        setup_kernels_compiled: 0,
+        setup_kernel_compile_seconds: 0.0,
+        setup_kernels_reused: 0,
+        kernels_compiled_ahead: None,
         converged_at: trainer.converged_at(),
         fit_checks: trainer.fit_checks().to_vec(),
     })
