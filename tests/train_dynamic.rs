@@ -145,7 +145,10 @@ fn kernels_compiled_ahead_leave_the_trainer_nothing_to_compile() {
     let mut trainer = Trainer::new(ctx, &scene, config.clone(), Some(initial())).expect("trainer");
     trainer.run_until(2, |_| true).expect("train");
     let setup = ctx.kernel_compiles().since(&before);
-    assert_eq!(setup.compiled, 0, "the trainer compiled what was not ahead: {setup:?}");
+    assert_eq!(
+        setup.compiled, 0,
+        "the trainer compiled what was not ahead: {setup:?}"
+    );
     assert!(setup.reused >= ahead.compiled, "{setup:?} after {ahead:?}");
     let again = Trainer::compile_kernels(ctx, &config).expect("compile again");
     assert_eq!(again.compiled, 0, "{again:?}");
