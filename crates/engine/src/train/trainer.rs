@@ -191,6 +191,9 @@ pub struct Trainer {
     view_queue: Vec<usize>,
     prune_guard: Option<Box<dyn PruneGuard + Send>>,
     object_targets: Option<ObjectTargets>,
+    /// Per level, the objects that owned Gaussians when the targets were set (see
+    /// `ObjectLossConfig::only_objects_with_gaussians`).
+    objects_with_gaussians: Option<[BTreeSet<u32>; 3]>,
     skipped_pairs: BTreeSet<SkippedPair>,
     /// What the partial-mask filter has cost (a one-off of the job, not a step).
     partial_filter_cost: PartialFilterCost,
@@ -356,6 +359,7 @@ impl Trainer {
             view_queue: Vec::new(),
             prune_guard: None,
             object_targets: None,
+            objects_with_gaussians: None,
             skipped_pairs: BTreeSet::new(),
             partial_filter_cost: PartialFilterCost::default(),
             partial_filter_report: None,

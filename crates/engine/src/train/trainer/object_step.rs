@@ -6,9 +6,10 @@
 use super::{TrainError, Trainer};
 use crate::loss::{LossOutputs, ObjectContentHints, ObjectLossImages, ObjectLossSlot};
 use crate::render::{ObjectSlot, RenderOutput};
-use crate::train::object_loss::{ObjectTargets, SkippedPair, sample_objects};
+use crate::train::object_loss::{ObjectTargets, SkippedPair, objects_owned, sample_objects};
 use crate::train::partial_filter_report::PartialFilterReport;
 use segsplat_scene::Level;
+use std::collections::BTreeSet;
 
 #[derive(Debug, thiserror::Error)]
 pub enum ObjectTargetsError {
@@ -66,8 +67,23 @@ impl Trainer {
                 }
             }
         }
+        self.objects_with_gaussians = match &self.config.object_loss {
+            Some(config) if config.only_objects_with_gaussians => {
+                Some(self.objects_with_gaussians()?)
+            }
+            _ => None,
+        };
         self.object_targets = Some(targets);
         Ok(())
+    }
+
+    /// Per level, the object ids the model's Gaussians carry (one read-back of the ids).
+    fn objects_with_gaussians(&self) -> Result<[BTreeSet<u32>; 3], TrainError> {
+        let count = self.gaussians.count();
+        let bytes = self
+            .ctx
+            .read_buffer(&self.gaussians.object_ids, (count * 3 * 4) as u64)?;
+        Ok(objects_owned(bytemuck::cast_slice(&bytes)))
     }
 
     /// What the partial-mask filter has cost so far.
@@ -102,15 +118,20 @@ impl Trainer {
         let mut slots = Vec::new();
         for level in config.active_levels(self.step, self.config.steps) {
             let skipped = &self.skipped_pairs;
+            let owned = self
+                .objects_with_gaussians
+                .as_ref()
+                .map(|owned| &owned[level.index()]);
             let objects = sample_objects(
                 &masks.present[level.index()],
                 config.objects_per_level,
                 |object_id| {
-                    skipped.contains(&SkippedPair {
-                        train_view: view_index,
-                        level,
-                        object_id,
-                    })
+                    owned.is_some_and(|owned| !owned.contains(&object_id))
+                        || skipped.contains(&SkippedPair {
+                            train_view: view_index,
+                            level,
+                            object_id,
+                        })
                 },
                 &mut self.rng,
             );
