@@ -101,18 +101,27 @@ fn deformation_field_beats_a_static_model_on_held_out_times() {
     assert!(dynamic_psnr > 22.0, "held-out PSNR {dynamic_psnr:.2} dB");
 }
 
+/// A GPU context of the test's own (not the binary's shared one, whose counters the other
+/// tests move too) and the moving spheres in a folder kept alive beside them; `None` where
+/// there is no adapter and skipping is allowed.
+fn own_context_and_scene() -> Option<(segsplat_gpu::GpuContext, tempfile::TempDir, Scene)> {
+    gpu_context()?;
+    let ctx = segsplat_gpu::GpuContext::new_default().expect("GPU context");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let scene = dynamic_scene(dir.path());
+    Some((ctx, dir, scene))
+}
+
 /// A steady dynamic step allocates nothing and creates no bind group, as a static one does: the
 /// field's GEMMs, reductions, encoding and warp take their parameters from the context's uniform
 /// ring (issue 38, item 4). Counted, not timed.
 #[test]
 fn steady_dynamic_steps_create_no_buffers_and_no_bind_groups() {
-    if gpu_context().is_none() {
-        return;
-    }
     // A context of its own: the shared one counts the other tests' allocations too.
-    let ctx = &segsplat_gpu::GpuContext::new_default().expect("GPU context");
-    let dir = tempfile::tempdir().expect("tempdir");
-    let scene = dynamic_scene(dir.path());
+    let Some((ctx, _dir, scene)) = own_context_and_scene() else {
+        return;
+    };
+    let ctx = &ctx;
     let steady = TrainConfig {
         densify_from: Some(10_000),
         ..config(&scene, 600, true)
@@ -131,13 +140,11 @@ fn steady_dynamic_steps_create_no_buffers_and_no_bind_groups() {
 /// deformation field's included, so the trainer compiles none; and asking again compiles none.
 #[test]
 fn kernels_compiled_ahead_leave_the_trainer_nothing_to_compile() {
-    if gpu_context().is_none() {
-        return;
-    }
     // A context of its own: its kernel cache starts empty.
-    let ctx = &segsplat_gpu::GpuContext::new_default().expect("GPU context");
-    let dir = tempfile::tempdir().expect("tempdir");
-    let scene = dynamic_scene(dir.path());
+    let Some((ctx, _dir, scene)) = own_context_and_scene() else {
+        return;
+    };
+    let ctx = &ctx;
     let config = config(&scene, 60, true);
     let ahead = Trainer::compile_kernels(ctx, &config).expect("compile ahead");
     assert!(ahead.compiled > 10, "{ahead:?}");

@@ -79,8 +79,7 @@ impl Kernel {
         entry_point: &str,
         constants: &[(&str, f64)],
     ) -> Result<Self, GpuError> {
-        let source = sources.concat();
-        let key = KernelKey::new(label, &source, entry_point, constants);
+        let key = KernelKey::new(label, sources.concat(), entry_point, constants);
         if let Some(kernel) = ctx.cached_kernel(&key) {
             // Profiling may have been turned on since the kernel was compiled.
             return Ok(Self {
@@ -91,7 +90,7 @@ impl Kernel {
         }
         let started = Instant::now();
         let kernel = validated(ctx, label, || {
-            Self::compile(ctx, label, source, entry_point, constants)
+            Self::compile(ctx, label, &key.source, entry_point, constants)
         })?;
         ctx.keep_kernel(key, kernel.clone(), started.elapsed());
         Ok(kernel)
@@ -100,12 +99,11 @@ impl Kernel {
     fn compile(
         ctx: &GpuContext,
         label: &'static str,
-        source: String,
+        source: &str,
         entry_point: &str,
         constants: &[(&str, f64)],
     ) -> Self {
-        // Read before the source moves into the module.
-        let reflected = reflect_bindings(&source, entry_point).filter(|bindings| {
+        let reflected = reflect_bindings(source, entry_point).filter(|bindings| {
             let uniforms = bindings
                 .iter()
                 .filter(|(_, kind)| *kind == BindingKind::Uniform)

@@ -1,6 +1,6 @@
 //! Compiled kernels kept on their device, so a pipeline is compiled once per process.
 //!
-//! A trainer builds about a hundred pipelines, and a service worker builds a trainer per job on
+//! A trainer builds about fifty pipelines, and a service worker builds a trainer per job on
 //! the same context: on lavapipe every pipeline is an LLVM compile, and on a GPU driver a SPIR-V
 //! one, so without this every job paid for all of them again (issue 38, item 5). A kernel is
 //! known by its label, its whole source, its entry point and its constants, so two variants of
@@ -71,13 +71,13 @@ impl KernelCache {
 impl KernelKey {
     pub fn new(
         label: &'static str,
-        source: &str,
+        source: String,
         entry_point: &str,
         constants: &[(&str, f64)],
     ) -> Self {
         Self {
             label,
-            source: source.to_string(),
+            source,
             entry_point: entry_point.to_string(),
             constants: constants
                 .iter()

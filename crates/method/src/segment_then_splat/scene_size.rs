@@ -129,10 +129,10 @@ impl SceneSizedFields {
         if self.steps {
             config.steps = scene_sized_steps(training_views);
         }
-        let run = config.steps.max(1) as f32;
-        let released = size.released_steps() as f32;
-        let joins_at =
-            |released_step: f32| (released_step / released).min(released_step / run).min(1.0);
+        // The earlier of the released step and its share of this run: the released step over
+        // the longer of the two runs.
+        let longer_run = config.steps.max(size.released_steps()) as f32;
+        let joins_at = |released_step: f32| (released_step / longer_run).min(1.0);
         let object_loss = config
             .object_loss
             .get_or_insert_with(ObjectLossConfig::default);
