@@ -52,6 +52,28 @@ source scripts/test_servers.sh
 # and binaries (bench = true by default) and ran their unit tests a second time.
 phase "benches"
 cargo test --locked --workspace --bench '*'
+# The REST contract and the web console run beside the tests, not after them: the test binaries
+# run one at a time and keep about 1.5 of two cores busy (386 s of wall time for 584 CPU-seconds),
+# and these two checks are mostly a live server waiting on schemathesis and a browser (together
+# 4m52s after the tests on CI's last run). Their output is kept and printed when the tests end.
+# - contract: the REST contract against a live server: the served OpenAPI document validates, and
+#   schemathesis finds no failures in a bounded run (scripts/contract.sh; skips without its
+#   tools, except under CI=true).
+# - console: the web console in a real browser: playwright-core driving Debian's chromium
+#   headless against a live server, from upload to a text query's masks (scripts/console_e2e.sh;
+#   skips without its tools, except under CI=true). Screenshots land in console-screenshots/.
+phase "contract and console (beside the tests; their log follows the tests)"
+live_checks_log=$(mktemp)
+# Their own session (process group), so a failed test run stops them and their servers too.
+setsid bash -c 'set -euo pipefail
+    phase() { echo "== $(date +%H:%M:%S) $1"; }
+    phase "contract"
+    bash scripts/contract.sh
+    phase "console"
+    bash scripts/console_e2e.sh' >"$live_checks_log" 2>&1 &
+live_checks=$!
+# (test_servers.sh's own EXIT trap, which stops the storage servers, is kept in this one.)
+trap 'kill -TERM -- "-$live_checks" 2>/dev/null || true; stop_test_servers' EXIT
 phase "tests"
 cargo test --locked --workspace --lib --bins --tests
 # The job and store tests again with every service on PostgreSQL instead of SQLite (each test
@@ -63,16 +85,16 @@ if [ -n "${SEGSPLAT_TEST_POSTGRES_URL:-}" ]; then
         --test service_tenants --test service_workers --test service_upload \
         --test service_object_store
 fi
-# The REST contract against a live server: the served OpenAPI document validates, and
-# schemathesis finds no failures in a bounded run (scripts/contract.sh; skips without its tools,
-# except under CI=true).
-phase "contract"
-bash scripts/contract.sh
-# The web console in a real browser: playwright-core driving Debian's chromium headless against
-# a live server, from upload to a text query's masks (scripts/console_e2e.sh; skips without its
-# tools, except under CI=true). Screenshots land in console-screenshots/.
-phase "console"
-bash scripts/console_e2e.sh
+phase "waiting for contract and console"
+live_status=0
+wait "$live_checks" || live_status=$?
+trap stop_test_servers EXIT
+cat "$live_checks_log"
+rm -f "$live_checks_log"
+if [ "$live_status" -ne 0 ]; then
+    echo "contract or console failed (exit $live_status): see its log above" >&2
+    exit "$live_status"
+fi
 
 # Every fuzz target for a short bounded time on its committed corpus (docs/fuzzing.md). Needs
 # nightly Rust and cargo-fuzz; without them fuzz.sh says so and skips, and the stable replay of

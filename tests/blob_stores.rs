@@ -113,6 +113,32 @@ fn an_unreachable_store_is_unavailable() {
     ));
 }
 
+/// An `https://` endpoint is spoken to in TLS (rustls on ring, installed by the store: the
+/// client has no provider of its own and would panic without one): the first bytes the server
+/// gets are a TLS handshake record, and a server that then hangs up is `Unavailable`.
+#[test]
+fn an_https_endpoint_is_spoken_to_in_tls() {
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = listener.local_addr().unwrap().port();
+    let server = std::thread::spawn(move || {
+        let (mut connection, _) = listener.accept().unwrap();
+        let mut first = [0u8; 3];
+        std::io::Read::read_exact(&mut connection, &mut first).unwrap();
+        first
+    });
+    let config = segsplat_service::config::BlobsConfig {
+        endpoint: Some(format!("https://127.0.0.1:{port}")),
+        allow_http: false,
+        max_retries: 0,
+        ..unreachable_s3_blobs()
+    };
+    let store = ObjectBlobStore::open(&config, "s3://bucket/prefix").unwrap();
+    let error = store.put_bytes("scenes/x/files/a", b"x").unwrap_err();
+    assert!(matches!(&error, BlobError::Unavailable { .. }), "{error:?}");
+    let first = server.join().unwrap();
+    assert_eq!(first, [0x16, 0x03, 0x01], "a TLS handshake record");
+}
+
 /// A file whose upload fails at its final request (the one PUT of a small file, or the parts and
 /// completion of a multipart one) while the server is down is an `Unavailable` error, not a
 /// crashed client (object_store's writer panics when aborted after a failed shutdown), and the
