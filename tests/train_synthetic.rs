@@ -479,3 +479,62 @@ fn bench_times_the_object_loss_against_plain_steps_in_one_invocation() {
         "{report}"
     );
 }
+
+/// Views decode on every core, a batch at a time, and upload in capture order: loading them on
+/// one thread and on three gives the same views in the same order, bit for bit, coarse images
+/// included (the pool's size only changes which thread decodes which frame).
+#[test]
+fn views_load_the_same_on_one_thread_and_on_several() {
+    use segsplat_engine::train::views::Views;
+    let Some(ctx) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let scene = synthetic_scene(dir.path());
+    let load = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let views = pool
+            .install(|| Views::load(&ctx, &scene, Some(48), 8, 2))
+            .unwrap();
+        let read = |buffer: &wgpu::Buffer| ctx.read_buffer(buffer, buffer.size()).unwrap();
+        let describe = |views: &[segsplat_engine::train::views::View]| {
+            views
+                .iter()
+                .map(|view| {
+                    let coarse: Vec<(u32, [u32; 2], Vec<u8>)> = view
+                        .coarse
+                        .iter()
+                        .map(|c| {
+                            (
+                                c.divisor,
+                                [c.camera.width, c.camera.height],
+                                read(&c.target),
+                            )
+                        })
+                        .collect();
+                    (
+                        view.frame_index,
+                        [view.camera.width, view.camera.height],
+                        read(&view.target),
+                        view.target_rgb.clone(),
+                        coarse,
+                    )
+                })
+                .collect::<Vec<_>>()
+        };
+        (describe(&views.train), describe(&views.test))
+    };
+    let (one_train, one_test) = load(1);
+    let (three_train, three_test) = load(3);
+    assert_eq!(one_train.len(), 28, "32 frames, every 8th held out");
+    assert_eq!(one_test.len(), 4);
+    assert!(
+        one_train.iter().all(|view| view.4.len() == 2),
+        "two coarse levels"
+    );
+    let order: Vec<usize> = one_train.iter().map(|view| view.0).collect();
+    assert!(order.windows(2).all(|pair| pair[0] < pair[1]), "{order:?}");
+    assert!(one_train == three_train, "training views differ");
+    assert!(one_test == three_test, "held-out views differ");
+}

@@ -4,6 +4,7 @@
 use crate::camera::{CameraError, RenderCamera};
 use image::Rgb32FImage;
 use image::imageops::FilterType;
+use rayon::prelude::*;
 use segsplat_gpu::GpuContext;
 use segsplat_scene::{FrameSplit, Scene, SceneError, load_frame_rgb};
 
@@ -106,6 +107,10 @@ pub fn training_pixels(scene: &Scene, max_resolution: Option<u32>, split_every: 
 impl Views {
     /// Loads every frame at `max_resolution`; training views also get `coarse_halvings` coarse
     /// images ([`View::coarse`]).
+    ///
+    /// Frames are decoded and filtered on every core, as many at a time as rayon has threads,
+    /// and uploaded in capture order: the host holds one batch of images, not the whole scene
+    /// (issue 38, item 5: a job's setup decoded its views one at a time, on one core).
     pub fn load(
         ctx: &GpuContext,
         scene: &Scene,
@@ -117,45 +122,29 @@ impl Views {
             train: Vec::new(),
             test: Vec::new(),
         };
-        for (frame_index, frame) in scene.frames.iter().enumerate() {
-            let held_out = is_held_out(scene, frame_index, split_every);
-            let image = load_frame_rgb(scene, frame_index, max_resolution)?;
-            let (width, height) = image.dimensions();
-            let scale = width as f32 / frame.intrinsics.width as f32;
-            let camera = RenderCamera::from_frame(frame, scale)?;
-            if (camera.width, camera.height) != (width, height) {
-                return Err(ViewsError::SizeMismatch {
-                    frame: frame.name.clone(),
-                    image: [width, height],
-                    camera: [camera.width, camera.height],
-                });
-            }
-            let pixels = rgba_pixels(&image);
-            let target = upload_target(ctx, &pixels);
-            let coarse = if held_out {
-                Vec::new()
-            } else {
-                (1..=coarse_halvings)
-                    .map(|halvings| coarse_view(ctx, &camera, &image, 1 << halvings))
-                    .collect()
-            };
-            let view = View {
-                frame_index,
-                name: frame.name.clone(),
-                camera,
-                time: frame.time.unwrap_or(0.0),
-                target,
-                target_rgb: if held_out {
-                    pixels.iter().map(|p| [p[0], p[1], p[2]]).collect()
+        let frames: Vec<usize> = (0..scene.frames.len()).collect();
+        for batch in frames.chunks(rayon::current_num_threads().max(1)) {
+            let decoded: Vec<Result<DecodedView, ViewsError>> = batch
+                .par_iter()
+                .map(|&frame_index| {
+                    DecodedView::decode(
+                        scene,
+                        frame_index,
+                        max_resolution,
+                        split_every,
+                        coarse_halvings,
+                    )
+                })
+                .collect();
+            for view in decoded {
+                let view = view?;
+                let held_out = view.held_out;
+                let view = view.upload(ctx, scene);
+                if held_out {
+                    views.test.push(view);
                 } else {
-                    Vec::new()
-                },
-                coarse,
-            };
-            if held_out {
-                views.test.push(view);
-            } else {
-                views.train.push(view);
+                    views.train.push(view);
+                }
             }
         }
         if views.train.is_empty() {
@@ -179,6 +168,79 @@ fn rgba_pixels(image: &Rgb32FImage) -> Vec<[f32; 4]> {
     image.pixels().map(|p| [p[0], p[1], p[2], 1.0]).collect()
 }
 
+/// One frame's images decoded and filtered on the CPU, not yet on the GPU.
+struct DecodedView {
+    frame_index: usize,
+    held_out: bool,
+    camera: RenderCamera,
+    pixels: Vec<[f32; 4]>,
+    /// `(divisor, camera, pixels)` per coarse level; training views only.
+    coarse: Vec<(u32, RenderCamera, Vec<[f32; 4]>)>,
+}
+
+impl DecodedView {
+    fn decode(
+        scene: &Scene,
+        frame_index: usize,
+        max_resolution: Option<u32>,
+        split_every: u32,
+        coarse_halvings: u32,
+    ) -> Result<Self, ViewsError> {
+        let frame = &scene.frames[frame_index];
+        let held_out = is_held_out(scene, frame_index, split_every);
+        let image = load_frame_rgb(scene, frame_index, max_resolution)?;
+        let (width, height) = image.dimensions();
+        let scale = width as f32 / frame.intrinsics.width as f32;
+        let camera = RenderCamera::from_frame(frame, scale)?;
+        if (camera.width, camera.height) != (width, height) {
+            return Err(ViewsError::SizeMismatch {
+                frame: frame.name.clone(),
+                image: [width, height],
+                camera: [camera.width, camera.height],
+            });
+        }
+        let coarse = if held_out {
+            Vec::new()
+        } else {
+            (1..=coarse_halvings)
+                .map(|halvings| coarse_image(&camera, &image, 1 << halvings))
+                .collect()
+        };
+        Ok(Self {
+            frame_index,
+            held_out,
+            camera,
+            pixels: rgba_pixels(&image),
+            coarse,
+        })
+    }
+
+    fn upload(self, ctx: &GpuContext, scene: &Scene) -> View {
+        let frame = &scene.frames[self.frame_index];
+        View {
+            frame_index: self.frame_index,
+            name: frame.name.clone(),
+            camera: self.camera,
+            time: frame.time.unwrap_or(0.0),
+            target: upload_target(ctx, &self.pixels),
+            target_rgb: if self.held_out {
+                self.pixels.iter().map(|p| [p[0], p[1], p[2]]).collect()
+            } else {
+                Vec::new()
+            },
+            coarse: self
+                .coarse
+                .into_iter()
+                .map(|(divisor, camera, pixels)| CoarseView {
+                    divisor,
+                    camera,
+                    target: upload_target(ctx, &pixels),
+                })
+                .collect(),
+        }
+    }
+}
+
 fn upload_target(ctx: &GpuContext, pixels: &[[f32; 4]]) -> wgpu::Buffer {
     wgpu::util::DeviceExt::create_buffer_init(
         &ctx.device,
@@ -193,17 +255,12 @@ fn upload_target(ctx: &GpuContext, pixels: &[[f32; 4]]) -> wgpu::Buffer {
 /// `image` filtered down to `camera` made `divisor` times smaller. The triangle filter widens
 /// with the reduction, so each coarse pixel averages the block it covers (no aliasing, and no
 /// ringing that would ask the splats for colours outside 0..1).
-fn coarse_view(
-    ctx: &GpuContext,
+fn coarse_image(
     camera: &RenderCamera,
     image: &Rgb32FImage,
     divisor: u32,
-) -> CoarseView {
+) -> (u32, RenderCamera, Vec<[f32; 4]>) {
     let camera = camera.downscaled(divisor);
     let reduced = image::imageops::resize(image, camera.width, camera.height, FilterType::Triangle);
-    CoarseView {
-        divisor,
-        camera,
-        target: upload_target(ctx, &rgba_pixels(&reduced)),
-    }
+    (divisor, camera, rgba_pixels(&reduced))
 }
