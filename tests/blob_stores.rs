@@ -113,9 +113,9 @@ fn an_unreachable_store_is_unavailable() {
     ));
 }
 
-/// An `https://` endpoint is spoken to in TLS (rustls on ring, installed by the store: the
-/// client has no provider of its own and would panic without one): the first bytes the server
-/// gets are a TLS handshake record, and a server that then hangs up is `Unavailable`.
+/// An `https://` endpoint is spoken to in TLS (rustls, through object_store's reqwest client): the
+/// first bytes the server gets are a TLS handshake record, and a server that then hangs up is
+/// `Unavailable`.
 #[test]
 fn an_https_endpoint_is_spoken_to_in_tls() {
     let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();

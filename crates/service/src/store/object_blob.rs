@@ -28,16 +28,6 @@ const PART_BYTES: usize = 8 << 20;
 const PARTS_IN_FLIGHT: usize = 3;
 const READ_CHUNK: usize = 1 << 20;
 
-/// rustls on ring for every HTTPS client in the process (the store's reqwest client is built
-/// without a provider of its own, and panics at its first request without one). Installed once;
-/// one installed before, by anything, is kept.
-fn install_tls_provider() {
-    static INSTALL: std::sync::Once = std::sync::Once::new();
-    INSTALL.call_once(|| {
-        let _ = rustls::crypto::ring::default_provider().install_default();
-    });
-}
-
 pub struct ObjectBlobStore {
     store: Arc<dyn ObjectStore>,
     /// Key prefix inside the bucket (no leading or trailing `/`), empty for the bucket's root.
@@ -78,7 +68,6 @@ impl ObjectBlobStore {
         if !prefix.is_empty() {
             validate_key(&prefix)?;
         }
-        install_tls_provider();
         let mut builder = AmazonS3Builder::from_env()
             .with_bucket_name(bucket)
             .with_client_options(
