@@ -17,20 +17,20 @@ async fn start_service(data: &std::path::Path) -> Option<TestService> {
     TestService::start_on_gpu(data, |_| {}).await
 }
 
-/// A 60-step `segment_then_splat` job on `scene_id`, awaited: (job id, finished job record).
-/// The steps of the job's "segment" progress events, in order.
-async fn segment_steps(client: &TestService, job_id: &str) -> Vec<u64> {
+/// The steps of the job's progress events of `stage`, in order.
+async fn stage_steps(client: &TestService, job_id: &str, stage: &str) -> Vec<u64> {
     let (status, events) = client.get_bytes(&format!("/v1/jobs/{job_id}/events")).await;
     assert_eq!(status, 200);
     String::from_utf8_lossy(&events)
         .lines()
         .filter_map(|line| line.strip_prefix("data:"))
         .filter_map(|data| serde_json::from_str::<serde_json::Value>(data.trim()).ok())
-        .filter(|event| event["kind"] == "progress" && event["payload"]["stage"] == "segment")
+        .filter(|event| event["kind"] == "progress" && event["payload"]["stage"] == stage)
         .filter_map(|event| event["payload"]["step"].as_u64())
         .collect()
 }
 
+/// A 60-step `segment_then_splat` job on `scene_id`, awaited: (job id, finished job record).
 async fn run_short_segment_then_splat(
     client: &TestService,
     scene_id: &str,
@@ -403,11 +403,17 @@ async fn segment_then_splat_job_stores_objects_at_three_levels() {
     assert!(filter["skipped_rendering_nothing"].as_u64() <= Some(total("skipped")));
     assert_eq!(filter["iou_quartiles"].as_array().map(Vec::len), Some(3));
     // The segmentation stage reports each view as it is segmented, not only its start and end.
-    let steps = segment_steps(&client, &job_id).await;
+    let steps = stage_steps(&client, &job_id, "segment").await;
     let train_views = steps.last().copied().unwrap_or_default();
     assert!(train_views >= 7, "{steps:?}");
     let expected: Vec<u64> = (0..=train_views).chain([train_views]).collect();
     assert_eq!(steps, expected);
+    // The training stage says it began before its first step, not at its first report (25
+    // steps in, or at the end of a shorter run), so a client timing stages from their first
+    // events times them right.
+    let train_steps = stage_steps(&client, &job_id, "train").await;
+    assert_eq!(train_steps.first(), Some(&0), "{train_steps:?}");
+    assert_eq!(train_steps.last(), Some(&10), "{train_steps:?}");
 
     let with_masks = SyntheticSpec {
         with_masks: Some(Level::ALL.to_vec()),
