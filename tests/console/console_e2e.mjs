@@ -57,9 +57,12 @@ async function shot(page, name) {
   await page.screenshot({ path: path.join(shots, `${name}.png`), fullPage: false });
 }
 
-// The WebGL canvas's pixels (it keeps its drawing buffer), as RGBA bytes with its size.
+// The WebGL canvas's pixels (it keeps its drawing buffer), as RGBA bytes with its size. They
+// cross from the page as one base64 string: returned as an array, Playwright serialises every
+// byte as its own JSON object: with those few million objects per call the whole console check
+// took 137 s and as many CPU-seconds, against 41 s and 36 CPU-seconds this way.
 async function canvasPixels(page, selector) {
-  return page.evaluate((selector) => {
+  const image = await page.evaluate((selector) => {
     const source = document.querySelector(selector);
     const copy = document.createElement("canvas");
     copy.width = source.width;
@@ -67,8 +70,14 @@ async function canvasPixels(page, selector) {
     const context = copy.getContext("2d");
     context.drawImage(source, 0, 0);
     const { data } = context.getImageData(0, 0, copy.width, copy.height);
-    return { width: copy.width, height: copy.height, cssWidth: source.clientWidth, data: Array.from(data) };
+    let binary = "";
+    for (let start = 0; start < data.length; start += 0x8000) {
+      binary += String.fromCharCode.apply(null, data.subarray(start, start + 0x8000));
+    }
+    return { width: copy.width, height: copy.height, cssWidth: source.clientWidth, base64: btoa(binary) };
   }, selector);
+  const { base64, ...size } = image;
+  return { ...size, data: Buffer.from(base64, "base64") };
 }
 
 // Mean over a rectangle (canvas pixels) of f(pixel index), and over everything outside it.
