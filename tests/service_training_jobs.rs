@@ -764,7 +764,8 @@ async fn bad_views_are_refused_when_nothing_matches(client: &TestService, scene_
 /// re-prompting, then trained, through the service. The tiny ONNX stand-in only follows a region
 /// by the colour under its first point (it is not SAM), so this checks the plumbing: the job
 /// runs without user masks or association, finds objects, and embeds only objects that kept
-/// Gaussians.
+/// Gaussians. The automatic masks' settings come from the config (`automatic`), and a wrong one
+/// is refused before anything is queued.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn segment_then_splat_with_propagated_masks() {
     let data = tempfile::tempdir().unwrap();
@@ -781,11 +782,33 @@ async fn segment_then_splat_with_propagated_masks() {
     let (status, scene) = client.upload(archive, "application/zip").await;
     assert_eq!(status, 201, "{scene}");
     let scene_id = scene["id"].as_str().unwrap();
+    for (automatic, named) in [
+        (serde_json::json!({"points_per_side": 0}), "points_per_side"),
+        (
+            serde_json::json!({"mask_nms": {"min_score": 2.0}}),
+            "mask_nms.min_score",
+        ),
+        (
+            serde_json::json!({"points_per_sides": 8}),
+            "points_per_sides",
+        ),
+    ] {
+        let (status, body) = client
+            .post_json(
+                &format!("/v1/scenes/{scene_id}/jobs"),
+                serde_json::json!({"kind": "segment_then_splat",
+                                   "config": {"masks": "propagated", "automatic": automatic}}),
+            )
+            .await;
+        assert_eq!(status, 422, "{body}");
+        assert!(body.to_string().contains(named), "{named}: {body}");
+    }
     let job_id = client
         .create_job(
             scene_id,
             "segment_then_splat",
             serde_json::json!({"steps": 40, "checkpoint_every": 0, "masks": "propagated",
+                               "automatic": {"points_per_side": 16},
                                "object_loss": {"objects_per_level": 1}}),
         )
         .await;
@@ -804,6 +827,11 @@ async fn segment_then_splat_with_propagated_masks() {
     assert_eq!(
         metrics["embeddings"], metrics["objects"],
         "one embedding per object with Gaussians: {job}"
+    );
+    assert_eq!(job["config"]["automatic"]["points_per_side"], 16, "{job}");
+    assert_eq!(
+        job["config"]["automatic"]["points_per_batch"], 64,
+        "the rest at the released settings: {job}"
     );
     let (_, stored) = client
         .get_json(&format!("/v1/scenes/{scene_id}/trained/metrics.json"))

@@ -85,6 +85,10 @@ pub struct SegmentThenSplatConfig {
     #[serde(flatten)]
     pub train: TrainConfig,
     pub masks: MaskSource,
+    /// SAM automatic mask generation's settings (`masks` `automatic` and `propagated`, and
+    /// `auto` when it picks SAM): the released ones unless given. `points_per_side` is the
+    /// stage's cost: the model answers its square, in prompts, on each view it generates on.
+    pub automatic: AutomaticConfig,
     /// Gaussians each object keeps at least (small, middle, large), or all it has when fewer.
     pub object_floors: [usize; 3],
     /// Steps between checkpoints (0 = only at the end).
@@ -104,6 +108,7 @@ impl Default for SegmentThenSplatConfig {
                 ..TrainConfig::default()
             },
             masks: MaskSource::Auto,
+            automatic: AutomaticConfig::default(),
             object_floors: DEFAULT_OBJECT_FLOORS,
             checkpoint_every: 1000,
             scene_sized: SceneSizedFields::default(),
@@ -169,6 +174,10 @@ impl JobHandler for SegmentThenSplatHandler {
             .object_loss
             .get_or_insert_with(ObjectLossConfig::default);
         parsed.train.validate().map_err(|error| error.to_string())?;
+        parsed
+            .automatic
+            .validate()
+            .map_err(|error| error.to_string())?;
         serde_json::to_value(&parsed).map_err(|error| error.to_string())
     }
 
@@ -356,7 +365,7 @@ fn masks_from(
                     SamPredictor::new(model),
                     StopSignal::of(ctx),
                 )),
-                config: AutomaticConfig::default(),
+                config: config.automatic.clone(),
             }
         }
         MaskSource::Classical => MaskGenerator::Classical(ClassicalConfig::default()),
@@ -470,7 +479,7 @@ fn propagated_masks(
             SamPredictor::new(model),
             StopSignal::of(ctx),
         )),
-        config: AutomaticConfig::default(),
+        config: config.automatic.clone(),
     };
     let (mut masks, propagation) = propagated_view_masks(
         scene,

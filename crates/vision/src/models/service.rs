@@ -67,6 +67,7 @@ pub fn runtime_options(config: &ModelsConfig) -> RuntimeOptions {
         library: config.ort_library.clone(),
         intra_threads: config.intra_threads,
         inter_threads: config.inter_threads,
+        spin_wait: config.spin_wait,
         cuda: config.cuda,
     }
 }
@@ -84,6 +85,11 @@ pub struct ModelsConfig {
     pub intra_threads: usize,
     /// Threads across operators; 0 = ONNX Runtime's default.
     pub inter_threads: usize,
+    /// Let ONNX Runtime's threads spin-wait between operators (its own default). Off here: a
+    /// worker's models share the machine with training (on a CPU adapter, training is the CPU)
+    /// and with the classical masks, which a spinning thread would slow for a few percent less
+    /// latency per answer.
+    pub spin_wait: bool,
     /// Use the CUDA execution provider when the library and a GPU offer it (on by default; the
     /// CPU otherwise). `false` keeps models on the CPU even where CUDA is available.
     pub cuda: bool,
@@ -96,6 +102,7 @@ impl Default for ModelsConfig {
             ort_library: None,
             intra_threads: 0,
             inter_threads: 0,
+            spin_wait: false,
             cuda: true,
         }
     }

@@ -33,8 +33,10 @@ pub enum AutomaticError {
 }
 
 /// Settings of automatic mask generation; defaults are the released Segment then Splat ones.
+/// A job config may give any of them (`automatic` in a `segment_then_splat` config); a misspelt
+/// name is refused rather than silently left at its default.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct AutomaticConfig {
     /// Points per image side; the grid has `points_per_side^2` prompts.
     pub points_per_side: u32,

@@ -31,7 +31,7 @@ pub fn box_nms(boxes: &[BoundingBox], scores: &[f32], iou_threshold: f32) -> Vec
 /// Segment then Splat's mask NMS rules (released `mask_nms(iou_thr=0.8, score_thr=0.7,
 /// inner_thr=0.5)`).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct MaskNmsConfig {
     /// A mask whose IoU with a kept, higher-scored mask is above this is a duplicate.
     pub duplicate_iou: f32,
