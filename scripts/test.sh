@@ -14,6 +14,7 @@ if [ "${CI:-}" = true ]; then
 fi
 # Each phase's start time, so a slow suite shows where its time goes.
 phase() { echo "== $(date +%H:%M:%S) $1"; }
+export -f phase
 # Formatting first: it needs no build.
 phase "fmt"
 if cargo fmt --version >/dev/null 2>&1; then
@@ -66,7 +67,6 @@ phase "contract and console (beside the tests; their log follows the tests)"
 live_checks_log=$(mktemp)
 # Their own session (process group), so a failed test run stops them and their servers too.
 setsid bash -c 'set -euo pipefail
-    phase() { echo "== $(date +%H:%M:%S) $1"; }
     phase "contract"
     bash scripts/contract.sh
     phase "console"

@@ -122,11 +122,12 @@ impl Views {
             train: Vec::new(),
             test: Vec::new(),
         };
-        let frames: Vec<usize> = (0..scene.frames.len()).collect();
-        for batch in frames.chunks(rayon::current_num_threads().max(1)) {
-            let decoded: Vec<Result<DecodedView, ViewsError>> = batch
-                .par_iter()
-                .map(|&frame_index| {
+        let batch = rayon::current_num_threads().max(1);
+        for start in (0..scene.frames.len()).step_by(batch) {
+            let end = (start + batch).min(scene.frames.len());
+            let decoded: Vec<Result<DecodedView, ViewsError>> = (start..end)
+                .into_par_iter()
+                .map(|frame_index| {
                     DecodedView::decode(
                         scene,
                         frame_index,
@@ -139,7 +140,7 @@ impl Views {
             for view in decoded {
                 let view = view?;
                 let held_out = view.held_out;
-                let view = view.upload(ctx, scene);
+                let view = view.upload(ctx);
                 if held_out {
                     views.test.push(view);
                 } else {
@@ -171,11 +172,20 @@ fn rgba_pixels(image: &Rgb32FImage) -> Vec<[f32; 4]> {
 /// One frame's images decoded and filtered on the CPU, not yet on the GPU.
 struct DecodedView {
     frame_index: usize,
+    name: String,
+    time: f32,
     held_out: bool,
     camera: RenderCamera,
     pixels: Vec<[f32; 4]>,
-    /// `(divisor, camera, pixels)` per coarse level; training views only.
-    coarse: Vec<(u32, RenderCamera, Vec<[f32; 4]>)>,
+    /// One per coarse level; training views only.
+    coarse: Vec<DecodedCoarse>,
+}
+
+/// A [`CoarseView`] before its upload.
+struct DecodedCoarse {
+    divisor: u32,
+    camera: RenderCamera,
+    pixels: Vec<[f32; 4]>,
 }
 
 impl DecodedView {
@@ -208,6 +218,8 @@ impl DecodedView {
         };
         Ok(Self {
             frame_index,
+            name: frame.name.clone(),
+            time: frame.time.unwrap_or(0.0),
             held_out,
             camera,
             pixels: rgba_pixels(&image),
@@ -215,13 +227,12 @@ impl DecodedView {
         })
     }
 
-    fn upload(self, ctx: &GpuContext, scene: &Scene) -> View {
-        let frame = &scene.frames[self.frame_index];
+    fn upload(self, ctx: &GpuContext) -> View {
         View {
             frame_index: self.frame_index,
-            name: frame.name.clone(),
+            name: self.name,
             camera: self.camera,
-            time: frame.time.unwrap_or(0.0),
+            time: self.time,
             target: upload_target(ctx, &self.pixels),
             target_rgb: if self.held_out {
                 self.pixels.iter().map(|p| [p[0], p[1], p[2]]).collect()
@@ -231,10 +242,10 @@ impl DecodedView {
             coarse: self
                 .coarse
                 .into_iter()
-                .map(|(divisor, camera, pixels)| CoarseView {
-                    divisor,
-                    camera,
-                    target: upload_target(ctx, &pixels),
+                .map(|coarse| CoarseView {
+                    divisor: coarse.divisor,
+                    camera: coarse.camera,
+                    target: upload_target(ctx, &coarse.pixels),
                 })
                 .collect(),
         }
@@ -255,12 +266,12 @@ fn upload_target(ctx: &GpuContext, pixels: &[[f32; 4]]) -> wgpu::Buffer {
 /// `image` filtered down to `camera` made `divisor` times smaller. The triangle filter widens
 /// with the reduction, so each coarse pixel averages the block it covers (no aliasing, and no
 /// ringing that would ask the splats for colours outside 0..1).
-fn coarse_image(
-    camera: &RenderCamera,
-    image: &Rgb32FImage,
-    divisor: u32,
-) -> (u32, RenderCamera, Vec<[f32; 4]>) {
+fn coarse_image(camera: &RenderCamera, image: &Rgb32FImage, divisor: u32) -> DecodedCoarse {
     let camera = camera.downscaled(divisor);
     let reduced = image::imageops::resize(image, camera.width, camera.height, FilterType::Triangle);
-    (divisor, camera, rgba_pixels(&reduced))
+    DecodedCoarse {
+        divisor,
+        camera,
+        pixels: rgba_pixels(&reduced),
+    }
 }
