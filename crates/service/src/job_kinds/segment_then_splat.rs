@@ -94,7 +94,7 @@ pub struct SegmentThenSplatConfig {
     /// Steps between checkpoints (0 = only at the end).
     pub checkpoint_every: u32,
     /// Fields that follow the scene at run time (docs/method.md: steps of about 100 passes over
-    /// the training views, 2k to 30k; one object per level for scenes under 100 training views,
+    /// the training views, 3k to 30k; one object per level for scenes under 100 training views,
     /// else three; the middle and large levels from the released code's shares of the job).
     /// Filled on submission with the fields the config left out.
     pub scene_sized: SceneSizedFields,
