@@ -87,8 +87,8 @@ async fn reconstruct_job_trains_and_stores_artifacts() {
             scene_id,
             "reconstruct",
             // One more SH band every 100 steps cannot happen in 60: the job says so.
-            serde_json::json!({"steps": 60, "checkpoint_every": 25, "densify_from": 20,
-                               "densify_interval": 20, "densify_until": 50,
+            serde_json::json!({"steps": 60, "checkpoint_every": 25, "held_out_every": 20,
+                               "densify_from": 20, "densify_interval": 20, "densify_until": 50,
                                "sh_degree_interval": 100}),
         )
         .await;
@@ -161,6 +161,24 @@ async fn reconstruct_job_trains_and_stores_artifacts() {
         training["checkpoint_write_seconds"].as_f64().unwrap() > 0.0,
         "{training}"
     );
+    // Held-out quality every 20 steps between the checkpoints at 25 and 50 (the end's is the
+    // job's own), against the training time before each.
+    let curve = training["held_out_curve"]
+        .as_array()
+        .expect("held_out_curve");
+    let steps: Vec<u64> = curve.iter().filter_map(|p| p["step"].as_u64()).collect();
+    assert_eq!(steps, [20, 40], "{training}");
+    assert!(
+        curve.iter().all(
+            |point| point["psnr"].as_f64() > Some(5.0) && point["gaussians"].as_u64() > Some(0)
+        ),
+        "{training}"
+    );
+    let seconds: Vec<f64> = curve
+        .iter()
+        .filter_map(|p| p["train_seconds"].as_f64())
+        .collect();
+    assert!(seconds[0] > 0.0 && seconds[1] > seconds[0], "{training}");
     let timestamps = segsplat_gpu::GpuContext::new_default()
         .map(|gpu| gpu.report.timestamp_queries)
         .unwrap_or(false);

@@ -77,11 +77,12 @@ pub struct BenchArgs {
     /// field). A static dataset works too: every view then has time 0, which costs the same.
     #[arg(long)]
     pub deformation: bool,
-    /// Layers of the deformation field (default 8); the input skip joins after depth / 2
-    /// (no skip below depth 4).
+    /// Layers of the deformation field (default: the shape a job's field gets on this
+    /// adapter, 8 x 256 on a GPU and 4 x 64 on a software adapter, docs/engine.md); the input
+    /// skip joins after depth / 2 (no skip below depth 4).
     #[arg(long, requires = "deformation")]
     pub field_depth: Option<u32>,
-    /// Width of the deformation field's hidden layers (default 256).
+    /// Width of the deformation field's hidden layers (default: as `--field-depth`).
     #[arg(long, requires = "deformation")]
     pub field_width: Option<u32>,
     /// After training and evaluation, time every kernel over this many more training steps
@@ -544,9 +545,9 @@ fn profile_kernels(
     })
 }
 
-/// The field `--deformation` trains: the default shape, resized by the flags.
-fn deformation_config(args: &BenchArgs) -> DeformationConfig {
-    let mut field = FieldShape::default();
+/// The field `--deformation` trains: the shape a job gets on this adapter, resized by the flags.
+fn deformation_config(args: &BenchArgs, software: bool) -> DeformationConfig {
+    let mut field = FieldShape::for_adapter(software);
     if let Some(depth) = args.field_depth {
         field.depth = depth;
         // The released code joins the input again after layer D // 2; the kernels cannot join
@@ -640,7 +641,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
             .get_or_insert_with(ConvergenceStop::default);
     }
     let baseline = if args.deformation {
-        config.deformation = Some(deformation_config(&args));
+        config.deformation = Some(deformation_config(&args, ctx.report.is_software));
         config.validate()?;
         Some(static_baseline(
             &ctx,

@@ -63,14 +63,14 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         config.seed = seed;
     }
     let scene = super::open_scene(&args.dataset)?;
+    let ctx = super::open_gpu()?;
     if scene.is_dynamic() && config.deformation.is_none() && !args.no_deformation {
-        config.deformation = Some(DeformationConfig::default());
+        config.deformation = Some(DeformationConfig::for_adapter(ctx.report.is_software));
     }
     config.validate()?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let checkpoint_path = args.out.join("train.ckpt");
-    let ctx = super::open_gpu()?;
     let mut trainer = if args.resume && checkpoint_path.exists() {
         let checkpoint = Checkpoint::<TrainerMeta>::load(&checkpoint_path)?;
         Trainer::resume(&ctx, &scene, &checkpoint)?

@@ -46,6 +46,15 @@ impl Default for DeformationConfig {
 }
 
 impl DeformationConfig {
+    /// The released settings with the field a config that leaves it out gets on this kind of
+    /// adapter ([`FieldShape::for_adapter`]).
+    pub fn for_adapter(software: bool) -> Self {
+        Self {
+            field: FieldShape::for_adapter(software),
+            ..Self::default()
+        }
+    }
+
     pub fn validate(&self) -> Result<(), (&'static str, String)> {
         self.field
             .validate()

@@ -80,7 +80,33 @@ impl LinearLayer {
     }
 }
 
+/// The field a software (CPU) adapter trains when a config leaves the shape out
+/// ([`FieldShape::for_adapter`]): 4 layers of 64, the input joining again after layer 2, the
+/// released encodings. It is the shape `tests/train_dynamic.rs` trains.
+pub const SOFTWARE_FIELD: FieldShape = FieldShape {
+    depth: 4,
+    width: 64,
+    skip_after: 2,
+    position_frequencies: 10,
+    time_frequencies: 10,
+    warp: WarpKind::Translation,
+};
+
 impl FieldShape {
+    /// The field a config that leaves the shape out trains with: the released 8 x 256 on a
+    /// hardware adapter, [`SOFTWARE_FIELD`] on a software one. On lavapipe the field is nearly
+    /// all of a dynamic step: with 8 x 256 over the figurine's 2,443 Gaussians a dynamic step
+    /// is 23x a static one, and no kernel could bring it under 5.3x; 4 x 64 is 3.1x, and on the
+    /// moving spheres it held out as much as 8 x 256 at equal steps (docs/engine.md, "The field
+    /// a CPU adapter trains").
+    pub fn for_adapter(software: bool) -> Self {
+        if software {
+            SOFTWARE_FIELD
+        } else {
+            Self::default()
+        }
+    }
+
     /// Rejects shapes the kernels cannot run, naming the field.
     pub fn validate(&self) -> Result<(), String> {
         if self.depth == 0 || self.depth > 16 {

@@ -9,12 +9,12 @@ use futures::future::BoxFuture;
 use serde::{Deserialize, Serialize};
 
 use super::training::{
-    TrainingStageReport, fatal, load_resume_point, note_undistortion, record_settings,
-    report_evaluation, store_outputs, train_failure, train_with_checkpoints,
+    StageCadence, TrainingStageReport, fatal, load_resume_point, note_undistortion,
+    record_settings, report_evaluation, store_outputs, train_failure, train_with_checkpoints,
 };
 use crate::job_kinds::trainer_setup::SetupTimer;
 use crate::jobs::{JobContext, JobFailure, JobHandler};
-use segsplat_engine::deform::{DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE};
+use segsplat_engine::deform::{DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE, DeformationConfig};
 use segsplat_engine::train::{TrainConfig, Trainer};
 use segsplat_gpu::GpuContext;
 use segsplat_method::scene_files::ReconstructMetrics;
@@ -31,8 +31,12 @@ pub struct ReconstructConfig {
     pub train: TrainConfig,
     /// Steps between checkpoints (0 = only at the end).
     pub checkpoint_every: u32,
+    /// Steps between evaluations of the held-out views while training (0 = only the job's own
+    /// at the end): `training.held_out_curve` in metrics.json.
+    pub held_out_every: u32,
     /// Set on submission when the config left `deformation` out: a dynamic scene then trains
-    /// with the default deformation field (`"deformation": null` keeps it static).
+    /// with the default deformation field for the worker's adapter (`"deformation": null`
+    /// keeps it static).
     pub deformation_from_scene: bool,
 }
 
@@ -41,7 +45,17 @@ impl Default for ReconstructConfig {
         Self {
             train: TrainConfig::default(),
             checkpoint_every: 1000,
+            held_out_every: 0,
             deformation_from_scene: false,
+        }
+    }
+}
+
+impl ReconstructConfig {
+    fn cadence(&self) -> StageCadence {
+        StageCadence {
+            checkpoint_every: self.checkpoint_every,
+            held_out_every: self.held_out_every,
         }
     }
 }
@@ -88,7 +102,7 @@ fn run_blocking(ctx: &JobContext) -> Result<(), JobFailure> {
     let scene = load_scene(&ctx.scene_dir, &LoadOptions::default()).map_err(fatal)?;
     note_undistortion(ctx, &scene);
     if config.deformation_from_scene && scene.is_dynamic() && config.train.deformation.is_none() {
-        config.train.deformation = Some(Default::default());
+        config.train.deformation = Some(DeformationConfig::for_adapter(gpu.report.is_software));
     }
     // No stage comes before the trainer to compile its kernels beside; a worker's context
     // still keeps them for its later jobs.
@@ -104,9 +118,8 @@ fn run_blocking(ctx: &JobContext) -> Result<(), JobFailure> {
     };
     let setup = setup.finish(&gpu);
     record_settings(ctx, &settings);
-    let training =
-        train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?
-            .with_setup(setup);
+    let training = train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.cadence())?
+        .with_setup(setup);
     finish(ctx, &scene, &mut trainer, training, settings)
 }
 

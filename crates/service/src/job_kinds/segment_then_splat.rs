@@ -21,8 +21,9 @@ use serde::{Deserialize, Serialize};
 use crate::job_kinds::stop_aware::{StopAware, StopSignal, stop_or};
 use crate::job_kinds::trainer_setup::{KernelWarmUp, SetupTimer};
 use crate::job_kinds::training::{
-    TrainingStageReport, fatal, load_resume_point, note_undistortion, record_settings, report,
-    report_evaluation, retryable, store_outputs, train_failure, train_with_checkpoints,
+    StageCadence, TrainingStageReport, fatal, load_resume_point, note_undistortion,
+    record_settings, report, report_evaluation, retryable, store_outputs, train_failure,
+    train_with_checkpoints,
 };
 use crate::jobs::{JobContext, JobFailure, JobHandler, Progress};
 use crate::store::objects::{ObjectEmbedding, ObjectRecord};
@@ -93,6 +94,9 @@ pub struct SegmentThenSplatConfig {
     pub object_floors: [usize; 3],
     /// Steps between checkpoints (0 = only at the end).
     pub checkpoint_every: u32,
+    /// Steps between evaluations of the held-out views while training (0 = only the job's own
+    /// at the end): `training.held_out_curve` in metrics.json.
+    pub held_out_every: u32,
     /// Fields that follow the scene at run time (docs/method.md: steps of about 100 passes over
     /// the training views, 3k to 30k; one object per level for scenes under 100 training views,
     /// else three; the middle and large levels from the released code's shares of the job).
@@ -111,7 +115,17 @@ impl Default for SegmentThenSplatConfig {
             automatic: AutomaticConfig::default(),
             object_floors: DEFAULT_OBJECT_FLOORS,
             checkpoint_every: 1000,
+            held_out_every: 0,
             scene_sized: SceneSizedFields::default(),
+        }
+    }
+}
+
+impl SegmentThenSplatConfig {
+    fn cadence(&self) -> StageCadence {
+        StageCadence {
+            checkpoint_every: self.checkpoint_every,
+            held_out_every: self.held_out_every,
         }
     }
 }
@@ -224,9 +238,11 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
     let frames = training_frames(&scene, &config.train);
     let size = SceneSize::of(frames.len());
     config.scene_sized.apply(frames.len(), &mut config.train);
-    config
-        .scene_sized
-        .apply_deformation(scene.is_dynamic(), &mut config.train);
+    config.scene_sized.apply_deformation(
+        scene.is_dynamic(),
+        gpu.report.is_software,
+        &mut config.train,
+    );
     let rgba = scene.format == SceneFormat::Blender;
     config
         .scene_sized
@@ -245,7 +261,7 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
     );
     // What the job runs with, `auto` and the scene-sized fields resolved: shown beside the
     // config it was created with, and kept in metrics.json.
-    let settings = SegmentThenSplatConfig {
+    let mut settings = SegmentThenSplatConfig {
         masks: resolved_mask_source(ctx, &scene, config.masks),
         ..config.clone()
     };
@@ -275,11 +291,17 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
         )
         .map_err(fatal)?,
     };
+    // A resumed attempt trains on with its checkpoint's settings, which differ from those just
+    // resolved where an adapter-sized value (the random start, the field's shape) was resolved
+    // on another kind of worker: the job says what runs.
+    if trainer.config() != &settings.train {
+        settings.train = trainer.config().clone();
+        record_settings(ctx, &settings);
+    }
     let setup = setup.finish(&gpu);
     ctx.stop_requested()?;
-    let training =
-        train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.checkpoint_every)?
-            .with_setup(setup);
+    let training = train_with_checkpoints(ctx, &mut trainer, CHECKPOINT_NAME, config.cadence())?
+        .with_setup(setup);
     let objects = finish(ctx, &scene, &mut trainer, training, segmented, settings)?;
     let embeddings = embed_objects(ctx, &scene, &trainer, &masks, &objects)?;
     Ok((objects, embeddings))

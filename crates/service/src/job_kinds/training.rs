@@ -236,6 +236,56 @@ pub struct TrainingStageReport {
     pub converged_at: Option<ConvergedAt>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub fit_checks: Vec<(u32, f64)>,
+    /// Held-out quality every `held_out_every` steps of this attempt (a job's config key; empty
+    /// when it is 0): how the scene's quality moved against the training time the user waited.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub held_out_curve: Vec<HeldOutPoint>,
+    /// Wall seconds of those evaluations (inside `seconds`).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub held_out_curve_seconds: f64,
+}
+
+fn is_zero(value: &f64) -> bool {
+    *value == 0.0
+}
+
+/// Held-out quality after `step` steps (`training.held_out_curve` in metrics.json).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct HeldOutPoint {
+    pub step: u32,
+    /// The stage's wall seconds so far, less its checkpoints, reports and evaluations.
+    pub train_seconds: f64,
+    pub gaussians: usize,
+    pub psnr: f64,
+    pub ssim: f64,
+}
+
+/// How often the training stage stops for a checkpoint and for a held-out evaluation, in steps
+/// (0: a checkpoint only at the end; no evaluations before the job's own at the end).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct StageCadence {
+    pub checkpoint_every: u32,
+    pub held_out_every: u32,
+}
+
+impl StageCadence {
+    /// The step after `step` at which a checkpoint is due (`total`: the last).
+    fn next_checkpoint(&self, step: u32, total: u32) -> u32 {
+        next_multiple(step, self.checkpoint_every, total)
+    }
+
+    /// The step after `step` at which a held-out evaluation is due (`total` when none is).
+    fn next_held_out(&self, step: u32, total: u32) -> u32 {
+        next_multiple(step, self.held_out_every, total)
+    }
+}
+
+/// The next multiple of `every` after `step`, at most `total` (`total` for 0).
+fn next_multiple(step: u32, every: u32, total: u32) -> u32 {
+    match every {
+        0 => total,
+        every => (step / every + 1).saturating_mul(every).min(total),
+    }
 }
 
 /// Steps timed with timestamp queries for [`TrainingStageReport::gpu_busy_fraction`]: few
@@ -243,8 +293,9 @@ pub struct TrainingStageReport {
 pub const BUSY_SAMPLE_STEPS: u32 = 10;
 
 /// Trains to the configured end, saving a checkpoint named `checkpoint_name` every
-/// `checkpoint_every` steps (0 = only at the end) and stopping at the next report when the job
-/// is cancelled or the service shuts down. Returns how this attempt's training went.
+/// `cadence.checkpoint_every` steps (0 = only at the end), evaluating the held-out views every
+/// `cadence.held_out_every` (0 = never here), and stopping at the next report when the job is
+/// cancelled or the service shuts down. Returns how this attempt's training went.
 ///
 /// The step loop takes each checkpoint's snapshot (GPU copies of the trainer's state, no
 /// read-back) and hands it to a [`CheckpointWriter`] thread, which reads the copies back,
@@ -255,14 +306,14 @@ pub fn train_with_checkpoints(
     ctx: &JobContext,
     trainer: &mut Trainer,
     checkpoint_name: &str,
-    checkpoint_every: u32,
+    cadence: StageCadence,
 ) -> Result<TrainingStageReport, JobFailure> {
     if trainer.step() == 0 {
         warn_about_schedule(ctx, trainer);
     }
     std::thread::scope(|scope| {
         let mut writer = CheckpointWriter::start(scope, ctx, checkpoint_name);
-        train_stage(ctx, trainer, checkpoint_every, &mut writer)
+        train_stage(ctx, trainer, cadence, &mut writer)
             .and_then(|report| finish_writes(report, writer))
     })
 }
@@ -278,7 +329,11 @@ fn finish_writes(
     report.seconds += waited;
     report.checkpoint_seconds += waited;
     report.job_overhead_ratio = report.seconds
-        / (report.seconds - report.checkpoint_seconds - report.report_seconds).max(1e-9);
+        / (report.seconds
+            - report.checkpoint_seconds
+            - report.report_seconds
+            - report.held_out_curve_seconds)
+            .max(1e-9);
     Ok(report)
 }
 
@@ -286,7 +341,7 @@ fn finish_writes(
 fn train_stage(
     ctx: &JobContext,
     trainer: &mut Trainer,
-    checkpoint_every: u32,
+    cadence: StageCadence,
     writer: &mut CheckpointWriter<'_>,
 ) -> Result<TrainingStageReport, JobFailure> {
     let total = trainer.config().steps;
@@ -297,7 +352,10 @@ fn train_stage(
     let started = std::time::Instant::now();
     let mut checkpoint_seconds = 0.0;
     let mut report_seconds = 0.0;
-    let mut checkpoint_host = HostCostReading::default();
+    let mut held_out_curve = Vec::new();
+    let mut held_out_curve_seconds = 0.0;
+    // Host costs of the checkpoints and evaluations, which the per-step figures leave out.
+    let mut outside_steps_host = HostCostReading::default();
     // The busy sample starts halfway through what this attempt trains, past the first steps'
     // allocations and cache fills.
     let mut busy_sample_at = (gpu.profiler.is_some() && total - first_step > 2 * BUSY_SAMPLE_STEPS)
@@ -317,10 +375,9 @@ fn train_stage(
     let stop = StopSignal::of(ctx);
     trainer.set_stop_check(Arc::new(move || stop.requested()));
     while trainer.step() < trainer.end_step() {
-        let next_checkpoint = match checkpoint_every {
-            0 => total,
-            every => (trainer.step() / every + 1) * every,
-        };
+        let next_checkpoint = cadence.next_checkpoint(trainer.step(), total);
+        let next_held_out = cadence.next_held_out(trainer.step(), total);
+        let next_stop = next_checkpoint.min(next_held_out);
         let mut run_to = |trainer: &mut Trainer, last_step: u32| {
             trainer
                 .run_until(last_step, |progress| {
@@ -339,7 +396,7 @@ fn train_stage(
                     .unwrap_or_else(|| train_failure(error))
                 })
         };
-        if let Some(at) = busy_sample_at.filter(|&at| at < next_checkpoint) {
+        if let Some(at) = busy_sample_at.filter(|&at| at < next_stop) {
             busy_sample_at = None;
             run_to(trainer, at)?;
             ctx.stop_requested()?;
@@ -347,20 +404,42 @@ fn train_stage(
                 run_to(trainer, last).map(|_| ())
             })?;
         }
-        run_to(trainer, next_checkpoint)?;
+        run_to(trainer, next_stop)?;
         ctx.stop_requested()?;
+        // The job evaluates its end itself; a stop that the convergence check made the end
+        // is that evaluation too.
+        if trainer.step() == next_held_out && trainer.step() < trainer.end_step() {
+            let evaluating = std::time::Instant::now();
+            let host_at_eval = gpu.host_costs.reading();
+            let eval = trainer.evaluate().map_err(train_failure)?;
+            outside_steps_host.add(&gpu.host_costs.reading().since(&host_at_eval));
+            held_out_curve.push(HeldOutPoint {
+                step: trainer.step(),
+                train_seconds: started.elapsed().as_secs_f64()
+                    - checkpoint_seconds
+                    - report_seconds
+                    - held_out_curve_seconds,
+                gaussians: trainer.gaussian_count(),
+                psnr: eval.psnr,
+                ssim: eval.ssim,
+            });
+            held_out_curve_seconds += evaluating.elapsed().as_secs_f64();
+        }
+        if trainer.step() < next_checkpoint && trainer.step() < trainer.end_step() {
+            continue;
+        }
         let checkpoint_started = std::time::Instant::now();
         let host_at_checkpoint = gpu.host_costs.reading();
         writer.write(trainer)?;
         checkpoint_seconds += checkpoint_started.elapsed().as_secs_f64();
-        checkpoint_host.add(&gpu.host_costs.reading().since(&host_at_checkpoint));
+        outside_steps_host.add(&gpu.host_costs.reading().since(&host_at_checkpoint));
     }
     let seconds = started.elapsed().as_secs_f64();
     let host = gpu.host_costs.reading().since(&host_before);
     let steps = trainer.step() - first_step;
     let per_step = |value: f64| value / f64::from(steps.max(1));
-    let waited = host.wait_seconds() - checkpoint_host.wait_seconds();
-    let submitted = host.submit_seconds() - checkpoint_host.submit_seconds();
+    let waited = host.wait_seconds() - outside_steps_host.wait_seconds();
+    let submitted = host.submit_seconds() - outside_steps_host.submit_seconds();
     let field_sample = busy_sample.filter(|sample| sample.field_ms_per_step > 0.0);
     Ok(TrainingStageReport {
         seconds,
@@ -369,21 +448,23 @@ fn train_stage(
         checkpoint_seconds,
         checkpoint_write_seconds: 0.0,
         report_seconds,
-        job_overhead_ratio: seconds / (seconds - checkpoint_seconds - report_seconds).max(1e-9),
+        job_overhead_ratio: seconds
+            / (seconds - checkpoint_seconds - report_seconds - held_out_curve_seconds).max(1e-9),
         dispatches_per_step: per_step((gpu.dispatch_count() - dispatches_before) as f64),
         bytes_read_back_per_step: per_step(
-            (host.bytes_read_back - checkpoint_host.bytes_read_back) as f64,
+            (host.bytes_read_back - outside_steps_host.bytes_read_back) as f64,
         ),
         host_ms_per_step: per_step(
-            (seconds - checkpoint_seconds - waited - submitted).max(0.0) * 1e3,
+            (seconds - checkpoint_seconds - held_out_curve_seconds - waited - submitted).max(0.0)
+                * 1e3,
         ),
         wait_ms_per_step: per_step(waited.max(0.0) * 1e3),
         submit_ms_per_step: per_step(submitted.max(0.0) * 1e3),
         bind_groups_created_per_step: per_step(
-            (host.bind_groups_created - checkpoint_host.bind_groups_created) as f64,
+            (host.bind_groups_created - outside_steps_host.bind_groups_created) as f64,
         ),
         buffers_created_per_step: per_step(
-            (host.buffers_created - checkpoint_host.buffers_created) as f64,
+            (host.buffers_created - outside_steps_host.buffers_created) as f64,
         ),
         gpu_busy_fraction: busy_sample.map(|sample| sample.busy_fraction),
         gemm_kernel: trainer
@@ -398,6 +479,8 @@ fn train_stage(
         kernels_compiled_ahead: None,
         converged_at: trainer.converged_at(),
         fit_checks: trainer.fit_checks().to_vec(),
+        held_out_curve,
+        held_out_curve_seconds,
     })
 }
 
@@ -495,4 +578,28 @@ pub fn report_evaluation(ctx: &JobContext, held_out: &EvalReport, gaussians: usi
         metrics.push(("worst_frame_index", frame as f64));
     }
     report(ctx, "evaluate", 1, 1, &metrics);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_stage_stops_at_each_checkpoint_and_evaluation_and_at_its_end() {
+        let cadence = StageCadence {
+            checkpoint_every: 25,
+            held_out_every: 20,
+        };
+        assert_eq!(cadence.next_checkpoint(0, 60), 25);
+        assert_eq!(cadence.next_held_out(0, 60), 20);
+        assert_eq!(cadence.next_held_out(20, 60), 40);
+        assert_eq!(cadence.next_checkpoint(50, 60), 60);
+        assert_eq!(cadence.next_held_out(40, 60), 60);
+        // A resumed attempt goes on from its checkpoint's step.
+        assert_eq!(cadence.next_held_out(25, 60), 40);
+        let at_the_end = StageCadence::default();
+        assert_eq!(at_the_end.next_checkpoint(10, 60), 60);
+        assert_eq!(at_the_end.next_held_out(10, 60), 60);
+        assert_eq!(next_multiple(u32::MAX - 1, 1 << 31, u32::MAX), u32::MAX);
+    }
 }
