@@ -5,6 +5,7 @@
 pub mod checkpoint_writer;
 pub mod reconstruct;
 pub mod segment_then_splat;
+pub mod stage_cadence;
 pub mod stop_aware;
 pub mod trainer_setup;
 pub mod training;
