@@ -62,12 +62,13 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     if let Some(seed) = args.seed {
         config.seed = seed;
     }
+    // A bad config is named before anything is opened; the field the scene adds is valid.
+    config.validate()?;
     let scene = super::open_scene(&args.dataset)?;
     let ctx = super::open_gpu()?;
     if scene.is_dynamic() && config.deformation.is_none() && !args.no_deformation {
         config.deformation = Some(DeformationConfig::for_adapter(ctx.report.is_software));
     }
-    config.validate()?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let checkpoint_path = args.out.join("train.ckpt");

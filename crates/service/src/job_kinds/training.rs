@@ -368,8 +368,8 @@ fn train_stage(
         }
         run_to(trainer, next_stop)?;
         ctx.stop_requested()?;
-        // The job evaluates its end itself; a stop that the convergence check made the end
-        // is that evaluation too.
+        // No point at the end, which the job evaluates itself (also an end the convergence
+        // stop brought forward).
         if trainer.step() == next_held_out && trainer.step() < trainer.end_step() {
             let evaluating = std::time::Instant::now();
             let host_at_eval = gpu.host_costs.reading();
