@@ -41,12 +41,12 @@ fn initial() -> GaussianModel {
 
 fn deformation() -> DeformationConfig {
     DeformationConfig {
-        field: FieldShape {
+        field: Some(FieldShape {
             depth: 4,
             width: 64,
             skip_after: 2,
             ..FieldShape::default()
-        },
+        }),
         warm_up_steps: Some(200),
         // The released schedule decays over 40k steps; this short run keeps its early rates.
         learning_rate_decay_steps: Some(40_000),
@@ -351,7 +351,8 @@ fn bench_matmul_reports_the_kernel_rate() {
 
 /// A job much shorter than the 30k-step recipe still trains its deformation field: with the
 /// schedule left to its defaults the 3000-step warm-up scales to the job (6 of 60 steps), so
-/// the field's parameters move (before, a dynamic job under 3000 steps trained none).
+/// the field's parameters move (before, a dynamic job under 3000 steps trained none). The
+/// field's shape is left out too: the trainer gives it the adapter's, and says so in its config.
 #[test]
 fn a_short_dynamic_job_trains_its_field_with_default_schedules() {
     let Some(ctx) = gpu_context() else { return };
@@ -362,18 +363,19 @@ fn a_short_dynamic_job_trains_its_field_with_default_schedules() {
         max_resolution: None,
         background: scene.background,
         max_gaussians: 6000,
-        deformation: Some(DeformationConfig {
-            field: FieldShape {
-                depth: 4,
-                width: 64,
-                skip_after: 2,
-                ..FieldShape::default()
-            },
-            ..DeformationConfig::default()
-        }),
+        deformation: Some(DeformationConfig::default()),
         ..Default::default()
     };
     let mut trainer = Trainer::new(ctx, &scene, config, Some(initial())).expect("trainer");
+    let trained_shape = trainer
+        .config()
+        .deformation
+        .as_ref()
+        .and_then(|deformation| deformation.field);
+    assert_eq!(
+        trained_shape,
+        Some(FieldShape::for_adapter(ctx.report.is_software))
+    );
     let schedule = trainer.schedule().deformation.expect("dynamic schedule");
     assert_eq!(schedule.warm_up_steps, 6);
     // A 60-step job is too short for default densification (a warning says so), not for the field.

@@ -558,7 +558,7 @@ fn deformation_config(args: &BenchArgs, software: bool) -> DeformationConfig {
         field.width = width;
     }
     DeformationConfig {
-        field,
+        field: Some(field),
         warm_up_steps: Some(0),
         ..DeformationConfig::default()
     }

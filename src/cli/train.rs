@@ -67,7 +67,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let scene = super::open_scene(&args.dataset)?;
     let ctx = super::open_gpu()?;
     if scene.is_dynamic() && config.deformation.is_none() && !args.no_deformation {
-        config.deformation = Some(DeformationConfig::for_adapter(ctx.report.is_software));
+        config.deformation = Some(DeformationConfig::default());
     }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;

@@ -10,7 +10,10 @@ use crate::train::schedule::DeformationSchedule;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct DeformationConfig {
-    pub field: FieldShape,
+    /// The field's shape. Left out (`None`), the trainer gives it the shape for its adapter
+    /// ([`FieldShape::for_adapter`]) when it starts, so its `config()` and checkpoints name the
+    /// shape that trained.
+    pub field: Option<FieldShape>,
     /// Steps trained as a static scene before the field starts moving Gaussians. This and the
     /// other step counts left out (`None`) are Deformable 3DGS's values for a 30k-step job
     /// (3000, 40000, 20000) scaled to the job's `steps` (`splat::train::schedule`).
@@ -33,7 +36,7 @@ pub struct DeformationConfig {
 impl Default for DeformationConfig {
     fn default() -> Self {
         Self {
-            field: FieldShape::default(),
+            field: None,
             warm_up_steps: None,
             learning_rate_initial: 0.0008,
             learning_rate_final: 1.6e-6,
@@ -46,19 +49,19 @@ impl Default for DeformationConfig {
 }
 
 impl DeformationConfig {
-    /// The released settings with the field a config that leaves it out gets on this kind of
-    /// adapter ([`FieldShape::for_adapter`]).
-    pub fn for_adapter(software: bool) -> Self {
-        Self {
-            field: FieldShape::for_adapter(software),
-            ..Self::default()
-        }
+    /// The shape that trains: the given one, or the one for the adapter (`software`: a CPU
+    /// adapter) when the config leaves it out.
+    pub fn field_for(&self, software: bool) -> FieldShape {
+        self.field
+            .unwrap_or_else(|| FieldShape::for_adapter(software))
     }
 
     pub fn validate(&self) -> Result<(), (&'static str, String)> {
-        self.field
-            .validate()
-            .map_err(|problem| ("deformation.field", problem))?;
+        if let Some(field) = &self.field {
+            field
+                .validate()
+                .map_err(|problem| ("deformation.field", problem))?;
+        }
         if !(self.learning_rate_initial > 0.0 && self.learning_rate_final > 0.0) {
             return Err((
                 "deformation.learning_rate_initial",
@@ -124,5 +127,40 @@ mod tests {
         assert_eq!(config.time_noise_at(20_000, 0.01, &schedule), 0.0);
         assert!((time_interval([0.0, 0.5, 1.0, 0.5]) - 0.5).abs() < 1e-6);
         assert_eq!(time_interval([0.3]), 1.0);
+    }
+
+    #[test]
+    fn the_fields_shape_follows_the_adapter_unless_given() {
+        let released = FieldShape::default();
+        let narrow = FieldShape::for_adapter(true);
+        assert_eq!(FieldShape::for_adapter(false), released);
+        let flops = |shape: FieldShape| {
+            let (forward, backward) = shape.flops_per_gaussian();
+            forward + backward
+        };
+        assert!(flops(narrow) * 10 < flops(released));
+        assert!(narrow.validate().is_ok());
+        let parse = |json: serde_json::Value| -> DeformationConfig {
+            serde_json::from_value(json).expect("a deformation config")
+        };
+        // Left out, or only the field left out: the adapter's shape.
+        let left_out = parse(serde_json::json!({"warm_up_steps": 10}));
+        assert_eq!(left_out.field_for(true), narrow);
+        assert_eq!(left_out.field_for(false), released);
+        // A given field is kept on any adapter, its own left-out keys at the released values.
+        let given = parse(serde_json::json!({"field": {"width": 32}}));
+        let width_32 = FieldShape {
+            width: 32,
+            ..released
+        };
+        assert_eq!(given.field_for(true), width_32);
+        assert_eq!(given.field_for(false), width_32);
+        // A bad given shape is named; a left-out one is never checked against a default.
+        let too_deep = parse(serde_json::json!({"field": {"depth": 40}}));
+        assert_eq!(
+            too_deep.validate().map_err(|(key, _)| key),
+            Err("deformation.field")
+        );
+        assert!(left_out.validate().is_ok());
     }
 }

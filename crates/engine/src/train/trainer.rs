@@ -268,6 +268,21 @@ pub fn resolve_random_init(config: &mut TrainConfig, scene: &Scene, ctx: &GpuCon
     }
 }
 
+/// Fills in what `config` leaves to the adapter of `ctx`: the random start's size
+/// ([`resolve_random_init`]) and the deformation field's shape (`DeformationConfig::field_for`:
+/// narrower on a CPU adapter). The trainer does this when it starts; a job does it first too,
+/// so the settings it records before training say what will train.
+pub fn resolve_adapter_sized(config: &mut TrainConfig, scene: &Scene, ctx: &GpuContext) {
+    resolve_random_init(config, scene, ctx);
+    resolve_field_shape(config, ctx);
+}
+
+fn resolve_field_shape(config: &mut TrainConfig, ctx: &GpuContext) {
+    if let Some(deformation) = config.deformation.as_mut() {
+        deformation.field = Some(deformation.field_for(ctx.report.is_software));
+    }
+}
+
 /// The initial model of plain training: [`initial_model`], plus `background_shell` Gaussians on
 /// a far sphere when it comes from sparse points (which miss the far background: on the
 /// figurine at 500 steps the shell raised held-out PSNR from 16.4 to 19.1 dB, docs/benchmarks.md).
@@ -299,6 +314,7 @@ impl Trainer {
         if model.is_none() {
             resolve_random_init(&mut config, scene, ctx);
         }
+        resolve_field_shape(&mut config, ctx);
         let model = match model {
             Some(model) => model,
             None => plain_initial_model(scene, &config)?,
@@ -377,7 +393,9 @@ impl Trainer {
         if let Some(deformation) = trainer.config.deformation.clone() {
             // Its own seeded stream, so a dynamic config leaves the view order unchanged.
             let mut field_rng = ChaCha8Rng::seed_from_u64(trainer.config.seed ^ 0xdef0);
-            let parameters = deformation.field.initial_parameters(&mut field_rng);
+            let parameters = deformation
+                .field_for(ctx.report.is_software)
+                .initial_parameters(&mut field_rng);
             let times: Vec<f32> = trainer.views.train.iter().map(|v| v.time).collect();
             let schedule = trainer.schedule.deformation.unwrap_or_else(|| {
                 DeformationSchedule::resolve(&deformation, trainer.config.steps)

@@ -11,7 +11,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use segsplat_engine::deform::{DeformationConfig, FieldShape};
+use segsplat_engine::deform::DeformationConfig;
 use segsplat_engine::train::{ObjectLossConfig, TrainConfig};
 
 /// Scenes with fewer training views than this are "small".
@@ -85,9 +85,6 @@ pub struct SceneSizedFields {
     /// `deformation`: the deformation field (docs/method.md "Dynamic scenes") for scenes whose
     /// frames carry times, none for static ones.
     pub deformation: bool,
-    /// `deformation.field`: the field's shape, which follows the adapter
-    /// (`FieldShape::for_adapter`: narrower on a software adapter).
-    pub field: bool,
     /// `background`: for scenes of RGBA images (Blender, D-NeRF), the colour they are composited
     /// on (white), so transparent pixels are not learnt as a haze of that colour.
     pub background: bool,
@@ -102,7 +99,6 @@ impl SceneSizedFields {
             objects_per_level: absent("/object_loss/objects_per_level"),
             level_schedule: absent("/object_loss/middle_from") && absent("/object_loss/large_from"),
             deformation: absent("/deformation"),
-            field: absent("/deformation/field"),
             background: absent("/background"),
         }
     }
@@ -115,15 +111,12 @@ impl SceneSizedFields {
         }
     }
 
-    /// Turns the deformation field on for a dynamic scene when the config left it out, and
-    /// gives a field whose shape the config left out the shape for the adapter (`software`: a
-    /// CPU adapter, see `FieldShape::for_adapter`).
-    pub fn apply_deformation(self, dynamic: bool, software: bool, config: &mut TrainConfig) {
+    /// Turns the deformation field on for a dynamic scene when the config left it out. Its
+    /// shape, when left out, is the adapter's: the trainer resolves it
+    /// (`DeformationConfig::field_for`).
+    pub fn apply_deformation(self, dynamic: bool, config: &mut TrainConfig) {
         if self.deformation && dynamic && config.deformation.is_none() {
             config.deformation = Some(DeformationConfig::default());
-        }
-        if let (true, Some(deformation)) = (self.field, config.deformation.as_mut()) {
-            deformation.field = FieldShape::for_adapter(software);
         }
     }
 
@@ -172,7 +165,6 @@ mod tests {
                 objects_per_level: false,
                 level_schedule: true,
                 deformation: true,
-                field: true,
                 background: true,
             }
         );
@@ -240,54 +232,15 @@ mod tests {
     fn deformation_follows_the_scene_unless_given() {
         let left_out = SceneSizedFields::left_out_of(&serde_json::json!({}));
         let mut dynamic = TrainConfig::default();
-        left_out.apply_deformation(true, false, &mut dynamic);
+        left_out.apply_deformation(true, &mut dynamic);
         assert_eq!(dynamic.deformation, Some(DeformationConfig::default()));
         let mut static_scene = TrainConfig::default();
-        left_out.apply_deformation(false, false, &mut static_scene);
+        left_out.apply_deformation(false, &mut static_scene);
         assert_eq!(static_scene.deformation, None);
         // An explicit `"deformation": null` keeps a dynamic scene static.
         let given = SceneSizedFields::left_out_of(&serde_json::json!({"deformation": null}));
         let mut forced_static = TrainConfig::default();
-        given.apply_deformation(true, false, &mut forced_static);
+        given.apply_deformation(true, &mut forced_static);
         assert_eq!(forced_static.deformation, None);
-    }
-
-    #[test]
-    fn the_fields_shape_follows_the_adapter_unless_given() {
-        let released = FieldShape::default();
-        let narrow = FieldShape::for_adapter(true);
-        assert_eq!(FieldShape::for_adapter(false), released);
-        let flops = |shape: FieldShape| {
-            let (forward, backward) = shape.flops_per_gaussian();
-            forward + backward
-        };
-        assert!(flops(narrow) * 10 < flops(released));
-        assert!(narrow.validate().is_ok());
-        let field_of = |submitted: serde_json::Value, software: bool| {
-            let left_out = SceneSizedFields::left_out_of(&submitted);
-            let mut config = TrainConfig {
-                deformation: serde_json::from_value(
-                    submitted.get("deformation").cloned().unwrap_or_default(),
-                )
-                .expect("deformation"),
-                ..TrainConfig::default()
-            };
-            left_out.apply_deformation(true, software, &mut config);
-            config.deformation.map(|deformation| deformation.field)
-        };
-        // Left out entirely, or only the field left out: the adapter's shape.
-        assert_eq!(field_of(serde_json::json!({}), true), Some(narrow));
-        assert_eq!(field_of(serde_json::json!({}), false), Some(released));
-        let warm_up_only = serde_json::json!({"deformation": {"warm_up_steps": 10}});
-        assert_eq!(field_of(warm_up_only, true), Some(narrow));
-        // A given field is kept on any adapter, its own left-out keys at the released values.
-        let given = serde_json::json!({"deformation": {"field": {"width": 32}}});
-        assert_eq!(
-            field_of(given, true),
-            Some(FieldShape {
-                width: 32,
-                ..released
-            })
-        );
     }
 }

@@ -13,7 +13,7 @@ use super::track_merge::{TrackMergeRule, merge_lost_tracks};
 use super::view_masks::{ViewMaskSet, ViewMaskSetError};
 use segsplat_engine::GaussianModel;
 use segsplat_engine::densify::ObjectFloor;
-use segsplat_engine::train::trainer::{initial_model, resolve_random_init};
+use segsplat_engine::train::trainer::{initial_model, resolve_adapter_sized};
 use segsplat_engine::train::views::is_held_out;
 use segsplat_engine::train::{
     ObjectLossConfig, ObjectTargets, TrainConfig, TrainError, Trainer, ViewIdMaps,
@@ -235,7 +235,7 @@ pub fn segmented_trainer_from_view_masks(
     config
         .object_loss
         .get_or_insert_with(ObjectLossConfig::default);
-    resolve_random_init(&mut config, scene, ctx);
+    resolve_adapter_sized(&mut config, scene, ctx);
     let model = initial_segmented_model(
         scene,
         masks,

@@ -102,7 +102,7 @@ fn run_blocking(ctx: &JobContext) -> Result<(), JobFailure> {
     let scene = load_scene(&ctx.scene_dir, &LoadOptions::default()).map_err(fatal)?;
     note_undistortion(ctx, &scene);
     if config.deformation_from_scene && scene.is_dynamic() && config.train.deformation.is_none() {
-        config.train.deformation = Some(DeformationConfig::for_adapter(gpu.report.is_software));
+        config.train.deformation = Some(DeformationConfig::default());
     }
     // No stage comes before the trainer to compile its kernels beside; a worker's context
     // still keeps them for its later jobs.

@@ -26,7 +26,7 @@ use crate::jobs::{JobContext, JobFailure, JobHandler, Progress};
 use crate::store::objects::{ObjectEmbedding, ObjectRecord};
 use segsplat_engine::checkpoint::Checkpoint;
 use segsplat_engine::deform::{DEFORMATION_FILE, DEFORMATION_WEIGHTS_FILE};
-use segsplat_engine::train::trainer::resolve_random_init;
+use segsplat_engine::train::trainer::resolve_adapter_sized;
 use segsplat_engine::train::{
     EvalReport, ObjectLossConfig, PartialFilterReport, TrainConfig, Trainer, TrainerMeta,
 };
@@ -230,16 +230,14 @@ fn run_blocking(ctx: &JobContext) -> Result<(Vec<ObjectRecord>, Vec<ObjectEmbedd
     let frames = training_frames(&scene, &config.train);
     let size = SceneSize::of(frames.len());
     config.scene_sized.apply(frames.len(), &mut config.train);
-    config.scene_sized.apply_deformation(
-        scene.is_dynamic(),
-        gpu.report.is_software,
-        &mut config.train,
-    );
+    config
+        .scene_sized
+        .apply_deformation(scene.is_dynamic(), &mut config.train);
     let rgba = scene.format == SceneFormat::Blender;
     config
         .scene_sized
         .apply_background(rgba.then_some(scene.background), &mut config.train);
-    resolve_random_init(&mut config.train, &scene, &gpu);
+    resolve_adapter_sized(&mut config.train, &scene, &gpu);
     tracing::info!(
         ?size,
         steps = config.train.steps,

@@ -40,7 +40,12 @@ impl Dynamics {
         train_times: impl IntoIterator<Item = f32>,
     ) -> Result<Self, TrainError> {
         Ok(Self {
-            field: DeformationField::new(ctx, config.field, parameters, config.chunk_gaussians)?,
+            field: DeformationField::new(
+                ctx,
+                config.field_for(ctx.report.is_software),
+                parameters,
+                config.chunk_gaussians,
+            )?,
             geometry: DeformedGeometry::new(ctx, capacity)?,
             time_interval: time_interval(train_times),
             deformed_at: None,
@@ -295,7 +300,7 @@ impl Trainer {
         let first = times.first().copied().unwrap_or(0.0);
         Ok(Some(StoredDeformation {
             header: DeformationHeader {
-                field: config.field,
+                field: config.field_for(self.ctx.report.is_software),
                 parameter_count: parameters.len(),
                 time_range: [first, times.last().copied().unwrap_or(first)],
             },
