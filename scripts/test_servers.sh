@@ -39,7 +39,9 @@ start_s3rver() {
     return 1
 }
 
-# A throwaway PostgreSQL cluster with trust authentication on 127.0.0.1 only. PostgreSQL refuses
+# A throwaway PostgreSQL cluster with trust authentication on 127.0.0.1 only. Every test's
+# fresh database is written to the WAL too; a small max_wal_size recycles it (the default 1 GB
+# let the cluster reach 543 MB in a CI run, most of it WAL). PostgreSQL refuses
 # to run as root, so as root the cluster belongs to the `postgres` user the package created.
 start_postgres() {
     local bin
@@ -61,7 +63,7 @@ start_postgres() {
     port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
     if ! "${as_user[@]}" "$bin/initdb" -D "$data/cluster" -A trust -U segsplat >"$data.log" 2>&1 \
         || ! "${as_user[@]}" "$bin/pg_ctl" -D "$data/cluster" -l "$data/server.log" -w \
-            -o "-c listen_addresses=127.0.0.1 -p $port -k $data -c max_connections=300 -c fsync=off" \
+            -o "-c listen_addresses=127.0.0.1 -p $port -k $data -c max_connections=300 -c fsync=off -c max_wal_size=96MB -c min_wal_size=32MB" \
             start >>"$data.log" 2>&1; then
         echo "error: PostgreSQL did not start; its log:" >&2
         cat "$data.log" "$data/server.log" >&2 2>/dev/null
