@@ -51,3 +51,37 @@ fn batched_object_losses_match_separate_renders() {
         );
     }
 }
+
+/// `fade_from_step`: the object loss keeps its weight up to that step, then falls to 0 over as
+/// many steps again, on both paths (the loss values are weighted, as the gradients are).
+#[test]
+fn the_object_loss_fades_to_nothing_after_its_fade() {
+    let Some(ctx) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let scene = synthetic_scene(dir.path(), |_| {});
+    let config = TrainConfig {
+        object_loss: Some(ObjectLossConfig {
+            objects_per_level: 1,
+            middle_from: 0.0,
+            large_from: 0.0,
+            fade_from_step: Some(2),
+            ..Default::default()
+        }),
+        ..config()
+    };
+    let options = SegmentedTrainingOptions::default();
+    for separate_renders in [false, true] {
+        let mut trainer =
+            segmented_trainer_from_user_masks(&ctx, &scene, config.clone(), &options).unwrap();
+        trainer.set_separate_object_renders(separate_renders);
+        let mut losses = Vec::new();
+        for _ in 0..6 {
+            trainer.train_step().unwrap();
+            losses.push(trainer.progress().unwrap().object_loss);
+        }
+        // Steps 0-2 at the full weight, step 3 at half, from step 4 none.
+        assert!(losses[..3].iter().all(|&loss| loss > 0.0), "{losses:?}");
+        assert!(losses[3] > 0.0, "{losses:?}");
+        assert_eq!(&losses[4..], &[0.0, 0.0], "{losses:?}");
+    }
+}

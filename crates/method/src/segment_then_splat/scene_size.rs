@@ -82,6 +82,9 @@ pub struct SceneSizedFields {
     /// `object_loss.middle_from` and `large_from`: the released 5k and 10k steps, or the
     /// released shares of a shorter run (see [`SceneSizedFields::apply`]).
     pub level_schedule: bool,
+    /// `object_loss.fade_from_step`: the scene-sized steps, so only a job longer than the scene
+    /// needs fades its object loss (`null` keeps the full weight to the end).
+    pub object_loss_fade: bool,
     /// `deformation`: the deformation field (docs/method.md "Dynamic scenes") for scenes whose
     /// frames carry times, none for static ones.
     pub deformation: bool,
@@ -98,6 +101,7 @@ impl SceneSizedFields {
             steps: absent("/steps"),
             objects_per_level: absent("/object_loss/objects_per_level"),
             level_schedule: absent("/object_loss/middle_from") && absent("/object_loss/large_from"),
+            object_loss_fade: absent("/object_loss/fade_from_step"),
             deformation: absent("/deformation"),
             background: absent("/background"),
         }
@@ -147,6 +151,9 @@ impl SceneSizedFields {
             object_loss.middle_from = joins_at(MIDDLE_FROM_STEP);
             object_loss.large_from = joins_at(LARGE_FROM_STEP);
         }
+        if self.object_loss_fade {
+            object_loss.fade_from_step = Some(scene_sized_steps(training_views));
+        }
     }
 }
 
@@ -164,6 +171,7 @@ mod tests {
                 steps: true,
                 objects_per_level: false,
                 level_schedule: true,
+                object_loss_fade: true,
                 deformation: true,
                 background: true,
             }
@@ -216,6 +224,26 @@ mod tests {
         // Between the two, whichever comes first: 30k steps join at 5k and 10k (not 7.5k, 15k).
         let (middle, large) = given(30_000);
         assert!((middle - 5.0 / 30.0).abs() < 1e-6 && (large - 10.0 / 30.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn the_object_loss_fades_after_the_scene_sized_steps_unless_given() {
+        let fade_of = |submitted: serde_json::Value| {
+            let mut config: TrainConfig =
+                serde_json::from_value(submitted.clone()).expect("a train config");
+            SceneSizedFields::left_out_of(&submitted).apply(20, &mut config);
+            config
+                .object_loss
+                .and_then(|object_loss| object_loss.fade_from_step)
+        };
+        // Left out: the scene-sized 3000 steps, whatever the job's own steps.
+        assert_eq!(fade_of(serde_json::json!({})), Some(3_000));
+        assert_eq!(fade_of(serde_json::json!({"steps": 15_000})), Some(3_000));
+        // Given, or `null` (the full weight to the end): kept.
+        let given = serde_json::json!({"object_loss": {"fade_from_step": 500}});
+        assert_eq!(fade_of(given), Some(500));
+        let never = serde_json::json!({"object_loss": {"fade_from_step": null}});
+        assert_eq!(fade_of(never), None);
     }
 
     #[test]

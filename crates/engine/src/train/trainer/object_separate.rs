@@ -45,7 +45,7 @@ impl Trainer {
                     width: view.camera.width,
                     height: view.camera.height,
                 },
-                config.weight,
+                config.weight_at(self.step),
                 &LossOutputs {
                     rendered_grad: &self.grad_image,
                     grad_index: 0,

@@ -109,11 +109,15 @@ impl Trainer {
     }
 
     /// This step's object slots: for each active level, `m` objects of the view (not skipped
-    /// by the partial-mask filter), drawn from the trainer's RNG.
+    /// by the partial-mask filter), drawn from the trainer's RNG. None once the loss's weight
+    /// is 0 (faded out, or configured so): their renders would train nothing.
     fn sample_object_slots(&mut self, view_index: usize) -> Vec<ObjectSlot> {
         let (Some(config), Some(targets)) = (&self.config.object_loss, &self.object_targets) else {
             return Vec::new();
         };
+        if config.weight_at(self.step) == 0.0 {
+            return Vec::new();
+        }
         let masks = &targets.views[view_index];
         let mut slots = Vec::new();
         for level in config.active_levels(self.step, self.config.steps) {
@@ -198,7 +202,7 @@ impl Trainer {
                     cell_maps: &cell_maps,
                 }),
             },
-            config.weight,
+            config.weight_at(self.step),
             &LossOutputs {
                 rendered_grad: grad_images,
                 grad_index: 0,
