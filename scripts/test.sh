@@ -9,12 +9,8 @@ export XDG_RUNTIME_DIR=${XDG_RUNTIME_DIR:-/tmp}
 export RUST_TEST_THREADS=${RUST_TEST_THREADS:-2}
 # A CI machine builds from nothing and never again: incremental compilation's caches are only
 # cost there (writing them, and the smaller code units it splits crates into).
-# Nor does it need the debug info of its 70-odd test binaries (about half of each binary's
-# ~100 MB, and written at every link): a failing test still names its file and line (the panic
-# location is no debug info) and a backtrace its functions. A CI run failed once for want of disk.
 if [ "${CI:-}" = true ]; then
     export CARGO_INCREMENTAL=${CARGO_INCREMENTAL:-0}
-    export CARGO_PROFILE_DEV_STRIP=${CARGO_PROFILE_DEV_STRIP:-debuginfo}
 fi
 # Each phase's start time and the disk left, so a slow or failed suite shows where its time
 # (and its disk) went.
