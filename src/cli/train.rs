@@ -98,7 +98,10 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     while trainer.step() < trainer.end_step() && !interrupt.requested() {
         let next = match args.checkpoint_every {
             0 => total,
-            every => (trainer.step() / every + 1) * every,
+            // Saturating: a cadence near u32::MAX must not wrap to an earlier step.
+            every => (trainer.step() / every + 1)
+                .saturating_mul(every)
+                .min(total),
         };
         trainer.run_until(next, |progress| {
             bar.set_position(progress.step as u64);
