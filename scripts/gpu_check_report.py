@@ -213,6 +213,13 @@ def assemble(work):
         kind = step.get("kind")
         if kind == "test":
             tests.append(test_result(step))
+        elif kind == "test-serial" and tests and tests[-1]["name"] == step.get("name"):
+            # The failed binary's rerun with one test at a time (gpu_check.sh): kept with it,
+            # not counted again.
+            rerun = test_result(step)
+            tests[-1]["serial_rerun"] = {key: rerun[key] for key in
+                                         ("status", "passed", "failed", "failures", "seconds")
+                                         if key in rerun}
         elif kind == "bench":
             benches.append(bench_result(step))
         elif kind == "adapters":
@@ -271,8 +278,10 @@ def print_summary(report):
           f"{tests['passed']} tests passed, {tests['failed']} failed")
     for test in tests["binaries"]:
         if test["status"] != "passed":
+            rerun = test.get("serial_rerun")
+            serial = f" (one test at a time: {rerun['status']})" if rerun else ""
             print(f"  {test['name']}: {test['status']} {test.get('reason', '')}"
-                  f"{' '.join(test.get('failures', []))}")
+                  f"{' '.join(test.get('failures', []))}{serial}")
     for bench in report["benches"]:
         took = f" in {bench['seconds']:.0f} s" if bench.get("seconds") is not None else ""
         print(f"bench {bench['name']}: {bench['status']}{took} {headline(bench)}".rstrip())

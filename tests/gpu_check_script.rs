@@ -227,6 +227,19 @@ fn a_run_over_a_stub_pack_reports_every_step() {
     assert_eq!(by_name("passes")["ignored"], 1);
     assert_eq!(by_name("fails")["status"], "failed");
     assert_eq!(by_name("fails")["failures"][0], "broken_on_gpu");
+    // A failed binary runs again one test at a time, kept with it and not counted twice; a
+    // timed-out one does not.
+    assert_eq!(
+        by_name("fails")["serial_rerun"]["status"],
+        "failed",
+        "{tests}"
+    );
+    assert_eq!(
+        by_name("fails")["serial_rerun"]["failures"][0],
+        "broken_on_gpu"
+    );
+    assert!(by_name("passes").get("serial_rerun").is_none());
+    assert!(by_name("hangs").get("serial_rerun").is_none());
     assert_eq!(by_name("hangs")["status"], "timeout");
     assert_eq!(tests["passed"], 3);
     assert_eq!(tests["failed"], 1);
