@@ -7,6 +7,7 @@ mod gpu_support;
 
 use gpu_support::segsplat;
 use segsplat_engine::checkpoint::Checkpoint;
+use segsplat_engine::schedule::LearningRates;
 use segsplat_engine::train::convergence::ConvergenceStop;
 use segsplat_engine::train::trainer::{initial_model, plain_initial_model};
 use segsplat_engine::train::{TrainConfig, Trainer, TrainerMeta};
@@ -94,6 +95,55 @@ fn short_training_reaches_held_out_psnr() {
 
 /// Densification never grows the model past its Gaussian budget, and fills it: the candidates
 /// it keeps are the highest-gradient ones, so a budget above the start is reached, not skipped.
+/// A run longer than the steps its schedule is laid out over (`schedule_steps`) polishes after
+/// them: every learning rate decays (`TrainSchedule::polish_factor_at`), so its Gaussians move far
+/// less in those steps than the same run's do without the polish. Both runs are the same up to
+/// step 20 and differ after it only in the polish (no densification, the coarse steps, the SH
+/// ramp and the position decay given alike).
+#[test]
+fn a_run_past_its_schedule_polishes_what_it_laid_out() {
+    let Some(ctx) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let scene = synthetic_scene(dir.path());
+    let moved_after_step_20 = |schedule_steps: Option<u32>| {
+        let config = TrainConfig {
+            schedule_steps,
+            coarse_until: Some(0),
+            learning_rates: LearningRates {
+                position_decay_steps: Some(20),
+                ..LearningRates::default()
+            },
+            ..config(60)
+        };
+        let mut trainer = Trainer::new(&ctx, &scene, config, None).unwrap();
+        trainer.run_until(20, |_| true).unwrap();
+        let laid_out = trainer.model().unwrap();
+        trainer.run(|_| true).unwrap();
+        let end = trainer.model().unwrap();
+        let colours: f32 = laid_out
+            .sh_coefficients
+            .iter()
+            .zip(&end.sh_coefficients)
+            .map(|(a, b)| (0..3).map(|c| (a[0][c] - b[0][c]).abs()).sum::<f32>())
+            .sum();
+        let opacities: f32 = laid_out
+            .opacity_logits
+            .iter()
+            .zip(&end.opacity_logits)
+            .map(|(a, b)| (a - b).abs())
+            .sum();
+        colours + opacities
+    };
+    let polished = moved_after_step_20(Some(20));
+    let full_rate = moved_after_step_20(None);
+    eprintln!("moved after step 20: polished {polished:.3}, at full rate {full_rate:.3}");
+    assert!(full_rate > 0.0);
+    assert!(
+        polished < 0.4 * full_rate,
+        "the polish moved the Gaussians {polished} against {full_rate} at full rate"
+    );
+}
+
 #[test]
 fn densification_stays_within_the_gaussian_budget() {
     let Some(ctx) = gpu() else { return };

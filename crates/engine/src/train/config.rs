@@ -18,6 +18,15 @@ pub const MAX_COARSE_HALVINGS: u32 = 4;
 pub struct TrainConfig {
     /// Optimisation steps (one training view each).
     pub steps: u32,
+    /// Steps the schedule's stages are laid out over (densification, SH bands, the position
+    /// rate's decay, coarse steps, the deformation field's warm-up); `None` is `steps`. A run
+    /// longer than this polishes what it laid out: from here every learning rate decays to
+    /// [`crate::train::schedule::POLISH_FINAL_SHARE`] of its value over as many steps again, and
+    /// stays there ([`crate::train::TrainSchedule::polish_factor_at`]). A job that asks for more
+    /// steps than its scene needs gets the scene's steps here, so the extra steps cannot
+    /// stretch its schedule into overfitting (docs/segment_then_splat.md, "Longer than the
+    /// scene needs").
+    pub schedule_steps: Option<u32>,
     /// Longest image side in pixels; images are downscaled to it (never upscaled).
     pub max_resolution: Option<u32>,
     /// Every n-th view (by capture order, starting with the first) is held out for evaluation,
@@ -81,6 +90,7 @@ impl Default for TrainConfig {
     fn default() -> Self {
         Self {
             steps: 30_000,
+            schedule_steps: None,
             max_resolution: Some(1600),
             eval_split_every: 8,
             seed: 0,
@@ -124,6 +134,9 @@ impl TrainConfig {
         };
         if self.steps == 0 {
             return fail("steps", "must be at least 1");
+        }
+        if self.schedule_steps == Some(0) {
+            return fail("schedule_steps", "must be at least 1");
         }
         if self.max_resolution == Some(0) {
             return fail("max_resolution", "must be positive");

@@ -29,8 +29,9 @@ pub struct ObjectLossConfig {
     pub middle_from: f32,
     /// Fraction of the steps after which the large level joins.
     pub large_from: f32,
-    /// Fraction of the steps from which partial masks are filtered (released: 30k of 40k). 1.0
-    /// filters after the last step: the left-out pairs then only leave the embeddings.
+    /// Fraction of the laid-out steps (`TrainConfig::schedule_steps`, else the steps) from which
+    /// partial masks are filtered (released: 30k of 40k). 1.0 filters after the last of them:
+    /// the left-out pairs then only leave the embeddings.
     pub partial_filter_from: f32,
     /// An (object, view) pair whose rendered mask (alpha > 0.5) has IoU below this with the
     /// 2D mask is skipped from then on.

@@ -398,7 +398,7 @@ impl Trainer {
                 .initial_parameters(&mut field_rng);
             let times: Vec<f32> = trainer.views.train.iter().map(|v| v.time).collect();
             let schedule = trainer.schedule.deformation.unwrap_or_else(|| {
-                DeformationSchedule::resolve(&deformation, trainer.config.steps)
+                DeformationSchedule::resolve(&deformation, trainer.schedule.laid_out_over)
             });
             trainer.dynamics = Some(dynamics::Dynamics::new(
                 ctx,

@@ -85,6 +85,9 @@ pub struct SceneSizedFields {
     /// `object_loss.fade_from_step`: the scene-sized steps, so only a job longer than the scene
     /// needs fades its object loss (`null` keeps the full weight to the end).
     pub object_loss_fade: bool,
+    /// `schedule_steps`: the scene-sized steps when the job asks for more, so its schedule is
+    /// the scene's and its extra steps polish (`TrainConfig::schedule_steps`).
+    pub schedule_steps: bool,
     /// `deformation`: the deformation field (docs/method.md "Dynamic scenes") for scenes whose
     /// frames carry times, none for static ones.
     pub deformation: bool,
@@ -102,6 +105,7 @@ impl SceneSizedFields {
             objects_per_level: absent("/object_loss/objects_per_level"),
             level_schedule: absent("/object_loss/middle_from") && absent("/object_loss/large_from"),
             object_loss_fade: absent("/object_loss/fade_from_step"),
+            schedule_steps: absent("/schedule_steps"),
             deformation: absent("/deformation"),
             background: absent("/background"),
         }
@@ -124,23 +128,38 @@ impl SceneSizedFields {
         }
     }
 
-    /// Fills the scene-sized fields of `config` for a scene of `training_views` views. Each
-    /// level joins at the released code's step (5k, 10k) or at the released code's share of
-    /// this run (a quarter and a half of a small scene's 20k), whichever comes first, so every
-    /// level trains in every run. A run as long as the released one or longer keeps the
-    /// released steps; a shorter one, with its steps given or sized from the scene, joins at the
+    /// Fills the scene-sized fields of `config` for a scene of `training_views` views.
+    ///
+    /// A job that asks for more steps than the scene needs lays its schedule out over the
+    /// scene's steps and polishes after them (`schedule_steps`), and its object loss fades from
+    /// there (`fade_from_step`): stretched over five times the steps, the recipe's schedule
+    /// overfit the figurine's 20 views (docs/segment_then_splat.md, "Longer than the scene
+    /// needs").
+    ///
+    /// Each level joins at the released code's step (5k, 10k) or at the released code's share
+    /// of the object loss's run (a quarter and a half of a small scene's 20k), whichever comes
+    /// first, so every level trains in every run; that run is the laid-out steps. A run as long
+    /// as the released one or longer keeps the released steps; a shorter one joins at the
     /// shares. The released steps alone left a 4000-step job without its middle and large
     /// levels: on the figurine it held out 18.58 dB, against 20.65 and 20.87 (two seeds) with
     /// the shares (docs/segment_then_splat.md).
     pub fn apply(self, training_views: usize, config: &mut TrainConfig) {
         let size = SceneSize::of(training_views);
+        let scene_steps = scene_sized_steps(training_views);
         if self.steps {
-            config.steps = scene_sized_steps(training_views);
+            config.steps = scene_steps;
         }
-        // The earlier of the released step and its share of this run: the released step over
-        // the longer of the two runs.
-        let longer_run = config.steps.max(size.released_steps()) as f32;
-        let joins_at = |released_step: f32| (released_step / longer_run).min(1.0);
+        if self.schedule_steps && config.steps > scene_steps {
+            config.schedule_steps = Some(scene_steps);
+        }
+        let steps = config.steps.max(1);
+        let laid_out = config.schedule_steps.unwrap_or(steps).clamp(1, steps);
+        // The earlier of the released step and its share of the laid-out run, as a share of
+        // the whole job.
+        let longer_run = laid_out.max(size.released_steps()) as f32;
+        let joins_at = |released_step: f32| {
+            (released_step * laid_out as f32 / longer_run / steps as f32).min(1.0)
+        };
         let object_loss = config
             .object_loss
             .get_or_insert_with(ObjectLossConfig::default);
@@ -152,7 +171,7 @@ impl SceneSizedFields {
             object_loss.large_from = joins_at(LARGE_FROM_STEP);
         }
         if self.object_loss_fade {
-            object_loss.fade_from_step = Some(scene_sized_steps(training_views));
+            object_loss.fade_from_step = Some(scene_steps);
         }
     }
 }
@@ -172,6 +191,7 @@ mod tests {
                 objects_per_level: false,
                 level_schedule: true,
                 object_loss_fade: true,
+                schedule_steps: true,
                 deformation: true,
                 background: true,
             }
@@ -202,28 +222,44 @@ mod tests {
         SceneSizedFields::default().apply(20, &mut given);
         assert_eq!(given.steps, TrainConfig::default().steps);
 
-        // Given steps longer than the released run keep the released steps for the levels
-        // (5k and 10k of 40k)...
-        let given = |steps: u32| {
-            let mut explicit = TrainConfig {
-                steps,
-                ..TrainConfig::default()
-            };
-            SceneSizedFields::left_out_of(&serde_json::json!({ "steps": steps }))
-                .apply(20, &mut explicit);
-            assert_eq!(explicit.steps, steps);
-            let object_loss = explicit.object_loss.unwrap();
-            (object_loss.middle_from, object_loss.large_from)
+        // Given steps longer than the scene needs lay the schedule out over the scene's steps,
+        // and the levels join at their shares of those (steps 750 and 1500 of 3000)...
+        let given = |submitted: serde_json::Value| {
+            let mut explicit: TrainConfig =
+                serde_json::from_value(submitted.clone()).expect("a train config");
+            SceneSizedFields::left_out_of(&submitted).apply(20, &mut explicit);
+            let object_loss = explicit.object_loss.expect("the object loss");
+            let steps = explicit.steps as f32;
+            (
+                explicit.schedule_steps,
+                (object_loss.middle_from * steps).round() as u32,
+                (object_loss.large_from * steps).round() as u32,
+            )
         };
-        let (middle, large) = given(40_000);
-        assert!((middle - 0.125).abs() < 1e-6 && (large - 0.25).abs() < 1e-6);
-        // ...and shorter ones join at the released shares, so every level trains: a 4000-step
-        // run has its middle level from step 1000 and its large one from step 2000, not never.
-        let (middle, large) = given(4_000);
-        assert!((middle - 0.25).abs() < 1e-6 && (large - 0.5).abs() < 1e-6);
-        // Between the two, whichever comes first: 30k steps join at 5k and 10k (not 7.5k, 15k).
-        let (middle, large) = given(30_000);
-        assert!((middle - 5.0 / 30.0).abs() < 1e-6 && (large - 10.0 / 30.0).abs() < 1e-6);
+        for steps in [4_000, 15_000, 40_000] {
+            let laid_out = given(serde_json::json!({ "steps": steps }));
+            assert_eq!(laid_out, (Some(3_000), 750, 1_500), "{steps} steps");
+        }
+        // ...and the scene's own steps (or fewer) need no separate schedule.
+        assert_eq!(given(serde_json::json!({})), (None, 750, 1_500));
+        assert_eq!(
+            given(serde_json::json!({"steps": 2_000})),
+            (None, 500, 1_000)
+        );
+        // A schedule over all the given steps (`null`): a run as long as the released one or
+        // longer keeps the released steps (5k and 10k), a shorter one joins at the released
+        // shares, so every level trains, and between the two whichever comes first: 30k
+        // steps join at 5k and 10k (not 7.5k, 15k).
+        let stretched =
+            |steps: u32| given(serde_json::json!({"steps": steps, "schedule_steps": null}));
+        assert_eq!(stretched(40_000), (None, 5_000, 10_000));
+        assert_eq!(stretched(30_000), (None, 5_000, 10_000));
+        assert_eq!(stretched(4_000), (None, 1_000, 2_000));
+        // A given schedule is kept, and the levels follow it.
+        assert_eq!(
+            given(serde_json::json!({"steps": 9_000, "schedule_steps": 6_000})),
+            (Some(6_000), 1_500, 3_000)
+        );
     }
 
     #[test]

@@ -16,16 +16,25 @@ impl Trainer {
         sh_degree: u32,
     ) -> Result<(), TrainError> {
         let rates = &self.config.learning_rates;
+        // Past the laid-out steps every group's rate decays alike (TrainSchedule::polish_factor_at).
+        let polish = self.schedule.polish_factor_at(self.step);
         let position_rate = rates.position_at(
             self.step,
             self.schedule.position_decay_steps,
             self.scene_extent,
-        );
+        ) * polish;
+        let [scale_rate, rotation_rate, opacity_rate, sh_dc_rate, rest] = [
+            rates.scale,
+            rates.rotation,
+            rates.opacity,
+            rates.sh_dc,
+            rates.sh_rest(),
+        ]
+        .map(|rate| rate * polish);
         let p = &self.gaussians.parameters;
         let g = &self.grads.parameters;
         let m = &self.first_moments;
         let v = &self.second_moments;
-        let rest = rates.sh_rest();
         let groups: [(
             &wgpu::Buffer,
             &wgpu::Buffer,
@@ -41,7 +50,7 @@ impl Trainer {
                 &m.log_scales,
                 &v.log_scales,
                 3,
-                rates.scale,
+                scale_rate,
             ),
             (
                 &p.rotations,
@@ -49,7 +58,7 @@ impl Trainer {
                 &m.rotations,
                 &v.rotations,
                 4,
-                rates.rotation,
+                rotation_rate,
             ),
             (
                 &p.opacity_logits,
@@ -57,9 +66,9 @@ impl Trainer {
                 &m.opacity_logits,
                 &v.opacity_logits,
                 1,
-                rates.opacity,
+                opacity_rate,
             ),
-            (&p.sh_dc, &g.sh_dc, &m.sh_dc, &v.sh_dc, 3, rates.sh_dc),
+            (&p.sh_dc, &g.sh_dc, &m.sh_dc, &v.sh_dc, 3, sh_dc_rate),
             (
                 &p.sh_rest[0],
                 &g.sh_rest[0],

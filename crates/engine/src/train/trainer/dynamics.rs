@@ -154,7 +154,8 @@ impl Trainer {
         let field_step = adam_step
             .saturating_sub(dynamics.schedule.warm_up_steps)
             .max(1);
-        let rate = dynamics.config.learning_rate_at(step, &dynamics.schedule);
+        let rate = dynamics.config.learning_rate_at(step, &dynamics.schedule)
+            * self.schedule.polish_factor_at(step);
         dynamics
             .field
             .encode_adam(&self.ctx, encoder, &self.adam, rate, field_step)?;

@@ -55,14 +55,15 @@ impl Trainer {
         self.fit_check.converged
     }
 
-    /// The step the partial-mask filter runs after: its share of the configured steps, or
-    /// earlier when the convergence stop's verdict came first.
+    /// The step the partial-mask filter runs after: its share of the laid-out steps (the
+    /// configured steps unless `schedule_steps` is shorter), or earlier when the convergence
+    /// stop's verdict came first.
     pub(super) fn partial_filter_step(&self) -> Option<u32> {
         let configured = self
             .config
             .object_loss
             .as_ref()
-            .map(|objects| objects.partial_filter_step(self.config.steps))?;
+            .map(|objects| objects.partial_filter_step(self.schedule.laid_out_over))?;
         Some(
             self.fit_check
                 .converged
