@@ -371,6 +371,11 @@ fn train_stage(
         // No point at the end, which the job evaluates itself (also an end the convergence
         // stop brought forward).
         if trainer.step() == next_held_out && trainer.step() < trainer.end_step() {
+            // The steps' work still queued on the device is training time: waited for here, not
+            // inside the evaluation's read-back, whose seconds the later points leave out (with
+            // the host ahead of the device, they came out smaller than an earlier point's).
+            gpu.wait_idle()
+                .map_err(|error| train_failure(error.into()))?;
             let evaluating = std::time::Instant::now();
             let host_at_eval = gpu.host_costs.reading();
             let eval = trainer.evaluate().map_err(train_failure)?;
