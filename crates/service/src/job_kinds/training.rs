@@ -372,20 +372,22 @@ fn train_stage(
         // stop brought forward).
         if trainer.step() == next_held_out && trainer.step() < trainer.end_step() {
             // The steps' work still queued on the device is training time: waited for here, not
-            // inside the evaluation's read-back, whose seconds the later points leave out (with
-            // the host ahead of the device, they came out smaller than an earlier point's).
+            // inside the evaluation's read-back, whose seconds the later points leave out.
             gpu.wait_idle()
                 .map_err(|error| train_failure(error.into()))?;
+            // Taken before this evaluation, which later points leave out: taken after it, a
+            // slow first evaluation made the next point's training time smaller than this one's.
+            let train_seconds = started.elapsed().as_secs_f64()
+                - checkpoint_seconds
+                - report_seconds
+                - held_out_curve_seconds;
             let evaluating = std::time::Instant::now();
             let host_at_eval = gpu.host_costs.reading();
             let eval = trainer.evaluate().map_err(train_failure)?;
             outside_steps_host.add(&gpu.host_costs.reading().since(&host_at_eval));
             held_out_curve.push(HeldOutPoint {
                 step: trainer.step(),
-                train_seconds: started.elapsed().as_secs_f64()
-                    - checkpoint_seconds
-                    - report_seconds
-                    - held_out_curve_seconds,
+                train_seconds,
                 gaussians: trainer.gaussian_count(),
                 psnr: eval.psnr,
                 ssim: eval.ssim,
