@@ -3,7 +3,8 @@
 2: more training must never make a scene worse). Uploads a dataset once, then runs one
 segment_then_splat job per step count, one after another so each has the machine to itself,
 and prints each job's held-out PSNR / SSIM, its curve (held-out PSNR every `held_out_every`
-steps) and its wall time. Standard library only (the demo's client helpers).
+steps) and its wall time, following each job's events with the demo's progress bars. Standard
+library only (scripts/demo_walkthrough.py's client helpers).
 
     python3 scripts/schedule_check.py --url http://127.0.0.1:8080 --dataset DIR \\
         --steps 3000,6000,15000 [--max-resolution 256] [--seed 42] [--config '{"...": ...}'] \\
@@ -21,21 +22,19 @@ import sys
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from demo_walkthrough import dataset_archive, get_json, post_json, request  # noqa: E402
+from demo_walkthrough import (  # noqa: E402
+    ProgressView, dataset_archive, follow_job, post_json, request)
 
 
-def run_job(url, scene_id, config, poll_seconds):
+def run_job(url, scene_id, config):
     started = time.monotonic()
     job = post_json(f"{url}/v1/scenes/{scene_id}/jobs",
                     {"kind": "segment_then_splat", "config": config})
-    while True:
-        state = get_json(f"{url}/v1/jobs/{job['id']}")
-        if state.get("state") in ("succeeded", "failed", "cancelled"):
-            break
-        time.sleep(poll_seconds)
+    final = follow_job(url, job["id"], ProgressView())
     wall = time.monotonic() - started
-    if state["state"] != "succeeded":
-        sys.exit(f"job {job['id']} {state['state']}: {state.get('error')}")
+    if not final or final.get("state") != "succeeded":
+        reason = (final or {}).get("error") or "the event stream ended early"
+        sys.exit(f"job {job['id']} {(final or {}).get('state', 'ended')}: {reason}")
     metrics = json.loads(request(f"{url}/v1/scenes/{scene_id}/trained/metrics.json"))
     training = metrics.get("training") or {}
     held_out = metrics.get("held_out") or {}
@@ -66,7 +65,6 @@ def main():
     parser.add_argument("--held-out-every", type=int, default=500)
     parser.add_argument("--config", default="{}", help="JSON merged into every job's config")
     parser.add_argument("--json", help="also write the results here")
-    parser.add_argument("--poll-seconds", type=float, default=1.0)
     args = parser.parse_args()
     url = args.url.rstrip("/")
     extra = json.loads(args.config)
@@ -87,7 +85,7 @@ def main():
         if args.max_resolution:
             config["max_resolution"] = args.max_resolution
         config.update(extra)
-        result = run_job(url, scene["id"], config, args.poll_seconds)
+        result = run_job(url, scene["id"], config)
         curve = " ".join(f"{step}:{psnr:.2f}" for step, psnr, _, _ in result["curve"])
         print(f"{result['steps']} steps: held-out {result['held_out_psnr']:.2f} dB / "
               f"{result['held_out_ssim']:.3f}, wall {result['wall_seconds']} s "

@@ -210,6 +210,13 @@ impl TrainConfig {
         Ok(())
     }
 
+    /// The steps the schedule is laid out over: `schedule_steps`, else `steps`, within 1 and
+    /// `steps`.
+    pub fn laid_out_steps(&self) -> u32 {
+        let steps = self.steps.max(1);
+        self.schedule_steps.unwrap_or(steps).clamp(1, steps)
+    }
+
     /// When each stage runs in this job (defaults scaled to `steps`).
     pub fn schedule(&self) -> TrainSchedule {
         TrainSchedule::resolve(self)

@@ -151,10 +151,7 @@ impl TrainSchedule {
     pub fn resolve(config: &TrainConfig) -> Self {
         let job_steps = config.steps.max(1);
         // Every default below is laid out over these; a longer job polishes after them.
-        let steps = config
-            .schedule_steps
-            .unwrap_or(job_steps)
-            .clamp(1, job_steps);
+        let steps = config.laid_out_steps();
         let densify_interval = config.densify_interval.unwrap_or_else(|| {
             scaled(RECIPE_DENSIFY_INTERVAL, steps).max(MIN_DENSIFY_INTERVAL.min(steps))
         });

@@ -153,7 +153,7 @@ impl SceneSizedFields {
             config.schedule_steps = Some(scene_steps);
         }
         let steps = config.steps.max(1);
-        let laid_out = config.schedule_steps.unwrap_or(steps).clamp(1, steps);
+        let laid_out = config.laid_out_steps();
         // The earlier of the released step and its share of the laid-out run, as a share of
         // the whole job.
         let longer_run = laid_out.max(size.released_steps()) as f32;
