@@ -1,6 +1,7 @@
 //! `ExclusiveScan` against a CPU prefix sum (exact: integer sums, wrapping like the GPU), the
-//! deferred read-back the training loop reads its progress with (`DeferredRead`), and the
-//! context's kernel cache every kernel is built through.
+//! deferred read-back the training loop reads its progress with (`DeferredRead`), the
+//! context's kernel cache every kernel is built through, and the encoder whose dispatches share
+//! a compute pass.
 
 mod gpu_support;
 
@@ -204,4 +205,58 @@ fn kernels_compile_once_per_context_and_rejected_ones_are_not_kept() {
     }
     let compiles = ctx.kernel_compiles();
     assert_eq!((compiles.compiled, compiles.reused), (1, 1));
+}
+
+/// Consecutive dispatches share one compute pass (`segsplat_gpu::Encoder`), and wgpu still
+/// orders them: the second reads what the first wrote across the whole buffer. A copy recorded
+/// between dispatches ends the pass, so it sees the dispatches before it and the dispatch after
+/// it sees the copy. On a context of its own, so the pass count is this test's alone.
+#[test]
+fn dispatches_share_a_pass_in_order_until_something_else_is_recorded() {
+    if gpu_context().is_none() {
+        return;
+    }
+    let ctx = segsplat_gpu::GpuContext::new_default().expect("a second context on the adapter");
+    let source = "@group(0) @binding(0) var<storage, read_write> input: array<u32>;\n\
+                  @group(0) @binding(1) var<storage, read_write> output: array<u32>;\n\
+                  @compute @workgroup_size(64) fn main(@builtin(global_invocation_id) id: vec3<u32>) {\n\
+                      output[id.x] = input[id.x] * 3u + 1u;\n\
+                  }";
+    let kernel = Kernel::new(&ctx, "pass_probe", &[source], "main", &[]).unwrap();
+    // Large enough that a missing barrier would let a later dispatch's workgroups overtake
+    // the earlier one's on a GPU.
+    const COUNT: usize = 1 << 16;
+    let start: Vec<u32> = (0..COUNT as u32).collect();
+    let [a, b, c, d] = ["a", "b", "c", "d"].map(|label| storage_buffer(&ctx, label, &start));
+    let groups = [(COUNT / 64) as u32, 1, 1];
+    let step = |x: u32| x.wrapping_mul(3).wrapping_add(1);
+
+    let before = ctx.host_costs.reading();
+    let mut encoder = new_encoder(&ctx);
+    kernel.dispatch(&mut encoder, &kernel.bind(&ctx, &[&a, &b]), groups);
+    kernel.dispatch(&mut encoder, &kernel.bind(&ctx, &[&b, &c]), groups);
+    encoder.copy_buffer_to_buffer(&c, 0, &d, 0, (COUNT * 4) as u64);
+    kernel.dispatch(&mut encoder, &kernel.bind(&ctx, &[&d, &a]), groups);
+    submit(&ctx, encoder);
+    let passes = ctx.host_costs.reading().since(&before).compute_passes;
+    assert_eq!(
+        passes, 2,
+        "two dispatches in one pass, the third after the copy in another"
+    );
+
+    let expected_c: Vec<u32> = start.iter().map(|&x| step(step(x))).collect();
+    let expected_a: Vec<u32> = expected_c.iter().map(|&x| step(x)).collect();
+    assert_eq!(ctx.read_vec::<u32>(&c).unwrap(), expected_c);
+    assert_eq!(ctx.read_vec::<u32>(&d).unwrap(), expected_c);
+    assert_eq!(ctx.read_vec::<u32>(&a).unwrap(), expected_a);
+
+    // `end_pass` gives each dispatch a pass of its own, as every dispatch had before.
+    let before = ctx.host_costs.reading();
+    let mut encoder = new_encoder(&ctx);
+    for _ in 0..3 {
+        kernel.dispatch(&mut encoder, &kernel.bind(&ctx, &[&a, &b]), groups);
+        encoder.end_pass();
+    }
+    submit(&ctx, encoder);
+    assert_eq!(ctx.host_costs.reading().since(&before).compute_passes, 3);
 }

@@ -112,7 +112,7 @@ fn separate(ctx: &GpuContext, variant: RasterVariant, case: &Case) -> (Vec<Vec<[
     renderer.set_intersection_capacity(1 << 20);
     let gaussians = GpuGaussians::upload(ctx, &case.model, case.model.len()).unwrap();
     let mut grads = GpuGaussianGrads::new(ctx, case.model.len()).unwrap();
-    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    let mut encoder = segsplat_gpu::Encoder::new(ctx, "test");
     grads.encode_zero(&mut encoder);
     let settings = std::iter::once(full_settings()).chain(case.slots.iter().map(object_settings));
     let mut outputs = Vec::new();
@@ -150,7 +150,7 @@ fn batched(ctx: &GpuContext, variant: RasterVariant, case: &Case) -> (Vec<Vec<[f
     renderer.set_intersection_capacity(1 << 20);
     let gaussians = GpuGaussians::upload(ctx, &case.model, case.model.len()).unwrap();
     let mut grads = GpuGaussianGrads::new(ctx, case.model.len()).unwrap();
-    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    let mut encoder = segsplat_gpu::Encoder::new(ctx, "test");
     grads.encode_zero(&mut encoder);
     let full_grad = buffer(ctx, &case.weights[0]);
     let base = renderer
@@ -322,7 +322,7 @@ fn object_batch_rejects_a_filtered_base_and_no_slots() {
     let case = Case::new(3, 50, 32, 32);
     let mut renderer = Renderer::new(&ctx).unwrap();
     let gaussians = GpuGaussians::upload(&ctx, &case.model, case.model.len()).unwrap();
-    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    let mut encoder = segsplat_gpu::Encoder::new(&ctx, "test");
     let filtered = RenderSettings {
         filter: ObjectFilter::Object {
             level: Level::Small,
@@ -390,7 +390,7 @@ fn mask_iou_counts_match_the_overlap_of_the_read_back_renders() {
     // stale values first.
     let first_pair = 2;
     let counts = MaskIouCounts::new(&ctx, first_pair + case.slots.len()).unwrap();
-    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    let mut encoder = segsplat_gpu::Encoder::new(&ctx, "test");
     let base = renderer
         .forward(
             &ctx,

@@ -90,7 +90,7 @@ fn gpu_gradients_with(
             contents: bytemuck::cast_slice(weights),
             usage: wgpu::BufferUsages::STORAGE,
         });
-    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    let mut encoder = segsplat_gpu::Encoder::new(ctx, "test");
     grads.encode_zero(&mut encoder);
     for _ in 0..renders {
         let output = renderer
@@ -357,7 +357,7 @@ fn gpu_intersection_overflow_is_reported_and_grown() {
     let settings = RenderSettings::default();
     let gaussians = GpuGaussians::upload(&ctx, &model, model.len()).unwrap();
     renderer.set_intersection_capacity(1);
-    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    let mut encoder = segsplat_gpu::Encoder::new(&ctx, "test");
     let output = renderer
         .forward(&ctx, &mut encoder, &gaussians, &camera, &settings)
         .unwrap();

@@ -47,14 +47,11 @@ fn usage() -> wgpu::BufferUsages {
     wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST
 }
 
-pub fn new_encoder(ctx: &GpuContext) -> wgpu::CommandEncoder {
-    ctx.device
-        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("test"),
-        })
+pub fn new_encoder(ctx: &GpuContext) -> segsplat_gpu::Encoder {
+    segsplat_gpu::Encoder::new(ctx, "test")
 }
 
-pub fn submit(ctx: &GpuContext, encoder: wgpu::CommandEncoder) {
+pub fn submit(ctx: &GpuContext, encoder: segsplat_gpu::Encoder) {
     ctx.submit(encoder.finish());
 }
 

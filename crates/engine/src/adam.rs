@@ -149,7 +149,7 @@ impl Adam {
     pub fn encode_steps(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         groups: &[AdamGroup<'_>],
         step: u32,
     ) -> Result<(), AdamError> {
@@ -185,7 +185,7 @@ impl Adam {
     pub fn encode_step(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         buffers: &AdamBuffers<'_>,
         element_count: u32,
         learning_rate: f32,

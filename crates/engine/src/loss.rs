@@ -515,7 +515,7 @@ impl RenderLoss {
     pub fn encode(
         &mut self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         images: &LossImages<'_>,
         weight: f32,
         outputs: &LossOutputs<'_>,
@@ -583,7 +583,7 @@ impl RenderLoss {
     pub fn encode_objects(
         &mut self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         images: &ObjectLossImages<'_>,
         weight: f32,
         outputs: &LossOutputs<'_>,
@@ -679,7 +679,7 @@ impl RenderLoss {
     fn encode_work_lists(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         scratch: &LossScratch,
         bindings: &PassBindings<'_>,
         content: Option<&ObjectContentHints<'_>>,
@@ -761,11 +761,11 @@ impl RenderLoss {
     fn encode_passes(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         scratch: &LossScratch,
         bindings: &PassBindings<'_>,
         slots: u32,
-        dispatch: &dyn Fn(&Kernel, &mut wgpu::CommandEncoder, &segsplat_gpu::Bound, bool),
+        dispatch: &dyn Fn(&Kernel, &mut segsplat_gpu::Encoder, &segsplat_gpu::Bound, bool),
     ) {
         let bind = self.moments_horizontal.bind_with(
             ctx,

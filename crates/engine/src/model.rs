@@ -496,7 +496,7 @@ impl GpuGaussianGrads {
     }
 
     /// Records clearing every gradient buffer to zero.
-    pub fn encode_zero(&self, encoder: &mut wgpu::CommandEncoder) {
+    pub fn encode_zero(&self, encoder: &mut segsplat_gpu::Encoder) {
         for buffer in self.parameters.all() {
             encoder.clear_buffer(buffer, 0, None);
         }

@@ -225,6 +225,7 @@ pub struct HostCosts {
     wait_nanos: AtomicU64,
     submit_nanos: AtomicU64,
     bind_groups_created: AtomicU64,
+    pub(crate) compute_passes: AtomicU64,
     buffers_created: AtomicU64,
 }
 
@@ -240,6 +241,8 @@ pub struct HostCostReading {
     pub submit_nanos: u64,
     /// Bind groups created by kernels (not found in the cache).
     pub bind_groups_created: u64,
+    /// Compute passes recorded (see [`crate::Encoder`]: consecutive dispatches share one).
+    pub compute_passes: u64,
     /// Buffers created for kernel parameters the uniform ring could not take, and by callers
     /// that count theirs through [`GpuContext::count_buffer_created`].
     pub buffers_created: u64,
@@ -253,6 +256,7 @@ impl HostCosts {
             wait_nanos: self.wait_nanos.load(Ordering::Relaxed),
             submit_nanos: self.submit_nanos.load(Ordering::Relaxed),
             bind_groups_created: self.bind_groups_created.load(Ordering::Relaxed),
+            compute_passes: self.compute_passes.load(Ordering::Relaxed),
             buffers_created: self.buffers_created.load(Ordering::Relaxed),
         }
     }
@@ -269,6 +273,7 @@ impl HostCostReading {
             bind_groups_created: self
                 .bind_groups_created
                 .saturating_sub(earlier.bind_groups_created),
+            compute_passes: self.compute_passes.saturating_sub(earlier.compute_passes),
             buffers_created: self.buffers_created.saturating_sub(earlier.buffers_created),
         }
     }
@@ -280,6 +285,7 @@ impl HostCostReading {
         self.wait_nanos += other.wait_nanos;
         self.submit_nanos += other.submit_nanos;
         self.bind_groups_created += other.bind_groups_created;
+        self.compute_passes += other.compute_passes;
         self.buffers_created += other.buffers_created;
     }
 

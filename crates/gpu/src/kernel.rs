@@ -15,7 +15,7 @@ use crate::kernel_layout::{BindingKind, layout_entries, reflect_bindings};
 use crate::profiler::KernelProfiler;
 use crate::uniform_ring::UniformParams;
 use crate::validation::validated;
-use crate::{GpuContext, GpuError};
+use crate::{Encoder, GpuContext, GpuError};
 
 /// Uniform bindings a kernel may have with dynamic offsets; more keep the automatic layout.
 const MAX_DYNAMIC_UNIFORMS: usize = 4;
@@ -270,40 +270,54 @@ impl Kernel {
             .and_then(|profiler| profiler.pass_writes(self.label))
     }
 
-    /// Records one dispatch of `workgroups` groups.
-    pub fn dispatch(
-        &self,
-        encoder: &mut wgpu::CommandEncoder,
-        bound: &Bound,
-        workgroups: [u32; 3],
-    ) {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some(self.label),
-            timestamp_writes: self.timestamp_writes(),
+    /// Records one dispatch of `workgroups` groups, in the encoder's open pass.
+    pub fn dispatch(&self, encoder: &mut Encoder, bound: &Bound, workgroups: [u32; 3]) {
+        self.record(encoder, bound, |pass| {
+            pass.dispatch_workgroups(workgroups[0], workgroups[1], workgroups[2]);
         });
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &bound.group, bound.dynamic_offsets());
-        pass.dispatch_workgroups(workgroups[0], workgroups[1], workgroups[2]);
-        self.dispatches.fetch_add(1, Ordering::Relaxed);
     }
 
     /// Records one dispatch whose group counts are read on the GPU from `indirect` at `offset`
     /// (three u32), so counts computed by earlier kernels need no CPU read-back.
     pub fn dispatch_indirect(
         &self,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut Encoder,
         bound: &Bound,
         indirect: &wgpu::Buffer,
         offset: u64,
     ) {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some(self.label),
-            timestamp_writes: self.timestamp_writes(),
+        self.record(encoder, bound, |pass| {
+            pass.dispatch_workgroups_indirect(indirect, offset);
         });
+    }
+
+    /// Sets this kernel and its bindings on the encoder's shared pass, or on a pass of its own
+    /// when the profiler times it, then records the dispatch.
+    fn record(
+        &self,
+        encoder: &mut Encoder,
+        bound: &Bound,
+        dispatch: impl FnOnce(&mut wgpu::ComputePass<'_>),
+    ) {
+        match self.timestamp_writes() {
+            Some(writes) => {
+                let mut pass = encoder.timed_pass(self.label, writes);
+                self.set_and_dispatch(&mut pass, bound, dispatch);
+            }
+            None => self.set_and_dispatch(encoder.shared_pass(), bound, dispatch),
+        }
+        self.dispatches.fetch_add(1, Ordering::Relaxed);
+    }
+
+    fn set_and_dispatch(
+        &self,
+        pass: &mut wgpu::ComputePass<'_>,
+        bound: &Bound,
+        dispatch: impl FnOnce(&mut wgpu::ComputePass<'_>),
+    ) {
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &bound.group, bound.dynamic_offsets());
-        pass.dispatch_workgroups_indirect(indirect, offset);
-        self.dispatches.fetch_add(1, Ordering::Relaxed);
+        dispatch(pass);
     }
 }
 

@@ -4,6 +4,7 @@
 pub mod bind_cache;
 pub mod context;
 pub mod deferred_read;
+pub mod encoder;
 pub mod kernel;
 pub mod kernel_cache;
 pub mod kernel_choices;
@@ -17,10 +18,11 @@ pub mod uniform_ring;
 pub mod validation;
 
 pub use context::{AdapterFilter, AdapterReport, GpuContext, GpuError, HostCostReading};
+pub use encoder::Encoder;
 pub use kernel::{Binding, Bound, Kernel};
 pub use kernel_cache::KernelCompiles;
 pub use kernel_choices::{GemmLayout, KernelChoices, RasterLayout};
-pub use profiler::{KernelProfile, KernelProfiler};
+pub use profiler::{BusyReading, KernelProfile, KernelProfiler, measure_busy};
 pub use release::{release_context, sole_owner};
 pub use scan::{ExclusiveScan, WorkgroupSum};
 pub use sort::{DEFAULT_SMALL_SORT_LIMIT, RadixSort};

@@ -138,6 +138,59 @@ impl KernelProfiler {
     }
 }
 
+/// What [`measure_busy`] found: the same work run untimed and then timed.
+#[derive(Debug, Clone)]
+pub struct BusyReading {
+    /// Wall milliseconds of the untimed run, from an idle device to an idle device.
+    pub wall_ms: f64,
+    /// Wall milliseconds of the timed run: longer, as each timed dispatch has a pass of its own.
+    pub profiled_wall_ms: f64,
+    /// GPU time of the timed run, by kernel.
+    pub profile: KernelProfile,
+}
+
+impl BusyReading {
+    /// The share of the untimed run's wall time the GPU spent in its kernels (at most 1).
+    pub fn busy_fraction(&self) -> f64 {
+        (self.profile.total_ms / self.wall_ms.max(1e-9)).min(1.0)
+    }
+}
+
+/// Runs `run` twice, which must record the same work each time (a fixed number of training
+/// steps): first untimed, for the wall time, then with every pass timed, for the GPU time. Timing
+/// gives every dispatch a pass of its own (see [`crate::Encoder`]), which costs the host more
+/// than the shared pass untimed work gets, so the wall time of a timed run would understate how
+/// busy the GPU is. `None` without a profiler, or when the profiler dropped passes.
+pub fn measure_busy<E>(
+    ctx: &GpuContext,
+    mut run: impl FnMut() -> Result<(), E>,
+    gpu_error: impl Fn(GpuError) -> E,
+) -> Result<Option<BusyReading>, E> {
+    let Some(profiler) = ctx.profiler.as_ref() else {
+        return Ok(None);
+    };
+    ctx.wait_idle().map_err(&gpu_error)?;
+    let started = std::time::Instant::now();
+    run()?;
+    ctx.wait_idle().map_err(&gpu_error)?;
+    let wall_ms = started.elapsed().as_secs_f64() * 1e3;
+    profiler.start();
+    let started = std::time::Instant::now();
+    let ran = run();
+    // Taken even when the run failed, so the profiler is left idle.
+    let profile = profiler.take(ctx).map_err(&gpu_error)?;
+    ran?;
+    let profiled_wall_ms = started.elapsed().as_secs_f64() * 1e3;
+    if profile.untimed_passes != 0 || wall_ms <= 0.0 {
+        return Ok(None);
+    }
+    Ok(Some(BusyReading {
+        wall_ms,
+        profiled_wall_ms,
+        profile,
+    }))
+}
+
 /// Sums each label's pass durations (`ticks` holds a begin and an end per pass).
 fn profile_from_ticks(
     labels: &[&'static str],

@@ -262,7 +262,7 @@ impl ExclusiveScan {
     pub fn encode(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut crate::Encoder,
         input: &wgpu::Buffer,
         output: &wgpu::Buffer,
         count: u32,
@@ -298,7 +298,7 @@ impl ExclusiveScan {
     pub(crate) fn encode_levels(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut crate::Encoder,
         input: &wgpu::Buffer,
         output: &wgpu::Buffer,
         levels_plan: &ScanLevels<'_>,
@@ -330,7 +330,7 @@ impl ExclusiveScan {
         };
         let max_groups = ctx.limits.max_compute_workgroups_per_dimension;
         let run = |kernel: &Kernel,
-                   encoder: &mut wgpu::CommandEncoder,
+                   encoder: &mut crate::Encoder,
                    bind_group: &crate::Bound,
                    level: usize| match dispatch {
             ScanDispatch::Direct(counts) => {

@@ -187,7 +187,7 @@ impl RadixSort {
     pub fn encode(
         &mut self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut crate::Encoder,
         keys: &wgpu::Buffer,
         values: &wgpu::Buffer,
         count_buffer: &wgpu::Buffer,
@@ -303,7 +303,7 @@ impl RadixSort {
     fn record_plan(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut crate::Encoder,
         scratch: &SortScratch,
         count_buffer: &wgpu::Buffer,
         count_offset: u64,
@@ -327,7 +327,7 @@ impl RadixSort {
     fn record_small(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut crate::Encoder,
         scratch: &SortScratch,
         target: &SmallSortTarget<'_>,
     ) {

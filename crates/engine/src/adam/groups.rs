@@ -101,7 +101,7 @@ impl AdamGroupsKernel {
     pub(super) fn encode(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         settings: &AdamSettings,
         groups: &[AdamGroup<'_>],
         step: u32,

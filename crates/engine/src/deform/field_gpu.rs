@@ -181,7 +181,7 @@ impl DeformationField {
         Ok(values)
     }
 
-    pub fn encode_zero_grads(&self, encoder: &mut wgpu::CommandEncoder) {
+    pub fn encode_zero_grads(&self, encoder: &mut segsplat_gpu::Encoder) {
         encoder.clear_buffer(&self.grads, 0, None);
     }
 
@@ -189,7 +189,7 @@ impl DeformationField {
     pub fn encode_adam(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         adam: &Adam,
         learning_rate: f32,
         step: u32,
@@ -315,7 +315,7 @@ impl DeformationField {
     fn encode_chunk_forward(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         means: &wgpu::Buffer,
         first: usize,
         rows: usize,
@@ -388,7 +388,7 @@ impl DeformationField {
     pub fn encode_forward(
         &mut self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         canonical: &GpuGaussians,
         deformed: &DeformedGeometry,
         time: f32,
@@ -436,7 +436,7 @@ impl DeformationField {
     pub fn encode_backward(
         &mut self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         canonical: &GpuGaussians,
         grads: &GpuGaussianGrads,
         time: f32,
@@ -479,7 +479,7 @@ impl DeformationField {
     fn encode_layers_backward(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         workspace: &Workspace,
         rows: u32,
     ) {

@@ -293,7 +293,7 @@ impl DeformKernels {
     pub fn gemm(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         params: GemmParams,
         splits: u32,
         buffers: GemmBuffers<'_>,
@@ -318,7 +318,7 @@ impl DeformKernels {
     pub fn column_sums(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         source: &wgpu::Buffer,
         source_offset: u32,
         source_row_stride: u32,
@@ -347,7 +347,7 @@ impl DeformKernels {
     pub fn split_reduce(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         partials: &wgpu::Buffer,
         count: u32,
         splits: u32,
@@ -370,7 +370,7 @@ impl DeformKernels {
     pub fn encode(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         params: EncodeParams,
         means: &wgpu::Buffer,
         encoded: &wgpu::Buffer,
@@ -387,7 +387,7 @@ impl DeformKernels {
     pub fn apply_forward(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         params: ApplyParams,
         buffers: &[&wgpu::Buffer; 7],
     ) {
@@ -399,7 +399,7 @@ impl DeformKernels {
     pub fn apply_backward(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         params: ApplyParams,
         buffers: &[&wgpu::Buffer; 7],
     ) {
@@ -411,7 +411,7 @@ impl DeformKernels {
 fn dispatch_apply(
     kernel: &Kernel,
     ctx: &GpuContext,
-    encoder: &mut wgpu::CommandEncoder,
+    encoder: &mut segsplat_gpu::Encoder,
     params: ApplyParams,
     buffers: &[&wgpu::Buffer; 7],
 ) {

@@ -190,11 +190,7 @@ pub fn measure_matmul(
             &operands.x
         };
         let record = |count: u32| {
-            let mut encoder = ctx
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("matmul bench"),
-                });
+            let mut encoder = segsplat_gpu::Encoder::new(ctx, "matmul bench");
             for _ in 0..count {
                 kernels.gemm(
                     ctx,

@@ -174,9 +174,8 @@ fn groups_for(ctx: &GpuContext, items: u32) -> [u32; 3] {
     )
 }
 
-fn encoder(ctx: &GpuContext, label: &str) -> wgpu::CommandEncoder {
-    ctx.device
-        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) })
+fn encoder(ctx: &GpuContext, label: &str) -> segsplat_gpu::Encoder {
+    segsplat_gpu::Encoder::new(ctx, label)
 }
 
 impl GpuDensifier {

@@ -48,7 +48,7 @@ impl Renderer {
     /// reset of the peak behind it; the caller submits `encoder` and then calls
     /// [`Self::capacity_check_submitted`] with what this returned. `None` when the previous two
     /// copies are still on their way (the peak keeps counting until the next request).
-    pub fn request_capacity_check(&mut self, encoder: &mut wgpu::CommandEncoder) -> Option<usize> {
+    pub fn request_capacity_check(&mut self, encoder: &mut segsplat_gpu::Encoder) -> Option<usize> {
         let slot = self.peak_read.record(encoder, &self.peak_intersections)?;
         encoder.clear_buffer(&self.peak_intersections, 0, None);
         Some(slot)

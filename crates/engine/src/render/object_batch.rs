@@ -137,7 +137,7 @@ impl Renderer {
     pub fn forward_objects<'g, 'b>(
         &mut self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         gaussians: impl Into<GaussianView<'g>>,
         base: &'b RenderOutput,
         slots: &[ObjectSlot],
@@ -216,7 +216,7 @@ impl Renderer {
     fn encode_object_tiles(
         &mut self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         gaussians: GaussianView<'_>,
         base: &RenderOutput,
         workspace: &RenderWorkspace,
@@ -294,7 +294,7 @@ impl Renderer {
     pub fn backward_objects_screen(
         &mut self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         batch: &ObjectBatchOutput<'_>,
         grad_images: &wgpu::Buffer,
     ) -> Result<(), RenderError> {
@@ -339,7 +339,7 @@ impl Renderer {
 /// in a table of their own past [`SLOT_TABLE_CAPACITY`].
 fn upload_slot_table(
     ctx: &GpuContext,
-    encoder: &mut wgpu::CommandEncoder,
+    encoder: &mut segsplat_gpu::Encoder,
     workspace: &RenderWorkspace,
     slots: &[ObjectSlot],
 ) -> wgpu::Buffer {

@@ -197,7 +197,7 @@ impl Renderer {
     pub fn forward<'g>(
         &mut self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         gaussians: impl Into<GaussianView<'g>>,
         camera: &RenderCamera,
         settings: &RenderSettings,
@@ -294,7 +294,7 @@ impl Renderer {
     pub(super) fn upload_uniforms(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         workspace: &RenderWorkspace,
         uniforms: &RenderUniforms,
     ) {
@@ -313,7 +313,7 @@ impl Renderer {
     fn encode_tiles(
         &mut self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         gaussians: GaussianView<'_>,
         workspace: &RenderWorkspace,
         count: u32,
@@ -403,7 +403,7 @@ impl Renderer {
     pub(super) fn encode_tile_ranges(
         &mut self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         workspace: &RenderWorkspace,
         key_count: u32,
     ) {
@@ -442,7 +442,7 @@ impl Renderer {
     pub fn backward<'g>(
         &mut self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         gaussians: impl Into<GaussianView<'g>>,
         output: &RenderOutput,
         grad_image: &wgpu::Buffer,
@@ -459,7 +459,7 @@ impl Renderer {
     pub fn backward_screen(
         &mut self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         output: &RenderOutput,
         grad_image: &wgpu::Buffer,
     ) -> Result<(), RenderError> {
@@ -501,7 +501,7 @@ impl Renderer {
     pub fn backward_projection<'g>(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         gaussians: impl Into<GaussianView<'g>>,
         output: &RenderOutput,
         grads: &mut GpuGaussianGrads,
@@ -532,7 +532,7 @@ impl Renderer {
     fn encode_projection_backward(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         gaussians: GaussianView<'_>,
         workspace: &RenderWorkspace,
         count: u32,
@@ -607,11 +607,7 @@ impl Renderer {
         // Each retry grows the capacity to 1.5x the needed count, so the second attempt fits
         // unless the scene exceeds the adapter (an error from sync_capacity).
         for _ in 0..RENDER_ATTEMPTS {
-            let mut encoder = ctx
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("render"),
-                });
+            let mut encoder = segsplat_gpu::Encoder::new(ctx, "render");
             let output = self.forward(ctx, &mut encoder, gaussians, camera, settings)?;
             ctx.submit_untimed(encoder.finish());
             let report = self.sync_capacity(ctx)?;

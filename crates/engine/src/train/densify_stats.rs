@@ -66,7 +66,7 @@ impl DensifyAccumulators {
     pub fn encode_accumulate(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         projected: &wgpu::Buffer,
         mean2d_abs: &wgpu::Buffer,
         gaussian_count: u32,
@@ -110,7 +110,7 @@ impl DensifyAccumulators {
         }
     }
 
-    pub fn encode_clear(&self, encoder: &mut wgpu::CommandEncoder) {
+    pub fn encode_clear(&self, encoder: &mut segsplat_gpu::Encoder) {
         encoder.clear_buffer(&self.gradient_sums, 0, None);
         encoder.clear_buffer(&self.visible_counts, 0, None);
         encoder.clear_buffer(&self.max_radii, 0, None);

@@ -45,7 +45,7 @@ impl MaskIouCounts {
     }
 
     /// Records zeroing the counts of pairs `first..first + count` (before counting them again).
-    pub fn encode_clear(&self, encoder: &mut wgpu::CommandEncoder, first: usize, count: usize) {
+    pub fn encode_clear(&self, encoder: &mut segsplat_gpu::Encoder, first: usize, count: usize) {
         encoder.clear_buffer(&self.counts, first as u64 * 8, Some(count as u64 * 8));
     }
 
@@ -54,7 +54,7 @@ impl MaskIouCounts {
     pub fn encode_batch(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         batch: &ObjectBatchOutput<'_>,
         ids: [&wgpu::Buffer; 3],
         first_pair: usize,

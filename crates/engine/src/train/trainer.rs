@@ -477,11 +477,7 @@ impl Trainer {
             sh_degree,
         };
         let ctx = &self.ctx;
-        let mut encoder = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("train step"),
-            });
+        let mut encoder = segsplat_gpu::Encoder::new(ctx, "train step");
         self.grads.encode_zero(&mut encoder);
         encoder.clear_buffer(&self.loss_values, 0, None);
         let view_time = self.views.train[view_index].time;
@@ -528,7 +524,7 @@ impl Trainer {
     /// times it, so the timed passes are the step's.
     fn encode_view_render(
         &mut self,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         view_index: usize,
         divisor: u32,
         time: f32,
@@ -575,7 +571,7 @@ impl Trainer {
     /// object renders batched on it, into `self.grads`.
     fn encode_projection_backward(
         &mut self,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         output: &RenderOutput,
     ) -> Result<(), TrainError> {
         let scene = dynamics::render_view(&self.gaussians, &self.dynamics);
@@ -653,12 +649,7 @@ impl Trainer {
     /// reported is a few steps old. Only the first report of a trainer waits, so that every
     /// report has a loss.
     fn progress_without_waiting(&mut self) -> Result<TrainProgress, TrainError> {
-        let mut encoder = self
-            .ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("progress read-back"),
-            });
+        let mut encoder = segsplat_gpu::Encoder::new(&self.ctx, "progress read-back");
         let loss_slot = self.loss_read.record(&mut encoder, &self.loss_values);
         let peak_slot = self.renderer.request_capacity_check(&mut encoder);
         self.ctx.submit_untimed(encoder.finish());

@@ -196,9 +196,14 @@ pub struct TrainingStageReport {
     /// Buffers created a step on paths that should create none (0 in steady training).
     #[serde(default)]
     pub buffers_created_per_step: f64,
-    /// Share of the wall time the GPU spent in the step's compute passes, from timestamp
-    /// queries over [`BUSY_SAMPLE_STEPS`] steps in the middle of the stage; absent where the
-    /// adapter has no timestamp queries or the stage was too short to sample.
+    /// Compute passes recorded a step: consecutive dispatches share one
+    /// (`segsplat_gpu::Encoder`), so this is far below `dispatches_per_step`.
+    #[serde(default)]
+    pub compute_passes_per_step: f64,
+    /// Share of the wall time the GPU spent in the step's compute passes: [`BUSY_SAMPLE_STEPS`]
+    /// steps in the middle of the stage timed on the wall, and as many more with timestamp
+    /// queries for the GPU's time (`segsplat_gpu::measure_busy`); absent where the adapter has
+    /// no timestamp queries or the stage was too short to sample.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gpu_busy_fraction: Option<f64>,
     /// The deformation field's GEMM kernel (`tiled`, `rows`, `broadcast`: docs/engine.md), for
@@ -318,9 +323,9 @@ fn train_stage(
     let mut held_out_curve_seconds = 0.0;
     // Host costs of the checkpoints and evaluations, which the per-step figures leave out.
     let mut outside_steps_host = HostCostReading::default();
-    // The busy sample starts halfway through what this attempt trains, past the first steps'
-    // allocations and cache fills.
-    let mut busy_sample_at = (gpu.profiler.is_some() && total - first_step > 2 * BUSY_SAMPLE_STEPS)
+    // The busy sample (twice its steps: on the wall, then timed) starts halfway through what
+    // this attempt trains, past the first steps' allocations and cache fills.
+    let mut busy_sample_at = (gpu.profiler.is_some() && total - first_step > 4 * BUSY_SAMPLE_STEPS)
         .then(|| first_step + (total - first_step) / 2);
     let mut busy_sample = None;
     // The stage begins now, not at its first report (25 steps in: minutes, with a deformation
@@ -435,6 +440,9 @@ fn train_stage(
         buffers_created_per_step: per_step(
             (host.buffers_created - outside_steps_host.buffers_created) as f64,
         ),
+        compute_passes_per_step: per_step(
+            (host.compute_passes - outside_steps_host.compute_passes) as f64,
+        ),
         gpu_busy_fraction: busy_sample.map(|sample| sample.busy_fraction),
         gemm_kernel: trainer
             .deformation_gemm_kernel()
@@ -470,41 +478,39 @@ fn is_field_kernel(label: &str) -> bool {
     label.starts_with("mlp_") || label.starts_with("deform_")
 }
 
-/// Trains [`BUSY_SAMPLE_STEPS`] steps with every pass timed and returns the GPU's time in them
-/// over the wall time, and the deformation field's share of it; `None` when the profiler
-/// dropped passes (the fraction would be low).
+/// Trains [`BUSY_SAMPLE_STEPS`] steps on the wall and as many with every pass timed
+/// (`segsplat_gpu::measure_busy`) and returns the GPU's share of the wall time, and the
+/// deformation field's share of the GPU's; `None` when the profiler dropped passes (the fraction
+/// would be low).
 fn sample_gpu_busy(
     gpu: &segsplat_gpu::GpuContext,
     trainer: &mut Trainer,
     mut run_to: impl FnMut(&mut Trainer, u32) -> Result<(), JobFailure>,
 ) -> Result<Option<BusySample>, JobFailure> {
-    let Some(profiler) = gpu.profiler.as_ref() else {
+    let end = trainer.config().steps;
+    let reading = segsplat_gpu::measure_busy(
+        gpu,
+        || {
+            let last = (trainer.step() + BUSY_SAMPLE_STEPS).min(end);
+            run_to(trainer, last)
+        },
+        retryable,
+    )?;
+    let Some(reading) = reading else {
         return Ok(None);
     };
-    gpu.wait_idle().map_err(retryable)?;
-    profiler.start();
-    let started = std::time::Instant::now();
-    let first = trainer.step();
-    let last = (first + BUSY_SAMPLE_STEPS).min(trainer.config().steps);
-    let trained = run_to(trainer, last);
-    // Taken even when training failed, so the profiler is left idle.
-    let profile = profiler.take(gpu).map_err(retryable)?;
-    trained?;
-    let wall_ms = started.elapsed().as_secs_f64() * 1e3;
-    if profile.untimed_passes != 0 || wall_ms <= 0.0 {
-        return Ok(None);
-    }
-    let field_ms: f64 = profile
+    let field_ms: f64 = reading
+        .profile
         .kernels
         .iter()
         .filter(|kernel| is_field_kernel(&kernel.kernel))
         .map(|kernel| kernel.ms)
         .sum();
-    let steps = f64::from((last - first).max(1));
+    let steps = f64::from(BUSY_SAMPLE_STEPS);
     Ok(Some(BusySample {
-        busy_fraction: (profile.total_ms / wall_ms).min(1.0),
+        busy_fraction: reading.busy_fraction(),
         field_ms_per_step: field_ms / steps,
-        field_fraction: field_ms / profile.total_ms.max(1e-9),
+        field_fraction: field_ms / reading.profile.total_ms.max(1e-9),
     }))
 }
 

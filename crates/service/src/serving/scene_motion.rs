@@ -61,11 +61,7 @@ impl SceneMotion {
             return Err(ServingError::BadView(format!("time {time} must be finite")));
         }
         if self.deformed_at != Some(time) {
-            let mut encoder = ctx
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("deform for serving"),
-                });
+            let mut encoder = segsplat_gpu::Encoder::new(ctx, "deform for serving");
             self.field
                 .encode_forward(ctx, &mut encoder, gaussians, &self.geometry, time)
                 .map_err(gpu_error)?;

@@ -10,7 +10,7 @@ impl Trainer {
     /// first thousand steps).
     pub(super) fn encode_adam(
         &self,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         step: u32,
         count: u32,
         sh_degree: u32,

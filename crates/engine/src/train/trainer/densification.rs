@@ -86,11 +86,7 @@ impl Trainer {
                 0.01,
             );
         }
-        let mut encoder = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("densify clear"),
-            });
+        let mut encoder = segsplat_gpu::Encoder::new(&ctx, "densify clear");
         self.accumulators.encode_clear(&mut encoder);
         ctx.submit(encoder.finish());
         Ok(())
@@ -123,11 +119,7 @@ impl Trainer {
         }
         self.first_moments.write(&ctx, first)?;
         self.second_moments.write(&ctx, second)?;
-        let mut encoder = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("densify reset"),
-            });
+        let mut encoder = segsplat_gpu::Encoder::new(&ctx, "densify reset");
         self.accumulators.encode_clear(&mut encoder);
         ctx.submit(encoder.finish());
         if !stats.gradient_sums.is_empty() {

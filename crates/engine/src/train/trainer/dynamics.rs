@@ -74,7 +74,7 @@ pub(super) fn deform_to(
     step: u32,
     dynamics: &mut Option<Dynamics>,
     gaussians: &GpuGaussians,
-    encoder: &mut wgpu::CommandEncoder,
+    encoder: &mut segsplat_gpu::Encoder,
     time: f32,
 ) -> Result<(), TrainError> {
     let Some(dynamics) = dynamics.as_mut() else {
@@ -99,7 +99,7 @@ impl Trainer {
     /// moved since) and deforms to `time`.
     pub(super) fn encode_deform_for_step(
         &mut self,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         time: f32,
     ) -> Result<(), TrainError> {
         if let Some(dynamics) = self.dynamics.as_mut() {
@@ -136,7 +136,7 @@ impl Trainer {
     /// render of the step and precede the Gaussians' Adam step.
     pub(super) fn encode_deform_backward_and_step(
         &mut self,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         adam_step: u32,
     ) -> Result<(), TrainError> {
         let step = self.step;
@@ -195,11 +195,7 @@ impl Trainer {
         for repeat in 0..repeats.max(1) {
             let time = self.views.train[repeat as usize % self.views.train.len()].time;
             let started = Instant::now();
-            let mut encoder = ctx
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("timing deformation forward"),
-                });
+            let mut encoder = segsplat_gpu::Encoder::new(&ctx, "timing deformation forward");
             dynamics.field.encode_forward(
                 &ctx,
                 &mut encoder,
@@ -212,11 +208,7 @@ impl Trainer {
             forward_secs += started.elapsed().as_secs_f64();
             // The backward reuses the activations the forward left resident (as in a step).
             let started = Instant::now();
-            let mut encoder = ctx
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("timing deformation backward"),
-                });
+            let mut encoder = segsplat_gpu::Encoder::new(&ctx, "timing deformation backward");
             dynamics.field.encode_zero_grads(&mut encoder);
             dynamics.field.encode_backward(
                 &ctx,
@@ -260,12 +252,7 @@ impl Trainer {
         if dynamics.geometry.capacity() < self.gaussians.capacity() {
             dynamics.geometry = DeformedGeometry::new(&self.ctx, self.gaussians.capacity())?;
         }
-        let mut encoder = self
-            .ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("deform for read-back"),
-            });
+        let mut encoder = segsplat_gpu::Encoder::new(&self.ctx, "deform for read-back");
         dynamics.field.encode_forward(
             &self.ctx,
             &mut encoder,

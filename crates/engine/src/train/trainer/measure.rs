@@ -27,11 +27,7 @@ impl Trainer {
             let time = self.views.train[view_index].time;
             for with_backward in [false, true] {
                 let started = Instant::now();
-                let mut encoder =
-                    ctx.device
-                        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                            label: Some("timing"),
-                        });
+                let mut encoder = segsplat_gpu::Encoder::new(&ctx, "timing");
                 if with_backward {
                     self.grads.encode_zero(&mut encoder);
                 }
@@ -111,12 +107,7 @@ impl Trainer {
             &self.views.train[index]
         };
         if self.dynamics.is_some() {
-            let mut encoder =
-                self.ctx
-                    .device
-                    .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                        label: Some("deform for evaluation"),
-                    });
+            let mut encoder = segsplat_gpu::Encoder::new(&self.ctx, "deform for evaluation");
             dynamics::deform_to(
                 &self.ctx,
                 self.step,

@@ -11,7 +11,7 @@ impl Trainer {
     /// Each slot re-projected, re-sorted, rasterized, its loss, and its whole backward.
     pub(super) fn encode_separate_object_losses(
         &mut self,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         view_index: usize,
         sh_degree: u32,
         slots: &[ObjectSlot],

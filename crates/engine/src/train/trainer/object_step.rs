@@ -150,7 +150,7 @@ impl Trainer {
     /// `base`'s for the step's one projection backward.
     pub(super) fn encode_object_losses(
         &mut self,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut segsplat_gpu::Encoder,
         view_index: usize,
         sh_degree: u32,
         base: &RenderOutput,

@@ -150,10 +150,8 @@ impl Trainer {
         Ok(())
     }
 
-    fn new_encoder(&self, label: &str) -> wgpu::CommandEncoder {
-        self.ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) })
+    fn new_encoder(&self, label: &str) -> segsplat_gpu::Encoder {
+        segsplat_gpu::Encoder::new(&self.ctx, label)
     }
 }
 
