@@ -153,7 +153,11 @@ async fn reconstruct_job_trains_and_stores_artifacts() {
     );
     // The host's side of the steps, and how busy the GPU was where the adapter times passes.
     let training = &metrics["training"];
-    for field in ["bind_groups_created_per_step", "buffers_created_per_step"] {
+    for field in [
+        "bind_groups_created_per_step",
+        "buffers_created_per_step",
+        "compute_passes_per_step",
+    ] {
         assert!(training[field].is_number(), "{field} missing: {training}");
     }
     // Checkpoints are encoded and stored beside the step loop, which only takes the snapshot.

@@ -255,9 +255,10 @@ fn is_zero(value: &f64) -> bool {
     *value == 0.0
 }
 
-/// Steps timed with timestamp queries for [`TrainingStageReport::gpu_busy_fraction`]: few
-/// enough for the profiler's pass capacity at object-loss steps.
-pub const BUSY_SAMPLE_STEPS: u32 = 10;
+/// Steps timed with timestamp queries for [`TrainingStageReport::gpu_busy_fraction`] (and as
+/// many before them on the wall): few enough for the profiler's pass capacity at object-loss
+/// steps, and for both halves to fit between a short job's checkpoints and held-out points.
+pub const BUSY_SAMPLE_STEPS: u32 = 5;
 
 /// Trains to the configured end, saving a checkpoint named `checkpoint_name` every
 /// `cadence.checkpoint_every` steps (0 = only at the end), evaluating the held-out views every
@@ -364,12 +365,18 @@ fn train_stage(
                 })
         };
         if let Some(at) = busy_sample_at.filter(|&at| at < next_stop) {
-            busy_sample_at = None;
-            run_to(trainer, at)?;
-            ctx.stop_requested()?;
-            busy_sample = sample_gpu_busy(&gpu, trainer, |trainer, last| {
-                run_to(trainer, last).map(|_| ())
-            })?;
+            // Both halves inside this stretch, so the sample never runs past a checkpoint or a
+            // held-out point; a stretch too short hands it on to the next.
+            if at + 2 * BUSY_SAMPLE_STEPS <= next_stop {
+                busy_sample_at = None;
+                run_to(trainer, at)?;
+                ctx.stop_requested()?;
+                busy_sample = sample_gpu_busy(&gpu, trainer, |trainer, last| {
+                    run_to(trainer, last).map(|_| ())
+                })?;
+            } else {
+                busy_sample_at = Some(next_stop);
+            }
         }
         run_to(trainer, next_stop)?;
         ctx.stop_requested()?;
