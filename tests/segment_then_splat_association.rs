@@ -13,10 +13,13 @@ mod segment_then_splat_support;
 use segment_then_splat_support::{config, full_truth, gpu, iou, mean, synthetic_scene};
 use segsplat_engine::ObjectFilter;
 use segsplat_engine::render::Renderer;
+use std::ops::ControlFlow;
+
 use segsplat_method::segment_then_splat::association::{
-    AssociationError, AssociationOptions, AssociationReport, associate_frame_masks,
+    AssociationError, AssociationOptions, AssociationReport, associate_frame_masks, frame_rgb8,
     generated_view_masks,
 };
+use segsplat_method::segment_then_splat::frame_masks::generate_frame_masks;
 use segsplat_method::segment_then_splat::objects::{full_mask, render_layer};
 use segsplat_method::segment_then_splat::track_metrics::object_recall_and_duplicates;
 use segsplat_method::segment_then_splat::training::{
@@ -158,6 +161,45 @@ fn classical_masks_associate_with_stated_recall_and_no_duplicates() {
         small.duplicated_objects <= MAX_CLASSICAL_SMALL_DUP,
         "{small:?}"
     );
+}
+
+/// The classical generator segments the views on every core at once
+/// (`frame_masks::generate_frame_masks`): the same masks as made one view at a time, progress
+/// counted once per view, and a stop heard after the views then in flight.
+#[test]
+fn views_segmented_at_once_are_the_views_segmented_one_by_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = synthetic_scene(dir.path(), |_| ());
+    let frames = training_frames(&scene, &config());
+    let mut generator = classical_generator();
+    let mut heard = Vec::new();
+    let masks = generate_frame_masks(&scene, &frames, &mut generator, None, |done| {
+        heard.push(done);
+        ControlFlow::Continue(())
+    })
+    .unwrap();
+    assert_eq!(heard, (0..=frames.len()).collect::<Vec<_>>());
+    assert_eq!(masks.len(), frames.len());
+    for &frame_index in &frames {
+        let image = frame_rgb8(&scene, frame_index, None).unwrap();
+        let one_by_one = generator.generate(&image, frame_index).unwrap();
+        assert!(masks[&frame_index] == one_by_one, "frame {frame_index}");
+    }
+
+    let stopped = generate_frame_masks(&scene, &frames, &mut generator, None, |done| {
+        if done >= 2 {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    });
+    match stopped {
+        Err(AssociationError::Stopped { views_done }) => {
+            // The views already started finish first: how many depends on the threads.
+            assert!((2..=frames.len()).contains(&views_done), "{views_done}")
+        }
+        other => panic!("expected a stop, got {:?}", other.map(|masks| masks.len())),
+    }
 }
 
 #[test]

@@ -16,6 +16,7 @@ use std::ops::ControlFlow;
 use image::RgbImage;
 use rayon::prelude::*;
 
+use super::frame_masks::generate_frame_masks;
 use super::global_objects::{
     drop_duplicates, objects_from_groups, paint_objects, sort_largest_first,
 };
@@ -37,6 +38,8 @@ pub enum AssociationError {
     Masks(#[from] ViewMaskSetError),
     #[error(transparent)]
     Mask(#[from] MaskError),
+    #[error("frame {frame_index} is given twice: a view's masks are made once")]
+    RepeatedFrame { frame_index: usize },
     #[error("frame {frame_index}: a {level:?} mask is {found:?}, the view {expected:?}")]
     MaskSize {
         frame_index: usize,
@@ -127,28 +130,22 @@ pub fn generated_view_masks(
 
 /// [`generated_view_masks`], calling `view_done` with the number of views segmented so far
 /// before the first view and after each one (generation is most of the stage's time). A
-/// `Break` from it stops the stage there with [`AssociationError::Stopped`]: one view is the
-/// longest a stop waits.
+/// `Break` from it stops the stage with [`AssociationError::Stopped`] once the views being
+/// segmented are done. A stateless generator (classical, user masks) segments the views on
+/// every core at once ([`super::frame_masks`]).
 pub fn generated_view_masks_with_progress(
     scene: &Scene,
     frames: &[usize],
     generator: &mut MaskGenerator,
     max_side: Option<u32>,
     options: &AssociationOptions,
-    mut view_done: impl FnMut(usize) -> ControlFlow<()>,
+    view_done: impl FnMut(usize) -> ControlFlow<()>,
 ) -> Result<(ViewMaskSet, AssociationReport), AssociationError> {
-    let mut done = 0;
-    if view_done(done).is_break() {
-        return Err(AssociationError::Stopped { views_done: done });
-    }
+    let mut masks = generate_frame_masks(scene, frames, generator, max_side, view_done)?;
     associate_frame_masks(scene, frames, max_side, options, |frame_index| {
-        let image = frame_rgb8(scene, frame_index, max_side)?;
-        let masks = generator.generate(&image, frame_index)?;
-        done += 1;
-        if view_done(done).is_break() {
-            return Err(AssociationError::Stopped { views_done: done });
-        }
-        Ok(masks)
+        masks
+            .remove(&frame_index)
+            .ok_or(AssociationError::RepeatedFrame { frame_index })
     })
 }
 
@@ -307,7 +304,7 @@ fn check_sizes(masks: &FrameMasks, view: &ViewMasks) -> Result<(), AssociationEr
 }
 
 /// The frame at the training resolution as 8-bit RGB, what generators take.
-pub(crate) fn frame_rgb8(
+pub fn frame_rgb8(
     scene: &Scene,
     frame_index: usize,
     max_side: Option<u32>,

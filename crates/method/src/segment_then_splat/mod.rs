@@ -5,6 +5,7 @@ pub mod association;
 /// The background shell lives with the trainer (plain training uses it too).
 pub use segsplat_engine::background_shell;
 pub mod carved_hulls;
+pub mod frame_masks;
 mod global_objects;
 pub mod hull_points;
 pub mod id_voting;

@@ -58,6 +58,43 @@ pub enum SegmentError {
     },
 }
 
+/// A [`MaskGenerator`] with no state (see [`MaskGenerator::stateless`]), so frames can be
+/// segmented on several threads at once.
+#[derive(Clone, Copy)]
+pub enum StatelessGenerator<'a> {
+    Classical(&'a ClassicalConfig),
+    User(&'a Arc<Scene>),
+}
+
+impl StatelessGenerator<'_> {
+    /// As [`MaskGenerator::generate`].
+    pub fn generate(
+        &self,
+        image: &RgbImage,
+        frame_index: usize,
+    ) -> Result<FrameMasks, SegmentError> {
+        match *self {
+            StatelessGenerator::Classical(config) => Ok(classical_masks(image, config)?),
+            StatelessGenerator::User(scene) => {
+                let frame = user_frame_masks(scene, frame_index)?;
+                let mismatch = frame.levels.iter().flatten().find(|scored| {
+                    (scored.mask.width(), scored.mask.height()) != image.dimensions()
+                });
+                if let Some(scored) = mismatch {
+                    return Err(SegmentError::UserMaskSize {
+                        frame_index,
+                        mask_width: scored.mask.width(),
+                        mask_height: scored.mask.height(),
+                        image_width: image.width(),
+                        image_height: image.height(),
+                    });
+                }
+                Ok(frame)
+            }
+        }
+    }
+}
+
 /// Where a frame's masks come from.
 pub enum MaskGenerator {
     /// Automatic masks from a point-prompt model (SAM family).
@@ -84,23 +121,23 @@ impl MaskGenerator {
             MaskGenerator::Automatic { segmenter, config } => {
                 Ok(generate_automatic_masks(segmenter.as_mut(), image, config)?)
             }
-            MaskGenerator::Classical(config) => Ok(classical_masks(image, config)?),
-            MaskGenerator::User(scene) => {
-                let frame = user_frame_masks(scene, frame_index)?;
-                let mismatch = frame.levels.iter().flatten().find(|scored| {
-                    (scored.mask.width(), scored.mask.height()) != image.dimensions()
-                });
-                if let Some(scored) = mismatch {
-                    return Err(SegmentError::UserMaskSize {
-                        frame_index,
-                        mask_width: scored.mask.width(),
-                        mask_height: scored.mask.height(),
-                        image_width: image.width(),
-                        image_height: image.height(),
-                    });
-                }
-                Ok(frame)
+            MaskGenerator::Classical(config) => {
+                StatelessGenerator::Classical(config).generate(image, frame_index)
             }
+            MaskGenerator::User(scene) => {
+                StatelessGenerator::User(scene).generate(image, frame_index)
+            }
+        }
+    }
+
+    /// This generator as one that many threads can use at once, when it holds no state: the
+    /// classical and user generators. A model's session segments one frame at a time (and
+    /// spreads each frame's work over the cores itself).
+    pub fn stateless(&self) -> Option<StatelessGenerator<'_>> {
+        match self {
+            MaskGenerator::Automatic { .. } => None,
+            MaskGenerator::Classical(config) => Some(StatelessGenerator::Classical(config)),
+            MaskGenerator::User(scene) => Some(StatelessGenerator::User(scene)),
         }
     }
 
