@@ -11,7 +11,7 @@
 
 use std::collections::HashMap;
 use std::ops::ControlFlow;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
 
 use rayon::prelude::*;
@@ -61,8 +61,8 @@ fn in_parallel(
     mut view_done: impl FnMut(usize) -> ControlFlow<()>,
 ) -> Result<HashMap<usize, FrameMasks>, AssociationError> {
     let stop = AtomicBool::new(false);
-    let done = AtomicUsize::new(0);
-    let (finished, heard) = mpsc::channel::<usize>();
+    let (finished, heard) = mpsc::channel::<()>();
+    let mut views_done = 0;
     let results = std::thread::scope(|scope| {
         let segmenting = scope.spawn(|| {
             let finished = finished;
@@ -70,18 +70,20 @@ fn in_parallel(
                 .par_iter()
                 .map(|&frame_index| {
                     if stop.load(Ordering::Relaxed) {
-                        return (frame_index, None);
+                        // Never read: a stop returns before the results are.
+                        return Err(AssociationError::Stopped { views_done: 0 });
                     }
                     let masks = frame_rgb8(scene, frame_index, max_side)
                         .map_err(AssociationError::from)
                         .and_then(|image| Ok(generator.generate(&image, frame_index)?));
-                    let _ = finished.send(done.fetch_add(1, Ordering::Relaxed) + 1);
-                    (frame_index, Some(masks))
+                    let _ = finished.send(());
+                    masks.map(|masks| (frame_index, masks))
                 })
                 .collect::<Vec<_>>()
         });
         // Ends when the segmenting thread drops its sender, after the last view.
-        for views_done in heard {
+        for () in heard {
+            views_done += 1;
             if view_done(views_done).is_break() {
                 stop.store(true, Ordering::Relaxed);
             }
@@ -93,16 +95,8 @@ fn in_parallel(
         Err(panic) => std::panic::resume_unwind(panic),
     };
     if stop.load(Ordering::Relaxed) {
-        return Err(AssociationError::Stopped {
-            views_done: done.load(Ordering::Relaxed),
-        });
+        return Err(AssociationError::Stopped { views_done });
     }
-    let mut masks = HashMap::with_capacity(frames.len());
-    for (frame_index, result) in results {
-        // Every view ran: nothing was skipped without a stop.
-        if let Some(result) = result {
-            masks.insert(frame_index, result?);
-        }
-    }
-    Ok(masks)
+    // In `frames`' order, so the error is the earliest failed frame's.
+    results.into_iter().collect()
 }
