@@ -157,9 +157,16 @@ async fn reconstruct_job_trains_and_stores_artifacts() {
         "bind_groups_created_per_step",
         "buffers_created_per_step",
         "compute_passes_per_step",
+        "finish_ms_per_step",
     ] {
         assert!(training[field].is_number(), "{field} missing: {training}");
     }
+    // wgpu's `finish` is part of the host's own time.
+    let finish = training["finish_ms_per_step"].as_f64().unwrap();
+    assert!(
+        finish > 0.0 && finish <= training["host_ms_per_step"].as_f64().unwrap(),
+        "{training}"
+    );
     // Checkpoints are encoded and stored beside the step loop, which only takes the snapshot.
     assert!(
         training["checkpoint_write_seconds"].as_f64().unwrap() > 0.0,

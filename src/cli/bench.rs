@@ -98,6 +98,11 @@ pub struct BenchArgs {
     /// training time; evaluations are not timed).
     #[arg(long, conflicts_with_all = ["object_loss", "deformation"])]
     pub eval_every: Option<u32>,
+    /// Train on wgpu's no-op device (`GpuContext::new_noop`): every dispatch recorded,
+    /// validated and submitted, none run. The `host` figures are then the host's side of a step
+    /// alone, as on a GPU that took no time; quality figures mean nothing.
+    #[arg(long, conflicts_with = "profile_kernels")]
+    pub noop_device: bool,
     /// Print one JSON object (otherwise a readable summary).
     #[arg(long)]
     pub json: bool,
@@ -413,6 +418,7 @@ impl TimedRun {
             host_ms_per_step: (self.seconds - waited - submitted) * 1e3 / steps,
             wait_ms_per_step: waited * 1e3 / steps,
             submit_ms_per_step: submitted * 1e3 / steps,
+            finish_ms_per_step: self.host.finish_seconds() * 1e3 / steps,
             bind_groups_created_per_step: self.host.bind_groups_created as f64 / steps,
             buffers_created_per_step: self.host.buffers_created as f64 / steps,
             compute_passes_per_step: self.host.compute_passes as f64 / steps,
@@ -432,6 +438,11 @@ struct HostCostReport {
     host_ms_per_step: f64,
     wait_ms_per_step: f64,
     submit_ms_per_step: f64,
+    /// Of `host_ms_per_step`, the time in wgpu's `finish` of the step's encoders, where wgpu 30
+    /// checks the recorded commands, works out their barriers and records the backend's
+    /// commands (on Vulkan the driver's `vkCmd*`): what is left of the host's share is
+    /// segsplat's own recording and wgpu's argument capture.
+    finish_ms_per_step: f64,
     /// Bind groups made a step (the rest come from the cache; see docs/engine.md).
     bind_groups_created_per_step: f64,
     /// Buffers made a step for kernel parameters or slot tables (0 in a steady step).
@@ -619,7 +630,11 @@ fn static_baseline(
 
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     let mut scene = super::open_scene(&args.dataset)?;
-    let mut ctx = super::open_gpu()?;
+    let mut ctx = if args.noop_device {
+        GpuContext::new_noop().context("cannot open the no-op device")?
+    } else {
+        super::open_gpu()?
+    };
     if args.profile_kernels.is_some() {
         ctx.enable_kernel_profiling()?;
     }

@@ -224,6 +224,7 @@ pub struct HostCosts {
     read_backs: AtomicU64,
     wait_nanos: AtomicU64,
     submit_nanos: AtomicU64,
+    pub(crate) finish_nanos: AtomicU64,
     bind_groups_created: AtomicU64,
     pub(crate) compute_passes: AtomicU64,
     buffers_created: AtomicU64,
@@ -239,6 +240,10 @@ pub struct HostCostReading {
     /// Time inside [`GpuContext::submit`]: microseconds on a GPU; on a software adapter, whose
     /// queue may run the work before it returns, it holds the arithmetic.
     pub submit_nanos: u64,
+    /// Time inside [`crate::Encoder::finish`], part of the host's own time: in wgpu 30 a pass's
+    /// commands are checked, their barriers worked out and the backend's commands recorded
+    /// (Vulkan's `vkCmd*` calls) when the encoder finishes, not when each is called.
+    pub finish_nanos: u64,
     /// Bind groups created by kernels (not found in the cache).
     pub bind_groups_created: u64,
     /// Compute passes recorded (see [`crate::Encoder`]: consecutive dispatches share one).
@@ -255,6 +260,7 @@ impl HostCosts {
             read_backs: self.read_backs.load(Ordering::Relaxed),
             wait_nanos: self.wait_nanos.load(Ordering::Relaxed),
             submit_nanos: self.submit_nanos.load(Ordering::Relaxed),
+            finish_nanos: self.finish_nanos.load(Ordering::Relaxed),
             bind_groups_created: self.bind_groups_created.load(Ordering::Relaxed),
             compute_passes: self.compute_passes.load(Ordering::Relaxed),
             buffers_created: self.buffers_created.load(Ordering::Relaxed),
@@ -270,6 +276,7 @@ impl HostCostReading {
             read_backs: self.read_backs.saturating_sub(earlier.read_backs),
             wait_nanos: self.wait_nanos.saturating_sub(earlier.wait_nanos),
             submit_nanos: self.submit_nanos.saturating_sub(earlier.submit_nanos),
+            finish_nanos: self.finish_nanos.saturating_sub(earlier.finish_nanos),
             bind_groups_created: self
                 .bind_groups_created
                 .saturating_sub(earlier.bind_groups_created),
@@ -284,6 +291,7 @@ impl HostCostReading {
         self.read_backs += other.read_backs;
         self.wait_nanos += other.wait_nanos;
         self.submit_nanos += other.submit_nanos;
+        self.finish_nanos += other.finish_nanos;
         self.bind_groups_created += other.bind_groups_created;
         self.compute_passes += other.compute_passes;
         self.buffers_created += other.buffers_created;
@@ -295,6 +303,10 @@ impl HostCostReading {
 
     pub fn submit_seconds(&self) -> f64 {
         self.submit_nanos as f64 * 1e-9
+    }
+
+    pub fn finish_seconds(&self) -> f64 {
+        self.finish_nanos as f64 * 1e-9
     }
 }
 
@@ -318,6 +330,52 @@ impl GpuContext {
         }
         let (adapter, _) = adapters.remove(0);
         Ok(Self::from_adapter(&adapter)?.with_kernel_choices(filter.kernels))
+    }
+
+    /// wgpu's no-op device: every kernel is compiled, every dispatch recorded, validated and
+    /// submitted, and copies, clears and buffer writes are carried out in host memory, but no
+    /// kernel runs. Training on it measures the host's side of a step alone (segsplat, wgpu-core
+    /// and its resource tracking), as on a GPU whose work took no time: the floor a real
+    /// device's step cannot go under, free of a software adapter's arithmetic competing for the
+    /// same cores (`segsplat bench --noop-device`, docs/benchmarks.md). What it renders and
+    /// trains is meaningless (every kernel's output stays zero).
+    pub fn new_noop() -> Result<Self, GpuError> {
+        let mut descriptor = wgpu::InstanceDescriptor::new_without_display_handle();
+        descriptor.backends = wgpu::Backends::NOOP;
+        // Shaped like the GPU jobs ran on (the H200's limits and 32-lane subgroups, a discrete
+        // device), so the kernels and sizes chosen for it are a GPU's, not the no-op backend's
+        // unlimited ones (it allocates host memory for every buffer it is asked for).
+        descriptor.backend_options.noop = wgpu::NoopBackendOptions {
+            enable: true,
+            device_type: Some(wgpu::DeviceType::DiscreteGpu),
+            subgroup_min_size: Some(32),
+            subgroup_max_size: Some(32),
+            limits: Some(wgpu::Limits {
+                max_storage_buffer_binding_size: 2_147_483_644,
+                max_buffer_size: 4_292_870_144,
+                max_compute_workgroup_storage_size: 49_152,
+                max_compute_invocations_per_workgroup: 1024,
+                max_compute_workgroup_size_x: 1024,
+                max_compute_workgroup_size_y: 1024,
+                max_storage_buffers_per_shader_stage: 16,
+                ..wgpu::Limits::default()
+            }),
+            features: None,
+        };
+        let instance = wgpu::Instance::new(descriptor);
+        let adapter = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::NOOP))
+            .into_iter()
+            .next()
+            .ok_or_else(|| GpuError::NoAdapter {
+                filter: "the no-op backend".to_string(),
+                found: "none".to_string(),
+            })?;
+        let mut ctx = Self::from_adapter(&adapter)?;
+        // wgpu 30's no-op adapter reports itself a CPU whatever `device_type` says; the kernels
+        // and sizes chosen from the report must be a GPU's.
+        ctx.report.is_software = false;
+        ctx.report.device_type = format!("{:?}", wgpu::DeviceType::DiscreteGpu);
+        Ok(ctx)
     }
 
     /// Any adapter at all; what tests and the CLI use.

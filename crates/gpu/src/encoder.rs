@@ -78,10 +78,16 @@ impl Encoder {
         self.pass = None;
     }
 
-    /// Ends the open pass (if any) and finishes the commands for submission.
+    /// Ends the open pass (if any) and finishes the commands for submission, timed into the
+    /// context's `finish_nanos`.
     pub fn finish(mut self) -> wgpu::CommandBuffer {
+        let started = std::time::Instant::now();
         self.pass = None;
-        self.inner.finish()
+        let commands = self.inner.finish();
+        self.host_costs
+            .finish_nanos
+            .fetch_add(started.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        commands
     }
 }
 

@@ -190,6 +190,10 @@ pub struct TrainingStageReport {
     /// Milliseconds a step inside queue submissions (a software adapter runs the work there).
     #[serde(default)]
     pub submit_ms_per_step: f64,
+    /// Of `host_ms_per_step`, milliseconds a step in wgpu's `finish` of the step's encoders
+    /// (its checks and barriers, and the backend's recording: Vulkan's `vkCmd*`).
+    #[serde(default)]
+    pub finish_ms_per_step: f64,
     /// Bind groups created a step (0 once every view has been seen: they are cached).
     #[serde(default)]
     pub bind_groups_created_per_step: f64,
@@ -441,6 +445,9 @@ fn train_stage(
         ),
         wait_ms_per_step: per_step(waited.max(0.0) * 1e3),
         submit_ms_per_step: per_step(submitted.max(0.0) * 1e3),
+        finish_ms_per_step: per_step(
+            (host.finish_seconds() - outside_steps_host.finish_seconds()).max(0.0) * 1e3,
+        ),
         bind_groups_created_per_step: per_step(
             (host.bind_groups_created - outside_steps_host.bind_groups_created) as f64,
         ),
