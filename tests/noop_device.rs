@@ -29,7 +29,6 @@ fn bench_on_noop(scene: &str, extra: &[&str]) -> serde_json::Value {
         "bench",
         scene,
         "--noop-device",
-        "--no-densify",
         "--max-resolution",
         "48",
         "--timing-repeats",
@@ -51,6 +50,11 @@ fn bench_on_the_noop_device_reports_the_hosts_side_of_a_step() {
     let report = bench_on_noop(&scene, &["--steps", "30"]);
     assert_eq!(report["adapter"], "noop wgpu backend", "{report}");
     assert_eq!(report["steps"], 30, "{report}");
+    // Densification is off on the no-op device: it would prune the all-zero model.
+    assert_eq!(
+        report["gaussians_end"], report["gaussians_start"],
+        "{report}"
+    );
     let dispatches = report["dispatches_per_step"].as_f64().expect("dispatches");
     assert!(dispatches >= 10.0, "{report}");
     let host = &report["host"];

@@ -100,7 +100,9 @@ pub struct BenchArgs {
     pub eval_every: Option<u32>,
     /// Train on wgpu's no-op device (`GpuContext::new_noop`): every dispatch recorded,
     /// validated and submitted, none run. The `host` figures are then the host's side of a step
-    /// alone, as on a GPU that took no time; quality figures mean nothing.
+    /// alone, as on a GPU that took no time; quality figures mean nothing. Implies
+    /// `--no-densify`: with every kernel's output zero, densification would prune the whole
+    /// model.
     #[arg(long, conflicts_with = "profile_kernels")]
     pub noop_device: bool,
     /// Print one JSON object (otherwise a readable summary).
@@ -654,7 +656,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         (None, Some(count)) => Some(random_model_in_points_bounds(&mut scene, count, args.seed)),
         (None, None) => None,
     };
-    if args.no_densify {
+    if args.no_densify || args.noop_device {
         config.densify_until = Some(0);
     }
     if args.converge {
