@@ -266,7 +266,22 @@ def headline(bench):
     profile = found.get("kernel_profile") or {}
     if "gpu_ms_per_step" in profile:
         parts.append(f"GPU {profile['gpu_ms_per_step']:.2f} ms/step")
+    parts.extend(host_figures(found.get("host") or {}))
     return ", ".join(parts)
+
+
+# The host's side of a step (issue 38, item 4), where a report has it: (key, label, format).
+HOST = (("host_ms_per_step", "host ms/step", "{:.3f}"),
+        ("finish_ms_per_step", "of it in finish", "{:.3f}"),
+        ("submit_ms_per_step", "submit ms/step", "{:.3f}"),
+        ("compute_passes_per_step", "passes/step", "{:.1f}"),
+        ("dispatches_per_step", "dispatches/step", "{:.1f}"),
+        ("gpu_busy_fraction", "GPU busy", "{:.2f}"))
+
+
+def host_figures(host):
+    return [f"{label} {fmt.format(host[key])}" for key, label, fmt in HOST
+            if isinstance(host.get(key), (int, float))]
 
 
 def print_summary(report):
@@ -293,6 +308,11 @@ def print_summary(report):
         if "stage_times" in job:
             figures.append(", ".join(f"{stage} {value['time']}"
                                      for stage, value in job["stage_times"].items()))
+        metrics = job.get("metrics") or {}
+        figures.extend(host_figures(metrics.get("training") or {}))
+        masks = (metrics.get("segment") or {}).get("masks_seconds")
+        if isinstance(masks, (int, float)):
+            figures.append(f"masks {masks:.1f} s")
         if job["status"] != "passed" and "last_progress" in job:
             figures.append(f"last: {job['last_progress']}")
         print(f"job ({job.get('steps', '')}): {job['status']} " + "; ".join(figures))
