@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Installs what a fresh Debian machine lacks to build, test and run segsplat:
 # - Mesa's software Vulkan driver (lavapipe) and the Vulkan loader, so the GPU engine runs without a GPU;
+# - the Khronos Vulkan validation layer, under which scripts/sync_validation.sh checks every
+#   barrier of the GPU tests' recordings;
 # - the ONNX Runtime shared library (from the `onnxruntime` wheel) for the model runtime;
 # - ffmpeg, which extracts frames from Neu3D camera videos (and makes the test videos);
 # - s3rver (npm registry), the S3-compatible server the object-store tests run against, and
@@ -17,7 +19,7 @@
 set -euo pipefail
 
 need_apt=()
-for package in mesa-vulkan-drivers libvulkan1 curl ffmpeg postgresql chromium; do
+for package in mesa-vulkan-drivers libvulkan1 vulkan-validationlayers curl ffmpeg postgresql chromium; do
   dpkg -s "$package" >/dev/null 2>&1 || need_apt+=("$package")
 done
 # Node.js for s3rver, unless the machine has its own.

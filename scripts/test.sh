@@ -4,6 +4,10 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 # Mesa warns on every device creation without it; harmless but noisy.
 export XDG_RUNTIME_DIR=${XDG_RUNTIME_DIR:-/tmp}
+# wgpu asks for the Khronos validation layer in debug builds whenever it is installed (the
+# bootstrap installs it for scripts/sync_validation.sh, below): off for the suite itself, which
+# it would slow several times over.
+export WGPU_VALIDATION=${WGPU_VALIDATION:-0}
 # Two test threads through the environment, not `-- --test-threads=2`: the criterion benches
 # (run once each in test mode) have their own argument parser and reject that flag.
 export RUST_TEST_THREADS=${RUST_TEST_THREADS:-2}
@@ -85,6 +89,15 @@ if [ -n "${SEGSPLAT_TEST_POSTGRES_URL:-}" ]; then
     SEGSPLAT_TEST_BACKEND=postgres cargo test --locked --workspace --test service_jobs --test service_core \
         --test service_tenants --test service_workers --test service_upload \
         --test service_object_store
+fi
+# The GPU tests and short training runs again under the Khronos layer's synchronization
+# validation: a missing barrier gives right answers on the software adapter, which runs a
+# submission's commands one at a time, and wrong ones on a GPU (scripts/sync_validation.sh).
+phase "synchronization validation"
+if [ "${CI:-}" = true ] || [ -e /usr/share/vulkan/explicit_layer.d/VkLayer_khronos_validation.json ]; then
+    bash scripts/sync_validation.sh --quick
+else
+    echo "skipping: the Khronos validation layer is not installed (apt-get install vulkan-validationlayers)"
 fi
 phase "waiting for contract and console"
 live_status=0

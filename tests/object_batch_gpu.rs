@@ -3,6 +3,8 @@
 //! the same gradients summed over the step's renders, on random scenes whose objects overlap and
 //! occlude each other, for every rasterize variant the adapter runs.
 
+mod gpu_support;
+
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use segsplat_engine::reference::ReferenceGaussians;
@@ -18,14 +20,7 @@ use segsplat_scene::Level;
 use wgpu::util::DeviceExt;
 
 fn context() -> Option<GpuContext> {
-    match GpuContext::new_default() {
-        Ok(ctx) => Some(ctx),
-        Err(error) if std::env::var("SEGSPLAT_SKIP_GPU_TESTS").as_deref() == Ok("1") => {
-            println!("skipping GPU test (SEGSPLAT_SKIP_GPU_TESTS=1): {error}");
-            None
-        }
-        Err(error) => panic!("no GPU adapter (set SEGSPLAT_SKIP_GPU_TESTS=1 to skip): {error}"),
-    }
+    gpu_support::new_gpu_context()
 }
 
 /// Objects at every level (random_scene gives each Gaussian ids 0..3 per level, so objects of

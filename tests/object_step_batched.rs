@@ -4,6 +4,7 @@
 //! same object loss, step after step. `object_batch_gpu.rs` checks the renders and gradients
 //! below the loss.
 
+mod gpu_support;
 mod segment_then_splat_support;
 
 use segment_then_splat_support::{config, gpu, synthetic_scene};

@@ -1,6 +1,8 @@
 //! GPU renderer against the CPU reference (f64): images, gradients, finite differences, object
 //! filter, background, empty and fully culled scenes, gradient accumulation, capacity growth.
 
+mod gpu_support;
+
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use segsplat_engine::reference::scenes::{
@@ -18,14 +20,7 @@ use segsplat_scene::Level;
 use wgpu::util::DeviceExt;
 
 fn context() -> Option<GpuContext> {
-    match GpuContext::new_default() {
-        Ok(ctx) => Some(ctx),
-        Err(error) if std::env::var("SEGSPLAT_SKIP_GPU_TESTS").as_deref() == Ok("1") => {
-            println!("skipping GPU test (SEGSPLAT_SKIP_GPU_TESTS=1): {error}");
-            None
-        }
-        Err(error) => panic!("no GPU adapter (set SEGSPLAT_SKIP_GPU_TESTS=1 to skip): {error}"),
-    }
+    gpu_support::new_gpu_context()
 }
 
 fn render_gpu(

@@ -8,6 +8,7 @@
 //! - Trained end to end from classical masks, each true object's best predicted object (any
 //!   level, the issue's `--oracle` selection) must match its held-out full silhouette.
 
+mod gpu_support;
 mod segment_then_splat_support;
 
 use segment_then_splat_support::{config, full_truth, gpu, iou, mean, synthetic_scene};

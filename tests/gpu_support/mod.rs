@@ -10,11 +10,12 @@ use std::sync::OnceLock;
 use segsplat_gpu::GpuContext;
 use wgpu::util::DeviceExt;
 
-/// The test context, or `None` (with a printed reason) when no adapter exists and
-/// `SEGSPLAT_SKIP_GPU_TESTS=1` allows skipping. Without that variable a missing adapter fails.
-pub fn gpu_context() -> Option<&'static GpuContext> {
-    static CONTEXT: OnceLock<Result<GpuContext, String>> = OnceLock::new();
-    match CONTEXT.get_or_init(|| GpuContext::new_default().map_err(|error| error.to_string())) {
+/// A context of the test's own on the default adapter, or `None` (with a printed reason) when no
+/// adapter exists and `SEGSPLAT_SKIP_GPU_TESTS=1` allows skipping. Without that variable a
+/// missing adapter fails.
+pub fn new_gpu_context() -> Option<GpuContext> {
+    log_to_stderr_when_asked();
+    match GpuContext::new_default() {
         Ok(ctx) => Some(ctx),
         Err(error) if std::env::var("SEGSPLAT_SKIP_GPU_TESTS").as_deref() == Ok("1") => {
             eprintln!("skipping GPU test: no adapter ({error})");
@@ -22,6 +23,29 @@ pub fn gpu_context() -> Option<&'static GpuContext> {
         }
         Err(error) => panic!("no GPU adapter (set SEGSPLAT_SKIP_GPU_TESTS=1 to skip): {error}"),
     }
+}
+
+/// One context shared by the test binary's tests ([`new_gpu_context`] made once).
+pub fn gpu_context() -> Option<&'static GpuContext> {
+    static CONTEXT: OnceLock<Option<GpuContext>> = OnceLock::new();
+    CONTEXT.get_or_init(new_gpu_context).as_ref()
+}
+
+/// With `RUST_LOG` set, log records (wgpu's among them) go to stderr, where the test harness
+/// does not hide them: `scripts/sync_validation.sh` runs the GPU tests under the Khronos
+/// validation layer, whose findings wgpu reports only through `log`.
+fn log_to_stderr_when_asked() {
+    static INSTALLED: std::sync::Once = std::sync::Once::new();
+    INSTALLED.call_once(|| {
+        let Ok(filter) = tracing_subscriber::EnvFilter::try_from_default_env() else {
+            return;
+        };
+        // Another logger already installed is as good.
+        let _ = tracing_subscriber::fmt()
+            .with_env_filter(filter)
+            .with_writer(std::io::stderr)
+            .try_init();
+    });
 }
 
 /// A storage buffer holding `data`, readable back by the tests.

@@ -12,16 +12,10 @@ use segsplat_scene::synthetic::{
 use segsplat_scene::{Level, LoadOptions, Scene, load_scene};
 
 /// The adapter, or `None` (skip, with the reason printed) when there is none and
-/// `SEGSPLAT_SKIP_GPU_TESTS` is set; without that variable a missing adapter fails.
+/// `SEGSPLAT_SKIP_GPU_TESTS=1` is set; without that variable a missing adapter fails.
+/// (A test using this module declares `mod gpu_support;` beside it.)
 pub fn gpu() -> Option<GpuContext> {
-    match GpuContext::new_default() {
-        Ok(ctx) => Some(ctx),
-        Err(error) if std::env::var("SEGSPLAT_SKIP_GPU_TESTS").is_ok() => {
-            eprintln!("skipping: no GPU adapter ({error})");
-            None
-        }
-        Err(error) => panic!("no GPU adapter: {error}"),
-    }
+    crate::gpu_support::new_gpu_context()
 }
 
 /// Writes the synthetic COLMAP scene (32 ring views at 96x72, masks at every level, points with
