@@ -267,7 +267,19 @@ def headline(bench):
     if "gpu_ms_per_step" in profile:
         parts.append(f"GPU {profile['gpu_ms_per_step']:.2f} ms/step")
     parts.extend(host_figures(found.get("host") or {}))
+    parts.extend(timeline_figures(profile.get("timeline") or {}))
     return ", ".join(parts)
+
+
+# The GPU's timeline over a sample of steps (`segsplat_gpu::BusySummary`): (key, label, format).
+TIMELINE = (("pass_ms_per_step", "GPU in passes ms/step", "{:.3f}"),
+            ("kernel_ms_per_step", "in kernels", "{:.3f}"),
+            ("idle_ms_per_step", "GPU idle ms/step", "{:.3f}"),
+            ("longest_gap_ms", "longest gap ms", "{:.2f}"))
+
+
+def timeline_figures(timeline):
+    return labelled(timeline, TIMELINE)
 
 
 # The host's side of a step (issue 38, item 4), where a report has it: (key, label, format).
@@ -280,8 +292,13 @@ HOST = (("host_ms_per_step", "host ms/step", "{:.3f}"),
 
 
 def host_figures(host):
-    return [f"{label} {fmt.format(host[key])}" for key, label, fmt in HOST
-            if isinstance(host.get(key), (int, float))]
+    return labelled(host, HOST)
+
+
+def labelled(values, table):
+    """Each (key, label, format) of `table` whose value `values` has, as "label value"."""
+    return [f"{label} {fmt.format(values[key])}" for key, label, fmt in table
+            if isinstance(values.get(key), (int, float))]
 
 
 def print_summary(report):
@@ -310,6 +327,7 @@ def print_summary(report):
                                      for stage, value in job["stage_times"].items()))
         metrics = job.get("metrics") or {}
         figures.extend(host_figures(metrics.get("training") or {}))
+        figures.extend(timeline_figures((metrics.get("training") or {}).get("gpu_timeline") or {}))
         masks = (metrics.get("segment") or {}).get("masks_seconds")
         if isinstance(masks, (int, float)):
             figures.append(f"masks {masks:.1f} s")

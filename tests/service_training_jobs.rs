@@ -199,6 +199,28 @@ async fn reconstruct_job_trains_and_stores_artifacts() {
             busy.is_some_and(|busy| busy > 0.0 && busy <= 1.0),
             "gpu_busy_fraction: {training}"
         );
+        // The sample behind it: steps with their shared passes timed, then with each dispatch.
+        let timeline = &training["gpu_timeline"];
+        assert_eq!(timeline["gpu_busy_fraction"].as_f64(), busy, "{training}");
+        assert!(
+            timeline["timeline_steps"]
+                .as_u64()
+                .is_some_and(|steps| steps
+                    >= u64::from(segsplat_service::job_kinds::training::BUSY_SAMPLE_STEPS)),
+            "{training}"
+        );
+        assert!(
+            timeline["passes_per_step"]
+                .as_f64()
+                .is_some_and(|p| p >= 1.0)
+                && timeline["pass_ms_per_step"]
+                    .as_f64()
+                    .is_some_and(|ms| ms > 0.0)
+                && timeline["kernel_ms_per_step"]
+                    .as_f64()
+                    .is_some_and(|ms| ms > 0.0),
+            "gpu_timeline: {training}"
+        );
     }
     // A succeeded job's checkpoint goes (jobs.keep_final_checkpoint is off), just after the
     // state is recorded.

@@ -416,6 +416,8 @@ fn bench_starts_from_a_trained_ply() {
         "1",
         "--profile-kernels",
         "2",
+        "--busy-steps",
+        "20",
         "--json",
     ]);
     assert!(output.status.success(), "{output:?}");
@@ -447,6 +449,26 @@ fn bench_starts_from_a_trained_ply() {
     let reported = profile["gpu_ms_per_step"].as_f64().expect("gpu ms");
     assert!(
         (total - reported).abs() < 1e-6 * reported.max(1.0),
+        "{report}"
+    );
+    // Before the kernels, a job's sample of steps ran with only their shared passes timed: the
+    // GPU's timeline over them, whose filled share is the busy fraction.
+    let timeline = &profile["timeline"];
+    assert_eq!(timeline["timeline_steps"], 20, "{report}");
+    assert_eq!(timeline["kernel_steps"], 2, "{report}");
+    let field = |name: &str| timeline[name].as_f64().expect(name);
+    // Shared passes: a few a step, far fewer than the dispatches.
+    assert!((1.0..20.0).contains(&field("passes_per_step")), "{report}");
+    assert!(field("pass_ms_per_step") > 0.0, "{report}");
+    let busy = field("gpu_busy_fraction");
+    assert!(busy > 0.0 && busy <= 1.0, "{report}");
+    assert_eq!(
+        profile["gpu_busy_fraction"].as_f64(),
+        Some(busy),
+        "{report}"
+    );
+    assert!(
+        field("idle_ms_per_step") >= 0.0 && field("longest_gap_ms") >= 0.0,
         "{report}"
     );
     let missing = segsplat(&[

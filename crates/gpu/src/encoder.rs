@@ -17,6 +17,7 @@ use std::sync::atomic::Ordering;
 
 use crate::GpuContext;
 use crate::context::HostCosts;
+use crate::profiler::KernelProfiler;
 
 /// A command encoder whose compute dispatches share a pass (see the module docs).
 pub struct Encoder {
@@ -24,6 +25,8 @@ pub struct Encoder {
     pass: Option<wgpu::ComputePass<'static>>,
     inner: wgpu::CommandEncoder,
     host_costs: Arc<HostCosts>,
+    /// Times the shared passes during a passes profile ([`KernelProfiler::start_passes`]).
+    profiler: Option<Arc<KernelProfiler>>,
 }
 
 impl Encoder {
@@ -34,6 +37,7 @@ impl Encoder {
                 .device
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) }),
             host_costs: Arc::clone(&ctx.host_costs),
+            profiler: ctx.profiler.clone(),
         }
     }
 
@@ -43,13 +47,16 @@ impl Encoder {
             pass,
             inner,
             host_costs,
+            profiler,
         } = self;
         pass.get_or_insert_with(|| {
             host_costs.compute_passes.fetch_add(1, Ordering::Relaxed);
             inner
                 .begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: Some("dispatches"),
-                    timestamp_writes: None,
+                    timestamp_writes: profiler
+                        .as_ref()
+                        .and_then(|profiler| profiler.shared_pass_writes()),
                 })
                 .forget_lifetime()
         })

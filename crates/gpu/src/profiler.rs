@@ -1,10 +1,17 @@
-//! Per-kernel GPU timing from timestamp queries, for benchmarks (`segsplat bench --profile-kernels`).
+//! GPU timing from timestamp queries, for benchmarks (`segsplat bench --profile-kernels`) and a
+//! job's `gpu_busy_fraction`. Two kinds of profile:
 //!
-//! While a profile runs, every [`Kernel`](super::Kernel) built on a context with profiling on
-//! writes a timestamp at the start and end of each of its passes. Wall-clock timing around a
-//! submission cannot say which of a step's ~100 passes the time went to; these timestamps can,
-//! without changing what is recorded (no extra submissions or waits). Off by default, and idle
-//! outside a profile.
+//! - **kernels** ([`KernelProfiler::start`]): every [`Kernel`](super::Kernel) dispatch gets a
+//!   pass of its own with a timestamp at its start and end, so the time is told by kernel.
+//!   Wall-clock timing around a submission cannot say which of a step's ~100 dispatches the
+//!   time went to; these timestamps can. The extra passes cost the host, and the sum leaves out
+//!   what the GPU spends between dispatches (barriers, launches).
+//! - **passes** ([`KernelProfiler::start_passes`]): the shared passes of [`crate::Encoder`]
+//!   get the timestamps, so the work is recorded as it is untimed, and the GPU's timeline shows
+//!   how much of it the passes fill ([`PassTimeline`]): what a step costs the GPU including
+//!   the gaps between its dispatches, and whether the host kept the GPU fed.
+//!
+//! No extra submissions or waits either way. Off by default, and idle outside a profile.
 
 use std::collections::BTreeMap;
 use std::sync::Mutex;
@@ -12,6 +19,7 @@ use std::sync::Mutex;
 use serde::Serialize;
 
 use super::context::{GpuContext, GpuError};
+use super::pass_timeline::PassTimeline;
 
 /// Passes timed in one profile; later passes run untimed (counted in `untimed_passes`).
 const PASS_CAPACITY: u32 = 2048;
@@ -32,9 +40,23 @@ pub struct KernelProfile {
     pub untimed_passes: u32,
 }
 
+/// What an active profile times.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+enum Timing {
+    #[default]
+    Off,
+    /// Each dispatch in a pass of its own.
+    Kernels,
+    /// The encoders' shared passes as they are.
+    Passes,
+}
+
+/// The label of a shared pass's timestamps.
+const SHARED_PASS: &str = "shared pass";
+
 #[derive(Debug, Default)]
 struct Recorded {
-    active: bool,
+    timing: Timing,
     labels: Vec<&'static str>,
     untimed: u32,
 }
@@ -80,19 +102,43 @@ impl KernelProfiler {
             .unwrap_or_else(|poison| poison.into_inner())
     }
 
-    /// Starts timing passes recorded from now on (until [`KernelProfiler::take`]).
+    /// Starts timing each dispatch recorded from now on (until [`KernelProfiler::take`]).
     pub fn start(&self) {
+        self.start_timing(Timing::Kernels);
+    }
+
+    /// Starts timing the encoders' shared passes opened from now on (until
+    /// [`KernelProfiler::take_timeline`]).
+    pub fn start_passes(&self) {
+        self.start_timing(Timing::Passes);
+    }
+
+    fn start_timing(&self, timing: Timing) {
         *self.recorded() = Recorded {
-            active: true,
+            timing,
             ..Recorded::default()
         };
     }
 
-    /// The timestamp writes for the next pass of kernel `label`; `None` outside a profile or once
-    /// the query set is full.
+    /// The timestamp writes for the next pass of kernel `label`, a dispatch's own; `None`
+    /// outside a kernels profile or once the query set is full.
     pub fn pass_writes(&self, label: &'static str) -> Option<wgpu::ComputePassTimestampWrites<'_>> {
+        self.writes(Timing::Kernels, label)
+    }
+
+    /// The timestamp writes for the next shared pass of an encoder; `None` outside a passes
+    /// profile or once the query set is full.
+    pub fn shared_pass_writes(&self) -> Option<wgpu::ComputePassTimestampWrites<'_>> {
+        self.writes(Timing::Passes, SHARED_PASS)
+    }
+
+    fn writes(
+        &self,
+        timing: Timing,
+        label: &'static str,
+    ) -> Option<wgpu::ComputePassTimestampWrites<'_>> {
         let mut recorded = self.recorded();
-        if !recorded.active {
+        if recorded.timing != timing {
             return None;
         }
         let pass = recorded.labels.len() as u32;
@@ -111,13 +157,38 @@ impl KernelProfiler {
     /// Per-kernel times of the passes recorded since [`KernelProfiler::start`], which must all
     /// have been submitted. Waits for the GPU and ends the profile.
     pub fn take(&self, ctx: &GpuContext) -> Result<KernelProfile, GpuError> {
-        let recorded = std::mem::take(&mut *self.recorded());
-        let passes = recorded.labels.len() as u32;
-        if passes == 0 {
+        let (recorded, ticks) = self.take_ticks(ctx)?;
+        if recorded.labels.is_empty() {
             return Ok(KernelProfile {
                 untimed_passes: recorded.untimed,
                 ..KernelProfile::default()
             });
+        }
+        Ok(profile_from_ticks(
+            &recorded.labels,
+            &ticks,
+            f64::from(ctx.queue.get_timestamp_period()),
+            recorded.untimed,
+        ))
+    }
+
+    /// The GPU's timeline of the shared passes recorded since [`KernelProfiler::start_passes`],
+    /// which must all have been submitted. Waits for the GPU and ends the profile.
+    pub fn take_timeline(&self, ctx: &GpuContext) -> Result<PassTimeline, GpuError> {
+        let (recorded, ticks) = self.take_ticks(ctx)?;
+        Ok(PassTimeline::from_ticks(
+            &ticks,
+            f64::from(ctx.queue.get_timestamp_period()),
+            recorded.untimed,
+        ))
+    }
+
+    /// Ends the profile and reads its timestamps back (a begin and an end per pass).
+    fn take_ticks(&self, ctx: &GpuContext) -> Result<(Recorded, Vec<u64>), GpuError> {
+        let recorded = std::mem::take(&mut *self.recorded());
+        let passes = recorded.labels.len() as u32;
+        if passes == 0 {
+            return Ok((recorded, Vec::new()));
         }
         let mut encoder = ctx
             .device
@@ -128,64 +199,115 @@ impl KernelProfiler {
         ctx.submit_untimed(encoder.finish());
         let ticks: Vec<u64> =
             bytemuck::pod_collect_to_vec(&ctx.read_buffer(&self.resolved, u64::from(passes) * 16)?);
-        let ns_per_tick = f64::from(ctx.queue.get_timestamp_period());
-        Ok(profile_from_ticks(
-            &recorded.labels,
-            &ticks,
-            ns_per_tick,
-            recorded.untimed,
-        ))
+        Ok((recorded, ticks))
     }
 }
 
-/// What [`measure_busy`] found: the same work run untimed and then timed.
+/// What [`measure_busy`] found: the work run with its shared passes timed, then run again with
+/// each dispatch timed.
 #[derive(Debug, Clone)]
 pub struct BusyReading {
-    /// Wall milliseconds of the untimed run, from an idle device to an idle device.
+    /// Wall milliseconds of the first run, from an idle device to an idle device (so with the
+    /// host's latency before the GPU gets its first pass, which the timeline leaves out).
     pub wall_ms: f64,
-    /// Wall milliseconds of the timed run: longer, as each timed dispatch has a pass of its own.
+    /// The GPU's timeline over the first run: how full its passes kept the GPU.
+    pub timeline: PassTimeline,
+    /// Wall milliseconds of the second run: longer, as each timed dispatch has a pass of its own.
     pub profiled_wall_ms: f64,
-    /// GPU time of the timed run, by kernel.
+    /// GPU time of the second run, by kernel.
     pub profile: KernelProfile,
 }
 
 impl BusyReading {
-    /// The share of the untimed run's wall time the GPU spent in its kernels (at most 1).
+    /// The share of the GPU's timeline over the first run that its passes filled
+    /// ([`PassTimeline::busy_fraction`]).
     pub fn busy_fraction(&self) -> f64 {
-        (self.profile.total_ms / self.wall_ms.max(1e-9)).min(1.0)
+        self.timeline.busy_fraction()
+    }
+
+    /// The reading per unit of work, given the units of each run (what a report carries).
+    pub fn summary(&self, timeline_units: u32, kernel_units: u32) -> BusySummary {
+        let per_timeline_unit = |value: f64| value / f64::from(timeline_units.max(1));
+        let kernel_ms = self.profile.total_ms / f64::from(kernel_units.max(1));
+        let pass_ms = per_timeline_unit(self.timeline.busy_ms);
+        BusySummary {
+            gpu_busy_fraction: self.busy_fraction(),
+            timeline_steps: timeline_units,
+            passes_per_step: per_timeline_unit(f64::from(self.timeline.passes)),
+            pass_ms_per_step: pass_ms,
+            idle_ms_per_step: per_timeline_unit(self.timeline.idle_ms()),
+            longest_gap_ms: self.timeline.longest_gap_ms,
+            wall_ms_per_step: per_timeline_unit(self.wall_ms),
+            kernel_steps: kernel_units,
+            kernel_ms_per_step: kernel_ms,
+            between_dispatches_ms_per_step: (pass_ms - kernel_ms).max(0.0),
+        }
     }
 }
 
-/// Runs `run` twice, which must record the same work each time (a fixed number of training
-/// steps): first untimed, for the wall time, then with every pass timed, for the GPU time. Timing
-/// gives every dispatch a pass of its own (see [`crate::Encoder`]), which costs the host more
-/// than the shared pass untimed work gets, so the wall time of a timed run would understate how
-/// busy the GPU is. `None` without a profiler, or when the profiler dropped passes.
+/// A [`BusyReading`] per step of training (the unit of work `bench` and a job measure), as
+/// `bench --profile-kernels` and a job's `metrics.json` report it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
+pub struct BusySummary {
+    /// The share of the GPU's timeline its passes filled, over `timeline_steps` steps.
+    pub gpu_busy_fraction: f64,
+    pub timeline_steps: u32,
+    pub passes_per_step: f64,
+    /// GPU milliseconds a step inside the step's passes (its kernels and what the GPU does
+    /// between them: barriers, launches).
+    pub pass_ms_per_step: f64,
+    /// GPU milliseconds a step with no pass running: where the host did not keep up, plus the
+    /// untimed copies and clears between passes.
+    pub idle_ms_per_step: f64,
+    /// The longest such stretch in the sample.
+    pub longest_gap_ms: f64,
+    /// Wall milliseconds a step of the timeline's run, from an idle device to an idle device.
+    pub wall_ms_per_step: f64,
+    /// Steps run with each dispatch timed.
+    pub kernel_steps: u32,
+    /// GPU milliseconds a step inside the kernels themselves (each dispatch timed alone).
+    pub kernel_ms_per_step: f64,
+    /// `pass_ms_per_step - kernel_ms_per_step`: what a step's passes cost the GPU beyond their
+    /// kernels (from two samples, so only roughly).
+    pub between_dispatches_ms_per_step: f64,
+}
+
+/// Runs `run(timeline_units)` with the encoders' shared passes timed, for how full the host keeps
+/// the GPU ([`PassTimeline`]), then `run(kernel_units)` with every dispatch timed, for the GPU's
+/// time by kernel. `run(n)` must record `n` units of the same work (training steps). The
+/// timeline's run can be long (it times a few passes a step); the kernels' run holds at most
+/// the profiler's 2048 dispatches. `None` without a profiler, or when either run recorded
+/// more passes than the profiler holds.
 pub fn measure_busy<E>(
     ctx: &GpuContext,
-    mut run: impl FnMut() -> Result<(), E>,
+    timeline_units: u32,
+    kernel_units: u32,
+    mut run: impl FnMut(u32) -> Result<(), E>,
     gpu_error: impl Fn(GpuError) -> E,
 ) -> Result<Option<BusyReading>, E> {
     let Some(profiler) = ctx.profiler.as_ref() else {
         return Ok(None);
     };
     ctx.wait_idle().map_err(&gpu_error)?;
+    profiler.start_passes();
     let started = std::time::Instant::now();
-    run()?;
-    ctx.wait_idle().map_err(&gpu_error)?;
+    let ran = run(timeline_units);
+    // Taken even when the run failed, so the profiler is left idle.
+    let timeline = profiler.take_timeline(ctx).map_err(&gpu_error)?;
+    ran?;
     let wall_ms = started.elapsed().as_secs_f64() * 1e3;
     profiler.start();
     let started = std::time::Instant::now();
-    let ran = run();
-    // Taken even when the run failed, so the profiler is left idle.
+    let ran = run(kernel_units);
     let profile = profiler.take(ctx).map_err(&gpu_error)?;
     ran?;
     let profiled_wall_ms = started.elapsed().as_secs_f64() * 1e3;
-    if profile.untimed_passes != 0 || wall_ms <= 0.0 {
+    if profile.untimed_passes != 0 || timeline.untimed_passes != 0 || timeline.passes == 0 {
         return Ok(None);
     }
     Ok(Some(BusyReading {
         wall_ms,
+        timeline,
         profiled_wall_ms,
         profile,
     }))

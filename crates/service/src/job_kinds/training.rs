@@ -204,18 +204,21 @@ pub struct TrainingStageReport {
     /// (`segsplat_gpu::Encoder`), so this is far below `dispatches_per_step`.
     #[serde(default)]
     pub compute_passes_per_step: f64,
-    /// Share of the wall time the GPU spent in the step's compute passes: [`BUSY_SAMPLE_STEPS`]
-    /// steps in the middle of the stage timed on the wall, and as many more with timestamp
-    /// queries for the GPU's time (`segsplat_gpu::measure_busy`); absent where the adapter has
-    /// no timestamp queries or the stage was too short to sample.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    /// Share of the GPU's timeline its passes filled over a sample of steps in the middle of the
+    /// stage (`segsplat_gpu::measure_busy`, `gpu_timeline.timeline_steps` of them): whether the
+    /// host kept the GPU fed. Absent where the adapter has no timestamp queries or the stage was
+    /// too short to sample.
     pub gpu_busy_fraction: Option<f64>,
+    /// The sample behind `gpu_busy_fraction`: the GPU's milliseconds a step inside the step's
+    /// passes, idle between them, and inside its kernels alone (`segsplat_gpu::BusySummary`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gpu_timeline: Option<segsplat_gpu::BusySummary>,
     /// The deformation field's GEMM kernel (`tiled`, `rows`, `broadcast`: docs/engine.md), for
     /// a dynamic scene.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gemm_kernel: Option<String>,
     /// GPU milliseconds a step spent in the deformation field's passes (its GEMMs, reductions,
-    /// encoding and warp; not its Adam step), from the same sample as `gpu_busy_fraction`.
+    /// encoding and warp; not its Adam step), from the sample's steps with every dispatch timed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub field_gpu_ms_per_step: Option<f64>,
     /// `field_gpu_ms_per_step` over the sampled steps' whole GPU time: the field's share.
@@ -259,10 +262,14 @@ fn is_zero(value: &f64) -> bool {
     *value == 0.0
 }
 
-/// Steps timed with timestamp queries for [`TrainingStageReport::gpu_busy_fraction`] (and as
-/// many before them on the wall): few enough for the profiler's pass capacity at object-loss
-/// steps, and for both halves to fit between a short job's checkpoints and held-out points.
+/// Steps run with every dispatch timed, for the GPU's time by kernel (the deformation field's
+/// share): few enough for the profiler's 2048 passes at object-loss steps.
 pub const BUSY_SAMPLE_STEPS: u32 = 5;
+
+/// The most steps run with the shared passes timed, for [`TrainingStageReport::gpu_busy_fraction`]:
+/// long enough that a densification step or a slow report in it weighs as it does in the stage.
+/// A short stage samples a quarter of its steps (at least [`BUSY_SAMPLE_STEPS`]).
+pub const BUSY_TIMELINE_STEPS: u32 = 100;
 
 /// Trains to the configured end, saving a checkpoint named `checkpoint_name` every
 /// `cadence.checkpoint_every` steps (0 = only at the end), evaluating the held-out views every
@@ -328,8 +335,9 @@ fn train_stage(
     let mut held_out_curve_seconds = 0.0;
     // Host costs of the checkpoints and evaluations, which the per-step figures leave out.
     let mut outside_steps_host = HostCostReading::default();
-    // The busy sample (twice its steps: on the wall, then timed) starts halfway through what
-    // this attempt trains, past the first steps' allocations and cache fills.
+    // The busy sample (its passes timed, then its dispatches) starts halfway through what this
+    // attempt trains, past the first steps' allocations and cache fills.
+    let timeline_steps = ((total - first_step) / 4).clamp(BUSY_SAMPLE_STEPS, BUSY_TIMELINE_STEPS);
     let mut busy_sample_at = (gpu.profiler.is_some() && total - first_step > 4 * BUSY_SAMPLE_STEPS)
         .then(|| first_step + (total - first_step) / 2);
     let mut busy_sample = None;
@@ -371,11 +379,13 @@ fn train_stage(
         if let Some(at) = busy_sample_at.filter(|&at| at < next_stop) {
             // Both halves inside this stretch, so the sample never runs past a checkpoint or a
             // held-out point; a stretch too short hands it on to the next.
+            // The timeline's steps shrink to what the stretch holds.
             if at + 2 * BUSY_SAMPLE_STEPS <= next_stop {
                 busy_sample_at = None;
                 run_to(trainer, at)?;
                 ctx.stop_requested()?;
-                busy_sample = sample_gpu_busy(&gpu, trainer, |trainer, last| {
+                let timeline_steps = timeline_steps.min(next_stop - at - BUSY_SAMPLE_STEPS);
+                busy_sample = sample_gpu_busy(&gpu, trainer, timeline_steps, |trainer, last| {
                     run_to(trainer, last).map(|_| ())
                 })?;
             } else {
@@ -457,7 +467,8 @@ fn train_stage(
         compute_passes_per_step: per_step(
             (host.compute_passes - outside_steps_host.compute_passes) as f64,
         ),
-        gpu_busy_fraction: busy_sample.map(|sample| sample.busy_fraction),
+        gpu_busy_fraction: busy_sample.map(|sample| sample.summary.gpu_busy_fraction),
+        gpu_timeline: busy_sample.map(|sample| sample.summary),
         gemm_kernel: trainer
             .deformation_gemm_kernel()
             .map(|kernel| kernel.name().to_string()),
@@ -478,8 +489,7 @@ fn train_stage(
 /// What the timed steps of [`sample_gpu_busy`] show.
 #[derive(Debug, Clone, Copy)]
 struct BusySample {
-    /// GPU time over wall time.
-    busy_fraction: f64,
+    summary: segsplat_gpu::BusySummary,
     /// GPU milliseconds a step in the deformation field's passes (0 for a static scene).
     field_ms_per_step: f64,
     /// Those over the steps' whole GPU time.
@@ -492,20 +502,23 @@ fn is_field_kernel(label: &str) -> bool {
     label.starts_with("mlp_") || label.starts_with("deform_")
 }
 
-/// Trains [`BUSY_SAMPLE_STEPS`] steps on the wall and as many with every pass timed
-/// (`segsplat_gpu::measure_busy`) and returns the GPU's share of the wall time, and the
-/// deformation field's share of the GPU's; `None` when the profiler dropped passes (the fraction
-/// would be low).
+/// Trains `timeline_steps` steps with their passes timed and [`BUSY_SAMPLE_STEPS`] more with
+/// every dispatch timed (`segsplat_gpu::measure_busy`) and returns how full the GPU's timeline
+/// was, and the deformation field's share of the GPU's time; `None` when the profiler dropped
+/// passes (the figures would be low).
 fn sample_gpu_busy(
     gpu: &segsplat_gpu::GpuContext,
     trainer: &mut Trainer,
+    timeline_steps: u32,
     mut run_to: impl FnMut(&mut Trainer, u32) -> Result<(), JobFailure>,
 ) -> Result<Option<BusySample>, JobFailure> {
     let end = trainer.config().steps;
     let reading = segsplat_gpu::measure_busy(
         gpu,
-        || {
-            let last = (trainer.step() + BUSY_SAMPLE_STEPS).min(end);
+        timeline_steps,
+        BUSY_SAMPLE_STEPS,
+        |steps| {
+            let last = (trainer.step() + steps).min(end);
             run_to(trainer, last)
         },
         retryable,
@@ -522,7 +535,7 @@ fn sample_gpu_busy(
         .sum();
     let steps = f64::from(BUSY_SAMPLE_STEPS);
     Ok(Some(BusySample {
-        busy_fraction: reading.busy_fraction(),
+        summary: reading.summary(timeline_steps, BUSY_SAMPLE_STEPS),
         field_ms_per_step: field_ms / steps,
         field_fraction: field_ms / reading.profile.total_ms.max(1e-9),
     }))
