@@ -288,7 +288,8 @@ HOST = (("host_ms_per_step", "host ms/step", "{:.3f}"),
         ("submit_ms_per_step", "submit ms/step", "{:.3f}"),
         ("compute_passes_per_step", "passes/step", "{:.1f}"),
         ("dispatches_per_step", "dispatches/step", "{:.1f}"),
-        ("gpu_busy_fraction", "GPU busy", "{:.2f}"))
+        ("gpu_busy_fraction", "GPU busy", "{:.2f}"),
+        ("partial_filter_seconds", "partial-mask filter s", "{:.2f}"))
 
 
 def host_figures(host):

@@ -453,6 +453,12 @@ async fn segment_then_splat_job_stores_objects_at_three_levels() {
     assert_eq!(Some(total("skipped")), stored["skipped_pairs"].as_u64());
     assert!(filter["skipped_rendering_nothing"].as_u64() <= Some(total("skipped")));
     assert_eq!(filter["iou_quartiles"].as_array().map(Vec::len), Some(3));
+    // Its pass's seconds, inside the stage's.
+    let filter_seconds = training["partial_filter_seconds"].as_f64().unwrap_or(-1.0);
+    assert!(
+        filter_seconds > 0.0 && filter_seconds < training["seconds"].as_f64().unwrap_or(0.0),
+        "{stored}"
+    );
     // The segmentation stage reports each view as it is segmented, not only its start and end.
     let steps = stage_steps(&client, &job_id, "segment").await;
     let train_views = steps.last().copied().unwrap_or_default();

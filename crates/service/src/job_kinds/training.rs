@@ -183,11 +183,19 @@ pub struct TrainingStageReport {
     pub dispatches_per_step: f64,
     pub bytes_read_back_per_step: f64,
     /// Host milliseconds a step outside the device's work and checkpoints (encoding,
-    /// progress, densification's re-layout on the CPU).
+    /// progress, densification's re-layout on the CPU, the partial-mask filter's host side and
+    /// the busy sample's).
     pub host_ms_per_step: f64,
+    /// Wall seconds of the partial-mask filter's pass (inside `seconds`, and its host side
+    /// inside `host_ms_per_step`): it renders every (object, view) pair once, late in the
+    /// stage, and reads the renders back.
+    #[serde(default)]
+    pub partial_filter_seconds: f64,
     /// Milliseconds a step the host waited for the GPU (read-backs, waits).
     pub wait_ms_per_step: f64,
-    /// Milliseconds a step inside queue submissions (a software adapter runs the work there).
+    /// Milliseconds a step inside queue submissions (a software adapter runs the work there;
+    /// a GPU's driver may hold a submission until earlier ones drain, so on a GPU this is
+    /// partly a wait too).
     #[serde(default)]
     pub submit_ms_per_step: f64,
     /// Of `host_ms_per_step`, milliseconds a step in wgpu's `finish` of the step's encoders
@@ -326,6 +334,7 @@ fn train_stage(
     let total = trainer.config().steps;
     let gpu = trainer.gpu().clone();
     let first_step = trainer.step();
+    let filter_before = trainer.partial_filter_cost().seconds;
     let dispatches_before = gpu.dispatch_count();
     let host_before = gpu.host_costs.reading();
     let started = std::time::Instant::now();
@@ -454,6 +463,7 @@ fn train_stage(
                 * 1e3,
         ),
         wait_ms_per_step: per_step(waited.max(0.0) * 1e3),
+        partial_filter_seconds: trainer.partial_filter_cost().seconds - filter_before,
         submit_ms_per_step: per_step(submitted.max(0.0) * 1e3),
         finish_ms_per_step: per_step(
             (host.finish_seconds() - outside_steps_host.finish_seconds()).max(0.0) * 1e3,
