@@ -16,6 +16,8 @@
 # segment_then_splat_synthetic: three minutes under the layer on two cores); the training runs
 # cover the same steps (densification, the object loss, the deformation field).
 # Needs the layer (Debian: `apt-get install vulkan-validationlayers`); exits 2 without it.
+# Where a C compiler and the Vulkan headers are, it first checks that the layer reports a hazard
+# planted on purpose (scripts/sync_hazard_control.c).
 # Debian 12's layer (1.3.239) predates the SPIR-V source language naga writes for WGSL and
 # reports every shader module as `InconsistentSpirv`; that one message is not counted.
 set -euo pipefail
@@ -25,7 +27,7 @@ quick=0
 for arg; do
   case $arg in
     --quick) quick=1 ;;
-    -h | --help) sed -n '2,18p' "$0"; exit 0 ;;
+    -h | --help) sed -n '2,22p' "$0"; exit 0 ;;
     *) echo "unknown argument '$arg' (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -87,6 +89,22 @@ if ! grep -q 'Insert instance layer "VK_LAYER_KHRONOS_validation"' "$logs/loader
   exit 1
 fi
 rm "$logs/loader.log"
+
+# The positive control, where the Vulkan headers are (Debian's libvulkan-dev; CI has none): two
+# fills of one buffer with no barrier between them must be reported (scripts/sync_hazard_control.c).
+if command -v cc >/dev/null && [ -e /usr/include/vulkan/vulkan.h ]; then
+  cc scripts/sync_hazard_control.c -lvulkan -o "$logs/control"
+  VK_INSTANCE_LAYERS=VK_LAYER_KHRONOS_validation "$logs/control" >"$logs/control.out" 2>&1 || true
+  if ! grep -q 'SYNC-HAZARD-WRITE-AFTER-WRITE' "$logs/control.out"; then
+    echo "sync_validation: the layer did not report the control's unbarriered fills:" >&2
+    tail -20 "$logs/control.out" >&2
+    exit 1
+  fi
+  rm "$logs/control.out"
+  echo "== the control's unbarriered fills are reported (SYNC-HAZARD-WRITE-AFTER-WRITE)"
+else
+  echo "== no positive control here (it needs cc and the Vulkan headers, libvulkan-dev)"
+fi
 
 echo "== GPU tests under synchronization validation"
 for name in "${tests[@]}"; do
