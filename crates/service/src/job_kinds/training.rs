@@ -216,6 +216,7 @@ pub struct TrainingStageReport {
     /// stage (`segsplat_gpu::measure_busy`, `gpu_timeline.timeline_steps` of them): whether the
     /// host kept the GPU fed. Absent where the adapter has no timestamp queries or the stage was
     /// too short to sample.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gpu_busy_fraction: Option<f64>,
     /// The sample behind `gpu_busy_fraction`: the GPU's milliseconds a step inside the step's
     /// passes, idle between them, and inside its kernels alone (`segsplat_gpu::BusySummary`).
