@@ -558,7 +558,9 @@ fn profile_kernels(
         },
         anyhow::Error::from,
     )?
-    .context("more passes than the profiler holds: use fewer --profile-kernels steps")?;
+    .context(
+        "more passes than the profiler holds: use fewer --profile-kernels or --busy-steps steps",
+    )?;
     let timeline = reading.summary(busy_steps, steps);
     let per_step = |ms: f64| ms / f64::from(steps);
     Ok(KernelProfileReport {
