@@ -6,7 +6,7 @@ cd "$(dirname "$0")/.."
 export XDG_RUNTIME_DIR=${XDG_RUNTIME_DIR:-/tmp}
 # wgpu asks for the Khronos validation layer in debug builds whenever it is installed (the
 # bootstrap installs it for scripts/sync_validation.sh, below): off for the suite itself, which
-# it would slow several times over.
+# it would slow down.
 export WGPU_VALIDATION=${WGPU_VALIDATION:-0}
 # Two test threads through the environment, not `-- --test-threads=2`: the criterion benches
 # (run once each in test mode) have their own argument parser and reject that flag.
