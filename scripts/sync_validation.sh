@@ -121,7 +121,7 @@ run bench-object-loss "$bin" bench "$static_scene" --steps 120 --timing-repeats 
   --json
 for gemm in tiled rows broadcast; do
   run "bench-deformation-$gemm" env SEGSPLAT_GEMM_KERNEL=$gemm "$bin" bench "$dynamic_scene" \
-    --steps 12 --timing-repeats 1 --deformation --field-depth 4 --field-width 80 --json
+    --steps 4 --timing-repeats 1 --deformation --field-depth 4 --field-width 80 --json
 done
 
 # A variant the adapter cannot run fails its bench with a message naming it: not a hazard.
