@@ -40,9 +40,11 @@ stamp "part 1 rc=$?"
 work=$(sed -n 's/^work folder kept: //p' "$S/check.log" | tail -1)
 bin=$work/bin/bin/segsplat
 [ -x "$bin" ] || bin=${SEGSPLAT_BIN:-}
-icd=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
-if [ -f "$icd" ] && ! "$bin" adapters 2>/dev/null | grep -qi nvidia; then
-  export VK_DRIVER_FILES=$icd
+# Where the loader needed pointing at the driver's Vulkan manifest, gpu_check.sh found it and
+# noted it in the kept work folder.
+if [ -f "$work/meta/vk_driver_files" ]; then
+  VK_DRIVER_FILES=$(cat "$work/meta/vk_driver_files")
+  export VK_DRIVER_FILES
 fi
 export XDG_RUNTIME_DIR=/tmp SEGSPLAT_BIN=$bin
 

@@ -19,12 +19,8 @@ use segsplat_gpu::GpuContext;
 use segsplat_scene::Level;
 use wgpu::util::DeviceExt;
 
-/// One context for the binary's tests (its kernel cache shared), so each kernel is compiled once:
-/// with a device each, the tests compiled every kernel again, all at once (on the H200
-/// `raster_gpu` ran past its 30 s with 7 of 11 tests left, stop 54, while the binaries sharing
-/// one context finished in time). A test that changes what the context reports changes a clone.
 fn context() -> Option<GpuContext> {
-    gpu_support::gpu_context().cloned()
+    gpu_support::shared_gpu_context()
 }
 
 fn render_gpu(

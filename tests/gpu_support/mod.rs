@@ -31,6 +31,15 @@ pub fn gpu_context() -> Option<&'static GpuContext> {
     CONTEXT.get_or_init(new_gpu_context).as_ref()
 }
 
+/// A clone of [`gpu_context`] (its kernel cache shared), for tests that change what the context
+/// reports, and for binaries whose tests each made a device before: each kernel then compiles
+/// once. With a device per test, `raster_gpu` compiled every kernel eleven times at once and ran
+/// past its 30 s on the H200 with 7 of 11 tests left (stop 54), while the binaries sharing one
+/// context finished in time.
+pub fn shared_gpu_context() -> Option<GpuContext> {
+    gpu_context().cloned()
+}
+
 /// With `RUST_LOG` set, log records (wgpu's among them) go to stderr, where the test harness
 /// does not hide them: `scripts/sync_validation.sh` runs the GPU tests under the Khronos
 /// validation layer, whose findings wgpu reports only through `log`.
