@@ -11,10 +11,15 @@
 //! Every GEMM kernel the adapter can run is checked (`GemmKernel::supported`): the tiled one
 //! hardware GPUs use, the row-per-invocation one, and the subgroup-broadcast one software
 //! adapters with 8-lane subgroups use.
+//!
+//! The tests share a context whose uniform ring holds 32 kernel parameters
+//! (`small_ring_gpu_context`), so while one test records, the others go round the ring many
+//! times: on the H200 (stop 54) this binary's parallel tests got wrong products because another
+//! thread's submission freed slots a recording still needed.
 
 mod gpu_support;
 
-use gpu_support::{gpu_context, new_encoder, seeded_rng, submit};
+use gpu_support::{new_encoder, seeded_rng, small_ring_gpu_context, submit};
 use rand::Rng;
 use segsplat_engine::deform::reference;
 use segsplat_engine::deform::warp::{Pose, warp, warp_backward};
@@ -145,7 +150,9 @@ fn run_forward(ctx: &GpuContext, s: &mut Setup) -> [Vec<f32>; 3] {
 
 fn check_forward(warp_kind: WarpKind, gemm: GemmKernel) {
     const TOLERANCE: f64 = 5e-5;
-    let Some(ctx) = gpu_context() else { return };
+    let Some(ctx) = small_ring_gpu_context() else {
+        return;
+    };
     let mut s = setup(ctx, warp_kind, gemm);
     let [means, rotations, log_scales] = run_forward(ctx, &mut s);
     let (worst, moved, wrong) =
@@ -168,7 +175,9 @@ fn check_forward(warp_kind: WarpKind, gemm: GemmKernel) {
 
 #[test]
 fn forward_matches_reference_with_translation() {
-    let Some(ctx) = gpu_context() else { return };
+    let Some(ctx) = small_ring_gpu_context() else {
+        return;
+    };
     for gemm in GemmKernel::supported(ctx) {
         check_forward(WarpKind::Translation, gemm);
     }
@@ -176,7 +185,9 @@ fn forward_matches_reference_with_translation() {
 
 #[test]
 fn forward_matches_reference_with_screw_motion() {
-    let Some(ctx) = gpu_context() else { return };
+    let Some(ctx) = small_ring_gpu_context() else {
+        return;
+    };
     for gemm in GemmKernel::supported(ctx) {
         check_forward(WarpKind::Screw, gemm);
     }
@@ -213,7 +224,9 @@ fn forward_and_backward(
 }
 
 fn check_backward(warp_kind: WarpKind, gemm: GemmKernel) {
-    let Some(ctx) = gpu_context() else { return };
+    let Some(ctx) = small_ring_gpu_context() else {
+        return;
+    };
     let mut s = setup(ctx, warp_kind, gemm);
     let upstream = upstream(9);
     let grads = forward_and_backward(ctx, &mut s, &upstream);
@@ -269,7 +282,9 @@ fn check_backward(warp_kind: WarpKind, gemm: GemmKernel) {
 
 #[test]
 fn backward_matches_reference_with_translation() {
-    let Some(ctx) = gpu_context() else { return };
+    let Some(ctx) = small_ring_gpu_context() else {
+        return;
+    };
     for gemm in GemmKernel::supported(ctx) {
         check_backward(WarpKind::Translation, gemm);
     }
@@ -277,7 +292,9 @@ fn backward_matches_reference_with_translation() {
 
 #[test]
 fn backward_matches_reference_with_screw_motion() {
-    let Some(ctx) = gpu_context() else { return };
+    let Some(ctx) = small_ring_gpu_context() else {
+        return;
+    };
     for gemm in GemmKernel::supported(ctx) {
         check_backward(WarpKind::Screw, gemm);
     }
@@ -309,7 +326,9 @@ fn gpu_objective(ctx: &GpuContext, s: &mut Setup, params: &[f32], upstream: &Gau
 
 #[test]
 fn gpu_gradient_matches_central_differences_of_the_gpu_forward() {
-    let Some(ctx) = gpu_context() else { return };
+    let Some(ctx) = small_ring_gpu_context() else {
+        return;
+    };
     let mut s = setup(ctx, WarpKind::Screw, GemmKernel::for_adapter(ctx));
     let upstream = upstream(9);
     forward_and_backward(ctx, &mut s, &upstream);
@@ -347,7 +366,9 @@ fn gpu_gradient_matches_central_differences_of_the_gpu_forward() {
 /// f64 product on sampled outputs, on a shape that is no multiple of any block.
 #[test]
 fn matmul_benchmark_measures_correct_products() {
-    let Some(ctx) = gpu_context() else { return };
+    let Some(ctx) = small_ring_gpu_context() else {
+        return;
+    };
     for gemm in GemmKernel::supported(ctx) {
         let report = measure_matmul(ctx, gemm, 1100, 72, 1).expect("matmul benchmark");
         assert_eq!(report.products.len(), 3);

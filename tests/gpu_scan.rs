@@ -1,11 +1,12 @@
 //! `ExclusiveScan` against a CPU prefix sum (exact: integer sums, wrapping like the GPU), the
 //! deferred read-back the training loop reads its progress with (`DeferredRead`), the
-//! context's kernel cache every kernel is built through, and the encoder whose dispatches share
-//! a compute pass.
+//! context's kernel cache every kernel is built through, the encoder whose dispatches share
+//! a compute pass, and the uniform ring kernels' parameters go through when several threads
+//! record on one context.
 
 mod gpu_support;
 
-use gpu_support::{gpu_context, new_encoder, seeded_rng, storage_buffer, submit};
+use gpu_support::{gpu_context, new_encoder, new_gpu_context, seeded_rng, storage_buffer, submit};
 use rand::Rng;
 use segsplat_gpu::{ExclusiveScan, Kernel, WorkgroupSum};
 
@@ -259,4 +260,78 @@ fn dispatches_share_a_pass_in_order_until_something_else_is_recorded() {
     }
     submit(&ctx, encoder);
     assert_eq!(ctx.host_costs.reading().since(&before).compute_passes, 3);
+}
+
+/// A small ring, so that a few hundred pushes go round it many times.
+const SMALL_RING: u64 = 4096;
+
+/// Records a copy of `value` through the uniform ring into `target` (what a kernel's parameters
+/// go through), without submitting it.
+fn record_upload(
+    ctx: &segsplat_gpu::GpuContext,
+    value: u32,
+    target: &wgpu::Buffer,
+) -> segsplat_gpu::Encoder {
+    let mut encoder = new_encoder(ctx);
+    ctx.encode_upload(&mut encoder, bytemuck::bytes_of(&[value; 4]), target, 0);
+    encoder
+}
+
+/// A thread still recording keeps its parameters while another thread pushes and submits round
+/// the ring many times. Before stop 58 any submission freed the whole ring, so the other
+/// thread's later pushes overwrote the recording's slot and it read their values: the NVIDIA
+/// H200's wrong deformation-field products in `deform_gpu`'s parallel tests.
+#[test]
+fn a_recording_keeps_its_kernel_parameters_while_other_threads_submit() {
+    let Some(ctx) = new_gpu_context() else { return };
+    let ctx = ctx.with_uniform_ring_bytes(SMALL_RING);
+    let mine = storage_buffer(&ctx, "recording's target", &[0u32; 4]);
+    let recording = record_upload(&ctx, 7, &mine);
+    std::thread::scope(|scope| {
+        scope.spawn(|| {
+            let theirs = storage_buffer(&ctx, "other thread's target", &[0u32; 4]);
+            for value in 1000..1000 + 4 * SMALL_RING as u32 / 16 {
+                submit(&ctx, record_upload(&ctx, value, &theirs));
+            }
+            let last: Vec<u32> = ctx.read_vec(&theirs).expect("read");
+            assert_eq!(last, [999 + 4 * SMALL_RING as u32 / 16; 4]);
+        });
+    });
+    assert_eq!(
+        ctx.uniform_ring_open_threads(),
+        1,
+        "the recording thread's slot is protected"
+    );
+    submit(&ctx, recording);
+    assert_eq!(ctx.uniform_ring_open_threads(), 0);
+    let read: Vec<u32> = ctx.read_vec(&mine).expect("read");
+    assert_eq!(
+        read, [7; 4],
+        "the recording read another thread's parameters"
+    );
+}
+
+/// A thread that pushed parameters and ended without submitting them (a recording abandoned on
+/// an error) frees its slots: the ring is not held for the rest of the context's life.
+#[test]
+fn a_thread_that_ends_without_submitting_frees_its_slots() {
+    let Some(ctx) = new_gpu_context() else { return };
+    let ctx = ctx.with_uniform_ring_bytes(SMALL_RING);
+    let target = storage_buffer(&ctx, "target", &[0u32; 4]);
+    // A spawned thread, not a scoped one: `join` returns once the thread has run its
+    // thread-local destructors, where a scope may end before them.
+    let (abandoning, abandoned_target) = (ctx.clone(), target.clone());
+    std::thread::spawn(move || drop(record_upload(&abandoning, 1, &abandoned_target)))
+        .join()
+        .expect("thread");
+    assert_eq!(ctx.uniform_ring_open_threads(), 0);
+    let before = ctx.host_costs.reading();
+    for value in 0..4 * SMALL_RING as u32 / 16 {
+        submit(&ctx, record_upload(&ctx, value, &target));
+    }
+    assert_eq!(
+        ctx.host_costs.reading().since(&before).buffers_created,
+        0,
+        "every push found room in the ring"
+    );
 }

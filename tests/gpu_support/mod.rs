@@ -40,6 +40,27 @@ pub fn shared_gpu_context() -> Option<GpuContext> {
     gpu_context().cloned()
 }
 
+/// Parameter slots in the uniform ring of [`small_ring_gpu_context`].
+pub const SMALL_RING_SLOTS: u64 = 16;
+
+/// One context shared by the test binary's tests whose uniform ring holds only
+/// [`SMALL_RING_SLOTS`] kernel parameters, so the binary's parallel tests go round it all the
+/// time: a recording whose parameters another thread could overwrite before it is submitted
+/// then reads wrong ones (`deform_gpu`'s wrong products on the H200 at stop 54). Pushes the
+/// ring cannot take get buffers of their own, so a test that counts buffers uses
+/// [`gpu_context`].
+pub fn small_ring_gpu_context() -> Option<&'static GpuContext> {
+    static CONTEXT: OnceLock<Option<GpuContext>> = OnceLock::new();
+    CONTEXT
+        .get_or_init(|| {
+            let ctx = new_gpu_context()?;
+            // The largest kernel parameters are under 256 bytes, and a slot is aligned.
+            let slot = 256u64.max(u64::from(ctx.limits.min_uniform_buffer_offset_alignment));
+            Some(ctx.with_uniform_ring_bytes(SMALL_RING_SLOTS * slot))
+        })
+        .as_ref()
+}
+
 /// With `RUST_LOG` set, log records (wgpu's among them) go to stderr, where the test harness
 /// does not hide them: `scripts/sync_validation.sh` runs the GPU tests under the Khronos
 /// validation layer, whose findings wgpu reports only through `log`.

@@ -421,6 +421,24 @@ impl GpuContext {
         })
     }
 
+    /// This context with a uniform ring of `bytes` (not [`crate::uniform_ring::RING_BYTES`]):
+    /// tests lap a small one to check that no thread's parameters are overwritten before it
+    /// submits. Call it before recording anything.
+    pub fn with_uniform_ring_bytes(mut self, bytes: u64) -> Self {
+        self.uniforms = Arc::new(Mutex::new(UniformRing::with_capacity(
+            &self.device,
+            &self.limits,
+            bytes,
+        )));
+        self
+    }
+
+    /// Threads whose pushed kernel parameters are still protected (pushed since their last
+    /// submission): 0 when every thread submitted what it recorded.
+    pub fn uniform_ring_open_threads(&self) -> usize {
+        locked(&self.uniforms).open_threads()
+    }
+
     /// Dispatches recorded so far by the kernels built on this context.
     pub fn dispatch_count(&self) -> u64 {
         self.dispatches.load(Ordering::Relaxed)
@@ -503,9 +521,14 @@ impl GpuContext {
     /// Submits with the kernel parameters pushed so far written first. Every submission of work
     /// recorded with [`crate::Kernel`]s must come through here (or [`Self::submit`]), never
     /// `queue.submit`, or it reads parameters that were never written.
+    ///
+    /// The ring stays locked until the queue has the commands: a slot this thread no longer
+    /// protects must not be overwritten and written by another thread's submission first.
     pub fn submit_untimed(&self, commands: wgpu::CommandBuffer) -> wgpu::SubmissionIndex {
-        locked(&self.uniforms).before_submit(&self.queue);
+        let mut ring = locked(&self.uniforms);
+        ring.before_submit(&self.queue, std::thread::current().id());
         let submission = self.queue.submit([commands]);
+        drop(ring);
         locked(&self.bind_groups).after_submit();
         submission
     }
@@ -514,9 +537,12 @@ impl GpuContext {
     /// submission), or, when the ring is full, in a buffer of their own (counted).
     pub fn uniform_params(&self, bytes: &[u8]) -> UniformParams {
         let mut ring = locked(&self.uniforms);
-        if let Some(slot) = ring.push(&self.queue, bytes) {
+        if let Some(slot) = ring.push(&self.queue, std::thread::current().id(), bytes) {
+            let buffer = ring.buffer().clone();
+            drop(ring);
+            crate::uniform_ring::release_when_thread_ends(&self.uniforms);
             return UniformParams {
-                buffer: ring.buffer().clone(),
+                buffer,
                 slot: Some(slot),
             };
         }
