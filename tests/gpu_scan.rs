@@ -1,8 +1,8 @@
 //! `ExclusiveScan` against a CPU prefix sum (exact: integer sums, wrapping like the GPU), the
 //! deferred read-back the training loop reads its progress with (`DeferredRead`), the
 //! context's kernel cache every kernel is built through, the encoder whose dispatches share
-//! a compute pass, and the uniform ring kernels' parameters go through when several threads
-//! record on one context.
+//! a compute pass, and what several threads recording on one context share: the uniform ring
+//! kernels' parameters go through and the kernel profiler.
 
 mod gpu_support;
 
@@ -334,4 +334,64 @@ fn a_thread_that_ends_without_submitting_frees_its_slots() {
         0,
         "every push found room in the ring"
     );
+}
+
+/// Two threads on one context with a profiler (two job slots on one GPU): a busy measure times
+/// its own thread's passes only, and a second measure while it runs gets no reading instead of
+/// resetting the first one's profile. Before stop 58 the other thread's pass was timed too, and
+/// could still be unsubmitted when the measure read its timestamps back.
+#[test]
+fn a_busy_measure_times_its_own_threads_passes_only() {
+    if gpu_context().is_none() {
+        return;
+    }
+    let mut ctx = segsplat_gpu::GpuContext::new_default().expect("a context with a profiler");
+    if let Err(error) = ctx.enable_kernel_profiling() {
+        eprintln!("skipping: {error}");
+        return;
+    }
+    let source = "@group(0) @binding(0) var<storage, read_write> input: array<u32>;\n\
+                  @group(0) @binding(1) var<storage, read_write> output: array<u32>;\n\
+                  @compute @workgroup_size(64) fn main(@builtin(global_invocation_id) id: vec3<u32>) {\n\
+                      output[id.x] = input[id.x] + 1u;\n\
+                  }";
+    let kernel = Kernel::new(&ctx, "busy_probe", &[source], "main", &[]).expect("kernel");
+    let dispatch_once = |from: &wgpu::Buffer, to: &wgpu::Buffer| {
+        let mut encoder = new_encoder(&ctx);
+        kernel.dispatch(&mut encoder, &kernel.bind(&ctx, &[from, to]), [4, 1, 1]);
+        submit(&ctx, encoder);
+    };
+    let [a, b, c, d] = ["a", "b", "c", "d"].map(|label| storage_buffer(&ctx, label, &[0u32; 256]));
+    let reading = segsplat_gpu::measure_busy(
+        &ctx,
+        2,
+        2,
+        |units| {
+            for _ in 0..units {
+                dispatch_once(&a, &b);
+            }
+            std::thread::scope(|scope| {
+                scope.spawn(|| {
+                    dispatch_once(&c, &d);
+                    let nested = segsplat_gpu::measure_busy(&ctx, 1, 1, |_| Ok(()), |error| error);
+                    assert!(
+                        matches!(nested, Ok(None)),
+                        "a second measure got {nested:?}"
+                    );
+                });
+            });
+            Ok(())
+        },
+        |error| error,
+    )
+    .expect("measure")
+    .expect("a reading");
+    assert_eq!(reading.timeline.passes, 2, "this thread's two passes alone");
+    let timed: u32 = reading
+        .profile
+        .kernels
+        .iter()
+        .map(|kernel| kernel.passes)
+        .sum();
+    assert_eq!(timed, 2, "this thread's two dispatches alone");
 }

@@ -15,6 +15,7 @@
 
 use std::collections::BTreeMap;
 use std::sync::Mutex;
+use std::thread::ThreadId;
 
 use serde::Serialize;
 
@@ -57,6 +58,10 @@ const SHARED_PASS: &str = "shared pass";
 #[derive(Debug, Default)]
 struct Recorded {
     timing: Timing,
+    /// The thread whose passes the profile times: a context may be shared (two job slots on
+    /// one GPU), and another thread's passes could still be unrecorded or unsubmitted when the
+    /// owner reads the timestamps back.
+    owner: Option<ThreadId>,
     labels: Vec<&'static str>,
     untimed: u32,
 }
@@ -67,6 +72,9 @@ pub struct KernelProfiler {
     queries: wgpu::QuerySet,
     resolved: wgpu::Buffer,
     recorded: Mutex<Recorded>,
+    /// Held through a [`measure_busy`], so two callers sharing the context do not take turns
+    /// resetting each other's profile.
+    sampling: Mutex<()>,
 }
 
 impl KernelProfiler {
@@ -93,6 +101,7 @@ impl KernelProfiler {
             queries,
             resolved,
             recorded: Mutex::new(Recorded::default()),
+            sampling: Mutex::new(()),
         })
     }
 
@@ -102,22 +111,31 @@ impl KernelProfiler {
             .unwrap_or_else(|poison| poison.into_inner())
     }
 
-    /// Starts timing each dispatch recorded from now on (until [`KernelProfiler::take`]).
-    pub fn start(&self) {
-        self.start_timing(Timing::Kernels);
+    /// Starts timing each dispatch this thread records from now on (until
+    /// [`KernelProfiler::take`]); `false`, and nothing changes, while another thread's profile
+    /// runs.
+    pub fn start(&self) -> bool {
+        self.start_timing(Timing::Kernels)
     }
 
-    /// Starts timing the encoders' shared passes opened from now on (until
-    /// [`KernelProfiler::take_timeline`]).
-    pub fn start_passes(&self) {
-        self.start_timing(Timing::Passes);
+    /// Starts timing the encoders' shared passes this thread opens from now on (until
+    /// [`KernelProfiler::take_timeline`]); `false` while another thread's profile runs.
+    pub fn start_passes(&self) -> bool {
+        self.start_timing(Timing::Passes)
     }
 
-    fn start_timing(&self, timing: Timing) {
-        *self.recorded() = Recorded {
+    fn start_timing(&self, timing: Timing) -> bool {
+        let me = std::thread::current().id();
+        let mut recorded = self.recorded();
+        if recorded.timing != Timing::Off && recorded.owner != Some(me) {
+            return false;
+        }
+        *recorded = Recorded {
             timing,
+            owner: Some(me),
             ..Recorded::default()
         };
+        true
     }
 
     /// The timestamp writes for the next pass of kernel `label`, a dispatch's own; `None`
@@ -138,7 +156,7 @@ impl KernelProfiler {
         label: &'static str,
     ) -> Option<wgpu::ComputePassTimestampWrites<'_>> {
         let mut recorded = self.recorded();
-        if recorded.timing != timing {
+        if recorded.timing != timing || recorded.owner != Some(std::thread::current().id()) {
             return None;
         }
         let pass = recorded.labels.len() as u32;
@@ -183,9 +201,19 @@ impl KernelProfiler {
         ))
     }
 
-    /// Ends the profile and reads its timestamps back (a begin and an end per pass).
+    /// Ends the profile and reads its timestamps back (a begin and an end per pass); another
+    /// thread's profile is left running, and this caller gets none.
     fn take_ticks(&self, ctx: &GpuContext) -> Result<(Recorded, Vec<u64>), GpuError> {
-        let recorded = std::mem::take(&mut *self.recorded());
+        let recorded = {
+            let mut recorded = self.recorded();
+            if recorded
+                .owner
+                .is_some_and(|owner| owner != std::thread::current().id())
+            {
+                return Ok((Recorded::default(), Vec::new()));
+            }
+            std::mem::take(&mut *recorded)
+        };
         let passes = recorded.labels.len() as u32;
         if passes == 0 {
             return Ok((recorded, Vec::new()));
@@ -276,8 +304,10 @@ pub struct BusySummary {
 /// the GPU ([`PassTimeline`]), then `run(kernel_units)` with every dispatch timed, for the GPU's
 /// time by kernel. `run(n)` must record `n` units of the same work (training steps). The
 /// timeline's run can be long (it times a few passes a step); the kernels' run holds at most
-/// the profiler's 2048 dispatches. `None` without a profiler, or when either run recorded
-/// more passes than the profiler holds.
+/// the profiler's 2048 dispatches. Only passes this thread records are timed, so on a context
+/// shared with other threads the timeline is this caller's work alone, and the GPU's time on
+/// theirs reads as idle. `None` without a profiler, while another thread measures, or when
+/// either run recorded more passes than the profiler holds.
 pub fn measure_busy<E>(
     ctx: &GpuContext,
     timeline_units: u32,
@@ -288,15 +318,25 @@ pub fn measure_busy<E>(
     let Some(profiler) = ctx.profiler.as_ref() else {
         return Ok(None);
     };
+    let _sampling = match profiler.sampling.try_lock() {
+        Ok(guard) => guard,
+        // A measure that panicked left nothing to protect.
+        Err(std::sync::TryLockError::Poisoned(poisoned)) => poisoned.into_inner(),
+        Err(std::sync::TryLockError::WouldBlock) => return Ok(None),
+    };
     ctx.wait_idle().map_err(&gpu_error)?;
-    profiler.start_passes();
+    if !profiler.start_passes() {
+        return Ok(None);
+    }
     let started = std::time::Instant::now();
     let ran = run(timeline_units);
     // Taken even when the run failed, so the profiler is left idle.
     let timeline = profiler.take_timeline(ctx).map_err(&gpu_error)?;
     ran?;
     let wall_ms = started.elapsed().as_secs_f64() * 1e3;
-    profiler.start();
+    if !profiler.start() {
+        return Ok(None);
+    }
     let started = std::time::Instant::now();
     let ran = run(kernel_units);
     let profile = profiler.take(ctx).map_err(&gpu_error)?;
