@@ -6,8 +6,9 @@
 #     mask seconds);
 #  1b. the host's floor: the same plain bench on Vulkan and on wgpu's no-op device, this host's CPU;
 #  2. the GPU tests but deform_gpu (gpu_check.sh, --test-timeout TT);
-#  3. deform_gpu in parallel and with --test-threads=1, twice each (a race against a wrong kernel:
-#     stop 54's tiled GEMM results on the H200);
+#  3. deform_gpu in parallel and with --test-threads=1, twice each: stop 54's wrong tiled GEMM
+#     results on the H200 came from the uniform ring's cross-thread race fixed at stop 58 (the
+#     binary now runs on a 16-slot ring), so every run should pass;
 #  4. item 1's quality: the job through `segsplat serve` and scripts/schedule_check.py at more seeds
 #     and with other steps and budgets, until 35 s are left.
 #
