@@ -161,6 +161,13 @@ async fn reconstruct_job_trains_and_stores_artifacts() {
     ] {
         assert!(training[field].is_number(), "{field} missing: {training}");
     }
+    // Counted on the job's own thread (a context may be shared by several slots): a step's
+    // dispatches and passes are there.
+    assert!(
+        training["dispatches_per_step"].as_f64().unwrap() >= 10.0
+            && training["compute_passes_per_step"].as_f64().unwrap() >= 1.0,
+        "{training}"
+    );
     // wgpu's `finish` is part of the host's own time.
     let finish = training["finish_ms_per_step"].as_f64().unwrap();
     assert!(

@@ -403,17 +403,18 @@ impl TimedRun {
         last_step: u32,
     ) -> anyhow::Result<u64> {
         let first_step = trainer.step();
-        let before = ctx.dispatch_count();
+        let before = segsplat_gpu::dispatches_on_this_thread();
         let filter_before = trainer.partial_filter_cost().dispatches;
-        let host_before = ctx.host_costs.reading();
+        let host_before = ctx.host_costs.reading_on_this_thread();
         let started = std::time::Instant::now();
         // Ends on a read-back, so the turn's GPU work is done when the clock stops.
         let progress = trainer.run_until(last_step, |_| true)?;
         self.seconds += started.elapsed().as_secs_f64();
-        self.host.add(&ctx.host_costs.reading().since(&host_before));
+        self.host
+            .add(&ctx.host_costs.reading_on_this_thread().since(&host_before));
         self.steps += progress.step - first_step;
         let filter = trainer.partial_filter_cost().dispatches - filter_before;
-        Ok(ctx.dispatch_count() - before - filter)
+        Ok(segsplat_gpu::dispatches_on_this_thread() - before - filter)
     }
 
     /// The host's side of a step, per step.

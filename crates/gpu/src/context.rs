@@ -14,6 +14,7 @@ use serde::Serialize;
 
 use crate::Kernel;
 use crate::bind_cache::{BindGroupCache, BindKey};
+use crate::host_costs::{Cost, HostCosts};
 use crate::kernel_cache::{KernelCache, KernelCompiles, KernelKey};
 use crate::kernel_choices::KernelChoices;
 use crate::uniform_ring::{UniformParams, UniformRing};
@@ -215,99 +216,6 @@ fn locked<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
     mutex
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner)
-}
-
-/// Counters of what the host waited for and read back (see [`GpuContext::host_costs`]).
-#[derive(Debug, Default)]
-pub struct HostCosts {
-    bytes_read_back: AtomicU64,
-    read_backs: AtomicU64,
-    wait_nanos: AtomicU64,
-    submit_nanos: AtomicU64,
-    pub(crate) finish_nanos: AtomicU64,
-    bind_groups_created: AtomicU64,
-    pub(crate) compute_passes: AtomicU64,
-    buffers_created: AtomicU64,
-}
-
-/// A reading of [`HostCosts`]; differences of two readings give what happened in between.
-#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
-pub struct HostCostReading {
-    pub bytes_read_back: u64,
-    pub read_backs: u64,
-    /// Time the host spent blocked on the device (waits and mapped read-backs).
-    pub wait_nanos: u64,
-    /// Time inside [`GpuContext::submit`]: microseconds on a GPU; on a software adapter, whose
-    /// queue may run the work before it returns, it holds the arithmetic.
-    pub submit_nanos: u64,
-    /// Time inside [`crate::Encoder::finish`], part of the host's own time: in wgpu 30 a pass's
-    /// commands are checked, their barriers worked out and the backend's commands recorded
-    /// (Vulkan's `vkCmd*` calls) when the encoder finishes, not when each is called.
-    pub finish_nanos: u64,
-    /// Bind groups created by kernels (not found in the cache).
-    pub bind_groups_created: u64,
-    /// Compute passes recorded (see [`crate::Encoder`]: consecutive dispatches share one).
-    pub compute_passes: u64,
-    /// Buffers created for kernel parameters the uniform ring could not take, and by callers
-    /// that count theirs through [`GpuContext::count_buffer_created`].
-    pub buffers_created: u64,
-}
-
-impl HostCosts {
-    pub fn reading(&self) -> HostCostReading {
-        HostCostReading {
-            bytes_read_back: self.bytes_read_back.load(Ordering::Relaxed),
-            read_backs: self.read_backs.load(Ordering::Relaxed),
-            wait_nanos: self.wait_nanos.load(Ordering::Relaxed),
-            submit_nanos: self.submit_nanos.load(Ordering::Relaxed),
-            finish_nanos: self.finish_nanos.load(Ordering::Relaxed),
-            bind_groups_created: self.bind_groups_created.load(Ordering::Relaxed),
-            compute_passes: self.compute_passes.load(Ordering::Relaxed),
-            buffers_created: self.buffers_created.load(Ordering::Relaxed),
-        }
-    }
-}
-
-impl HostCostReading {
-    /// What happened between `earlier` and this reading.
-    pub fn since(&self, earlier: &HostCostReading) -> HostCostReading {
-        HostCostReading {
-            bytes_read_back: self.bytes_read_back.saturating_sub(earlier.bytes_read_back),
-            read_backs: self.read_backs.saturating_sub(earlier.read_backs),
-            wait_nanos: self.wait_nanos.saturating_sub(earlier.wait_nanos),
-            submit_nanos: self.submit_nanos.saturating_sub(earlier.submit_nanos),
-            finish_nanos: self.finish_nanos.saturating_sub(earlier.finish_nanos),
-            bind_groups_created: self
-                .bind_groups_created
-                .saturating_sub(earlier.bind_groups_created),
-            compute_passes: self.compute_passes.saturating_sub(earlier.compute_passes),
-            buffers_created: self.buffers_created.saturating_sub(earlier.buffers_created),
-        }
-    }
-
-    /// Adds `other`'s counts to these.
-    pub fn add(&mut self, other: &HostCostReading) {
-        self.bytes_read_back += other.bytes_read_back;
-        self.read_backs += other.read_backs;
-        self.wait_nanos += other.wait_nanos;
-        self.submit_nanos += other.submit_nanos;
-        self.finish_nanos += other.finish_nanos;
-        self.bind_groups_created += other.bind_groups_created;
-        self.compute_passes += other.compute_passes;
-        self.buffers_created += other.buffers_created;
-    }
-
-    pub fn wait_seconds(&self) -> f64 {
-        self.wait_nanos as f64 * 1e-9
-    }
-
-    pub fn submit_seconds(&self) -> f64 {
-        self.submit_nanos as f64 * 1e-9
-    }
-
-    pub fn finish_seconds(&self) -> f64 {
-        self.finish_nanos as f64 * 1e-9
-    }
 }
 
 impl GpuContext {
@@ -512,9 +420,7 @@ impl GpuContext {
         let started = std::time::Instant::now();
         let submission = self.submit_untimed(commands);
         let took = u64::try_from(started.elapsed().as_nanos()).unwrap_or(u64::MAX);
-        self.host_costs
-            .submit_nanos
-            .fetch_add(took, Ordering::Relaxed);
+        self.host_costs.add(Cost::SubmitNanos, took);
         submission
     }
 
@@ -608,9 +514,7 @@ impl GpuContext {
     ) -> wgpu::BindGroup {
         let (group, created) = locked(&self.bind_groups).get_or_create(key, create);
         if created {
-            self.host_costs
-                .bind_groups_created
-                .fetch_add(1, Ordering::Relaxed);
+            self.host_costs.add(Cost::BindGroupsCreated, 1);
         }
         group
     }
@@ -618,9 +522,7 @@ impl GpuContext {
     /// Counts a buffer made on a path that should make none (a training step), so benchmarks
     /// and tests can see it.
     pub fn count_buffer_created(&self) {
-        self.host_costs
-            .buffers_created
-            .fetch_add(1, Ordering::Relaxed);
+        self.host_costs.add(Cost::BuffersCreated, 1);
     }
 
     /// Drops every cached bind group, releasing buffers only they still held: for callers that
@@ -634,9 +536,7 @@ impl GpuContext {
         let started = std::time::Instant::now();
         let polled = self.device.poll(wgpu::PollType::wait_indefinitely());
         let waited = u64::try_from(started.elapsed().as_nanos()).unwrap_or(u64::MAX);
-        self.host_costs
-            .wait_nanos
-            .fetch_add(waited, Ordering::Relaxed);
+        self.host_costs.add(Cost::WaitNanos, waited);
         polled?;
         Ok(())
     }
@@ -678,9 +578,8 @@ impl GpuContext {
     /// Counts a read-back of `bytes` in the host costs (for read-backs made elsewhere, e.g.
     /// [`crate::deferred_read::DeferredRead`]).
     pub fn count_read_back(&self, bytes: u64) {
-        let costs = &self.host_costs;
-        costs.read_backs.fetch_add(1, Ordering::Relaxed);
-        costs.bytes_read_back.fetch_add(bytes, Ordering::Relaxed);
+        self.host_costs.add(Cost::ReadBacks, 1);
+        self.host_costs.add(Cost::BytesReadBack, bytes);
     }
 
     /// Typed read-back of a whole buffer of plain values.

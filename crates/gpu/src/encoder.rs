@@ -13,10 +13,9 @@
 
 use std::ops::{Deref, DerefMut};
 use std::sync::Arc;
-use std::sync::atomic::Ordering;
 
 use crate::GpuContext;
-use crate::context::HostCosts;
+use crate::host_costs::{Cost, HostCosts};
 use crate::profiler::KernelProfiler;
 
 /// A command encoder whose compute dispatches share a pass (see the module docs).
@@ -50,7 +49,7 @@ impl Encoder {
             profiler,
         } = self;
         pass.get_or_insert_with(|| {
-            host_costs.compute_passes.fetch_add(1, Ordering::Relaxed);
+            host_costs.add(Cost::ComputePasses, 1);
             inner
                 .begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: Some("dispatches"),
@@ -70,9 +69,7 @@ impl Encoder {
         timestamp_writes: wgpu::ComputePassTimestampWrites<'_>,
     ) -> wgpu::ComputePass<'_> {
         self.pass = None;
-        self.host_costs
-            .compute_passes
-            .fetch_add(1, Ordering::Relaxed);
+        self.host_costs.add(Cost::ComputePasses, 1);
         self.inner.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some(label),
             timestamp_writes: Some(timestamp_writes),
@@ -91,9 +88,10 @@ impl Encoder {
         let started = std::time::Instant::now();
         self.pass = None;
         let commands = self.inner.finish();
-        self.host_costs
-            .finish_nanos
-            .fetch_add(started.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        self.host_costs.add(
+            Cost::FinishNanos,
+            u64::try_from(started.elapsed().as_nanos()).unwrap_or(u64::MAX),
+        );
         commands
     }
 }

@@ -307,6 +307,7 @@ impl Kernel {
             None => self.set_and_dispatch(encoder.shared_pass(), bound, dispatch),
         }
         self.dispatches.fetch_add(1, Ordering::Relaxed);
+        crate::host_costs::count_dispatch_on_this_thread();
     }
 
     fn set_and_dispatch(

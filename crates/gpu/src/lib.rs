@@ -5,6 +5,7 @@ pub mod bind_cache;
 pub mod context;
 pub mod deferred_read;
 pub mod encoder;
+pub mod host_costs;
 pub mod kernel;
 pub mod kernel_cache;
 pub mod kernel_choices;
@@ -18,8 +19,9 @@ pub mod sort;
 pub mod uniform_ring;
 pub mod validation;
 
-pub use context::{AdapterFilter, AdapterReport, GpuContext, GpuError, HostCostReading};
+pub use context::{AdapterFilter, AdapterReport, GpuContext, GpuError};
 pub use encoder::Encoder;
+pub use host_costs::{HostCostReading, HostCosts, dispatches_on_this_thread};
 pub use kernel::{Binding, Bound, Kernel};
 pub use kernel_cache::KernelCompiles;
 pub use kernel_choices::{GemmLayout, KernelChoices, RasterLayout};

@@ -336,8 +336,8 @@ fn train_stage(
     let gpu = trainer.gpu().clone();
     let first_step = trainer.step();
     let filter_before = trainer.partial_filter_cost().seconds;
-    let dispatches_before = gpu.dispatch_count();
-    let host_before = gpu.host_costs.reading();
+    let dispatches_before = segsplat_gpu::dispatches_on_this_thread();
+    let host_before = gpu.host_costs.reading_on_this_thread();
     let started = std::time::Instant::now();
     let mut checkpoint_seconds = 0.0;
     let mut report_seconds = 0.0;
@@ -418,9 +418,9 @@ fn train_stage(
                 - report_seconds
                 - held_out_curve_seconds;
             let evaluating = std::time::Instant::now();
-            let host_at_eval = gpu.host_costs.reading();
+            let host_at_eval = gpu.host_costs.reading_on_this_thread();
             let eval = trainer.evaluate().map_err(train_failure)?;
-            outside_steps_host.add(&gpu.host_costs.reading().since(&host_at_eval));
+            outside_steps_host.add(&gpu.host_costs.reading_on_this_thread().since(&host_at_eval));
             held_out_curve.push(HeldOutPoint {
                 step: trainer.step(),
                 train_seconds,
@@ -434,13 +434,17 @@ fn train_stage(
             continue;
         }
         let checkpoint_started = std::time::Instant::now();
-        let host_at_checkpoint = gpu.host_costs.reading();
+        let host_at_checkpoint = gpu.host_costs.reading_on_this_thread();
         writer.write(trainer)?;
         checkpoint_seconds += checkpoint_started.elapsed().as_secs_f64();
-        outside_steps_host.add(&gpu.host_costs.reading().since(&host_at_checkpoint));
+        outside_steps_host.add(
+            &gpu.host_costs
+                .reading_on_this_thread()
+                .since(&host_at_checkpoint),
+        );
     }
     let seconds = started.elapsed().as_secs_f64();
-    let host = gpu.host_costs.reading().since(&host_before);
+    let host = gpu.host_costs.reading_on_this_thread().since(&host_before);
     let steps = trainer.step() - first_step;
     let per_step = |value: f64| value / f64::from(steps.max(1));
     let waited = host.wait_seconds() - outside_steps_host.wait_seconds();
@@ -455,7 +459,9 @@ fn train_stage(
         report_seconds,
         job_overhead_ratio: seconds
             / (seconds - checkpoint_seconds - report_seconds - held_out_curve_seconds).max(1e-9),
-        dispatches_per_step: per_step((gpu.dispatch_count() - dispatches_before) as f64),
+        dispatches_per_step: per_step(
+            (segsplat_gpu::dispatches_on_this_thread() - dispatches_before) as f64,
+        ),
         bytes_read_back_per_step: per_step(
             (host.bytes_read_back - outside_steps_host.bytes_read_back) as f64,
         ),

@@ -42,7 +42,7 @@ impl Trainer {
             return Ok(());
         };
         let started = std::time::Instant::now();
-        let dispatches_before = self.ctx.dispatch_count();
+        let dispatches_before = segsplat_gpu::dispatches_on_this_thread();
         let threshold = config.partial_iou_threshold;
         let (pairs, mask_pixels) = collect_pairs(targets);
         let counts = MaskIouCounts::new(&self.ctx, pairs.len())?;
@@ -144,7 +144,8 @@ impl Trainer {
             "partial-mask filter"
         );
         self.partial_filter_cost.seconds += started.elapsed().as_secs_f64();
-        self.partial_filter_cost.dispatches += self.ctx.dispatch_count() - dispatches_before;
+        self.partial_filter_cost.dispatches +=
+            segsplat_gpu::dispatches_on_this_thread() - dispatches_before;
         self.skipped_pairs.extend(newly_skipped);
         self.partial_filter_report = Some(report);
         Ok(())
