@@ -283,6 +283,72 @@ async fn reconstruct_job_trains_and_stores_artifacts() {
 /// on the next start and finishes. The checkpoints are written the job's way: the step loop
 /// submits GPU copies of the trainer's state and the writer thread reads them back, encodes and
 /// stores them (issue 38, item 4).
+/// The dispatches a step the finished job `job_id` reports in its metrics.json.
+fn dispatches_per_step(client: &TestService, job_id: &str) -> f64 {
+    let bytes = client
+        .service
+        .blobs()
+        .get_bytes(&format!("jobs/{job_id}/output/metrics.json"))
+        .unwrap();
+    let metrics: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
+    metrics["training"]["dispatches_per_step"]
+        .as_f64()
+        .unwrap_or_else(|| panic!("no dispatches_per_step: {metrics}"))
+}
+
+/// Two slots on one adapter (`workers.slots_per_adapter`) share its context: the kernels, the
+/// uniform ring of kernel parameters, the profiler and the host-cost counters. Two jobs at once
+/// both succeed, and each reports its own dispatches a step, as the same job alone does
+/// (before stop 58 each counted the other's too).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn two_jobs_on_one_adapter_each_report_their_own_work() {
+    let data = tempfile::tempdir().unwrap();
+    let Some(client) = TestService::start_on_gpu(data.path(), |config| {
+        config.workers.slots_per_adapter = 2;
+    })
+    .await
+    else {
+        return;
+    };
+    let scene_id = &upload_small_scene(&client).await;
+    let config = serde_json::json!({"steps": 60, "checkpoint_every": 0, "seed": 3,
+                                    "densify_from": 20, "densify_interval": 20,
+                                    "densify_until": 50});
+    let first = client
+        .create_job(scene_id, "reconstruct", config.clone())
+        .await;
+    let second = client
+        .create_job(scene_id, "reconstruct", config.clone())
+        .await;
+    let mut spans = Vec::new();
+    for job_id in [&first, &second] {
+        let job = client
+            .wait_for_state(job_id, "succeeded", Duration::from_secs(300))
+            .await;
+        spans.push((
+            job["started_at_ms"].as_i64(),
+            job["finished_at_ms"].as_i64(),
+        ));
+    }
+    let overlapped = matches!(
+        spans[..],
+        [(Some(a0), Some(a1)), (Some(b0), Some(b1))] if a0 < b1 && b0 < a1
+    );
+    println!("the two jobs ran at once: {overlapped} ({spans:?})");
+    let alone = client.create_job(scene_id, "reconstruct", config).await;
+    client
+        .wait_for_state(&alone, "succeeded", Duration::from_secs(300))
+        .await;
+    let reference = dispatches_per_step(&client, &alone);
+    for job_id in [&first, &second] {
+        let shared = dispatches_per_step(&client, job_id);
+        assert!(
+            (shared / reference - 1.0).abs() < 0.1,
+            "job {job_id} reports {shared} dispatches a step beside another job, {reference} alone"
+        );
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_job_resumes_from_a_checkpoint_read_back_beside_the_step_loop() {
     let data = tempfile::tempdir().unwrap();
