@@ -17,7 +17,7 @@ use crate::bind_cache::{BindGroupCache, BindKey};
 use crate::host_costs::{Cost, HostCosts};
 use crate::kernel_cache::{KernelCache, KernelCompiles, KernelKey};
 use crate::kernel_choices::KernelChoices;
-use crate::uniform_ring::{UniformParams, UniformRing};
+use crate::uniform_ring::{UniformParams, UniformRing, this_thread};
 use wgpu::util::DeviceExt;
 
 use super::profiler::KernelProfiler;
@@ -432,7 +432,7 @@ impl GpuContext {
     /// protects must not be overwritten and written by another thread's submission first.
     pub fn submit_untimed(&self, commands: wgpu::CommandBuffer) -> wgpu::SubmissionIndex {
         let mut ring = locked(&self.uniforms);
-        ring.before_submit(&self.queue, std::thread::current().id());
+        ring.before_submit(&self.queue, this_thread());
         let submission = self.queue.submit([commands]);
         drop(ring);
         locked(&self.bind_groups).after_submit();
@@ -443,13 +443,15 @@ impl GpuContext {
     /// submission), or, when the ring is full, in a buffer of their own (counted).
     pub fn uniform_params(&self, bytes: &[u8]) -> UniformParams {
         let mut ring = locked(&self.uniforms);
-        if let Some(slot) = ring.push(&self.queue, std::thread::current().id(), bytes) {
+        if let Some(pushed) = ring.push(&self.queue, this_thread(), bytes) {
             let buffer = ring.buffer().clone();
             drop(ring);
-            crate::uniform_ring::release_when_thread_ends(&self.uniforms);
+            if pushed.opened {
+                crate::uniform_ring::release_when_thread_ends(&self.uniforms);
+            }
             return UniformParams {
                 buffer,
-                slot: Some(slot),
+                slot: Some(pushed.slot),
             };
         }
         drop(ring);

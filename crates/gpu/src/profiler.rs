@@ -125,7 +125,7 @@ impl KernelProfiler {
     }
 
     fn start_timing(&self, timing: Timing) -> bool {
-        let me = std::thread::current().id();
+        let me = crate::uniform_ring::this_thread();
         let mut recorded = self.recorded();
         if recorded.timing != Timing::Off && recorded.owner != Some(me) {
             return false;
@@ -156,7 +156,7 @@ impl KernelProfiler {
         label: &'static str,
     ) -> Option<wgpu::ComputePassTimestampWrites<'_>> {
         let mut recorded = self.recorded();
-        if recorded.timing != timing || recorded.owner != Some(std::thread::current().id()) {
+        if recorded.timing != timing || recorded.owner != Some(crate::uniform_ring::this_thread()) {
             return None;
         }
         let pass = recorded.labels.len() as u32;
@@ -208,7 +208,7 @@ impl KernelProfiler {
             let mut recorded = self.recorded();
             if recorded
                 .owner
-                .is_some_and(|owner| owner != std::thread::current().id())
+                .is_some_and(|owner| owner != crate::uniform_ring::this_thread())
             {
                 return Ok((Recorded::default(), Vec::new()));
             }

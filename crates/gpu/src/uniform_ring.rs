@@ -26,7 +26,6 @@
 //! (`tests/gpu_scan.rs`, `tests/deform_gpu.rs`).
 
 use std::cell::RefCell;
-use std::collections::HashMap;
 use std::sync::{Arc, Mutex, Weak};
 use std::thread::ThreadId;
 
@@ -60,7 +59,8 @@ pub struct RingPlacement {
     next: u64,
     /// For each thread that pushed since its last submission, the absolute position of its
     /// first such push: nothing at or after it may be overwritten yet.
-    open: HashMap<ThreadId, u64>,
+    /// A few threads at most, in the order they opened: the first is the oldest.
+    open: Vec<(ThreadId, u64)>,
 }
 
 /// Where [`RingPlacement::place`] put a push.
@@ -70,6 +70,8 @@ pub struct Placed {
     /// The push went back to the ring's start: what was pushed before must be written first,
     /// so each write stays contiguous.
     pub wrapped: bool,
+    /// The thread had no slot protected before this push.
+    pub opened: bool,
 }
 
 impl RingPlacement {
@@ -78,7 +80,7 @@ impl RingPlacement {
             capacity,
             alignment: alignment.max(4),
             next: 0,
-            open: HashMap::new(),
+            open: Vec::new(),
         }
     }
 
@@ -96,27 +98,48 @@ impl RingPlacement {
             lap_start + aligned
         };
         let end = start + size;
-        let oldest_protected = self.open.values().copied().min().unwrap_or(start);
+        // Entries are pushed as threads open them, at ever later positions.
+        let oldest_protected = self.open.first().map_or(start, |&(_, first)| first);
         if end > oldest_protected + self.capacity {
             return None;
         }
         self.next = end;
-        self.open.entry(thread).or_insert(start);
+        let opened = !self.open.iter().any(|&(known, _)| known == thread);
+        if opened {
+            self.open.push((thread, start));
+        }
         Some(Placed {
             offset: start - (start / self.capacity) * self.capacity,
             wrapped,
+            opened,
         })
     }
 
     /// `thread` submitted: what it pushed so far has been read or is queued to be.
     pub fn submitted(&mut self, thread: ThreadId) {
-        self.open.remove(&thread);
+        self.open.retain(|&(known, _)| known != thread);
     }
 
     /// Threads whose pushes are protected (for tests and diagnostics).
     pub fn open_threads(&self) -> usize {
         self.open.len()
     }
+}
+
+/// What [`UniformRing::push`] did: where the bytes went, and whether the pushing thread's
+/// slots became protected with them (so it should release them if it ends).
+#[derive(Debug, Clone, Copy)]
+pub struct Pushed {
+    pub slot: UniformSlot,
+    pub opened: bool,
+}
+
+/// This thread's id, looked up once: every kernel's parameters are pushed under it.
+pub(crate) fn this_thread() -> ThreadId {
+    thread_local! {
+        static ID: ThreadId = std::thread::current().id();
+    }
+    ID.with(|id| *id)
 }
 
 #[derive(Debug)]
@@ -160,12 +183,7 @@ impl UniformRing {
     /// Appends `bytes` (at most 64 KiB, one uniform binding) pushed by `thread`; `None` when
     /// the ring cannot take them without overwriting a slot whose reader is not submitted yet,
     /// and the caller should make a buffer of its own.
-    pub fn push(
-        &mut self,
-        queue: &wgpu::Queue,
-        thread: ThreadId,
-        bytes: &[u8],
-    ) -> Option<UniformSlot> {
+    pub fn push(&mut self, queue: &wgpu::Queue, thread: ThreadId, bytes: &[u8]) -> Option<Pushed> {
         // Uniform bindings are sized in multiples of 16 bytes.
         let size = (bytes.len() as u64).max(16).next_multiple_of(16);
         let placed = self.placement.place(thread, size)?;
@@ -181,9 +199,12 @@ impl UniformRing {
         self.pending.extend_from_slice(bytes);
         self.pending
             .resize((placed.offset + size - self.pending_start) as usize, 0);
-        Some(UniformSlot {
-            offset: placed.offset as u32,
-            size: size as u32,
+        Some(Pushed {
+            slot: UniformSlot {
+                offset: placed.offset as u32,
+                size: size as u32,
+            },
+            opened: placed.opened,
         })
     }
 
@@ -261,9 +282,11 @@ pub(crate) fn release_when_thread_ends(ring: &Arc<Mutex<UniformRing>>) {
 mod tests {
     use super::*;
 
+    /// A push back at the ring's start by a thread with nothing protected.
     const WRAPPED_TO_START: Option<Placed> = Some(Placed {
         offset: 0,
         wrapped: true,
+        opened: true,
     });
 
     fn other_thread() -> ThreadId {
