@@ -150,6 +150,13 @@ impl Worker {
             AttemptOutcome::Cancelled => "cancelled",
             AttemptOutcome::HandBack => "handed_back",
         };
+        // Counted before the outcome is stored: a client that sees the job finish and then
+        // scrapes /metrics finds the attempt there (it raced the store's write before).
+        metrics::counter!("segsplat_job_outcomes_total", "kind" => job.kind.clone(),
+            "outcome" => outcome_label)
+        .increment(1);
+        metrics::histogram!("segsplat_job_attempt_seconds", "kind" => job.kind.clone())
+            .record(started.elapsed().as_secs_f64());
         match self.record_outcome(&job.id, &outcome).await {
             Ok(Some(finished)) => {
                 info!(
@@ -169,11 +176,6 @@ impl Worker {
             ),
             Err(error) => warn!(%error, "recording the outcome failed; the lease will expire"),
         }
-        metrics::counter!("segsplat_job_outcomes_total", "kind" => job.kind.clone(),
-            "outcome" => outcome_label)
-        .increment(1);
-        metrics::histogram!("segsplat_job_attempt_seconds", "kind" => job.kind.clone())
-            .record(started.elapsed().as_secs_f64());
         self.shared.bus.notify(&job.id);
     }
 
