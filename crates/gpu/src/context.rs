@@ -6,7 +6,6 @@
 //! bindings) and with the optional features the kernels exploit when present: native f32 atomics and
 //! subgroups. Kernels fall back to CAS loops / shared memory when they are absent.
 
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
@@ -194,9 +193,6 @@ pub struct GpuContext {
     pub features: wgpu::Features,
     /// Per-kernel timestamps, when turned on by [`GpuContext::enable_kernel_profiling`].
     pub profiler: Option<Arc<KernelProfiler>>,
-    /// Dispatches recorded by every kernel built on this context: for small scenes a step costs
-    /// dispatch overhead more than arithmetic, so benchmarks report the count.
-    pub dispatches: Arc<AtomicU64>,
     /// Variants forced instead of the adapter's own (see [`KernelChoices`]).
     pub kernel_choices: KernelChoices,
     /// Read-backs and waits of every caller on this context: on a fast GPU the host's waits,
@@ -323,7 +319,6 @@ impl GpuContext {
             limits,
             features,
             profiler: None,
-            dispatches: Arc::new(AtomicU64::new(0)),
             kernel_choices: KernelChoices::default(),
             host_costs: Arc::new(HostCosts::default()),
         })
@@ -345,11 +340,6 @@ impl GpuContext {
     /// submission): 0 when every thread submitted what it recorded.
     pub fn uniform_ring_open_threads(&self) -> usize {
         locked(&self.uniforms).open_threads()
-    }
-
-    /// Dispatches recorded so far by the kernels built on this context.
-    pub fn dispatch_count(&self) -> u64 {
-        self.dispatches.load(Ordering::Relaxed)
     }
 
     /// Times every pass of the kernels built on this context from now on (see

@@ -29,7 +29,6 @@ pub struct Kernel {
     pub pipeline: wgpu::ComputePipeline,
     label: &'static str,
     profiler: Option<Arc<KernelProfiler>>,
-    dispatches: Arc<AtomicU64>,
     layout: wgpu::BindGroupLayout,
     /// Which bindings are uniforms with a dynamic offset (empty under the automatic layout).
     dynamic_uniforms: Vec<u32>,
@@ -84,7 +83,6 @@ impl Kernel {
             // Profiling may have been turned on since the kernel was compiled.
             return Ok(Self {
                 profiler: ctx.profiler.clone(),
-                dispatches: Arc::clone(&ctx.dispatches),
                 ..kernel
             });
         }
@@ -161,7 +159,6 @@ impl Kernel {
             pipeline,
             label,
             profiler: ctx.profiler.clone(),
-            dispatches: Arc::clone(&ctx.dispatches),
             layout,
             dynamic_uniforms,
             id: NEXT_KERNEL_ID.fetch_add(1, Ordering::Relaxed),
@@ -306,7 +303,6 @@ impl Kernel {
             }
             None => self.set_and_dispatch(encoder.shared_pass(), bound, dispatch),
         }
-        self.dispatches.fetch_add(1, Ordering::Relaxed);
         crate::host_costs::count_dispatch_on_this_thread();
     }
 

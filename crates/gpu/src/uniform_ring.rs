@@ -263,7 +263,7 @@ pub(crate) fn release_when_thread_ends(ring: &Arc<Mutex<UniformRing>>) {
     let _ = THREAD_RINGS.try_with(|cell| {
         let mut cell = cell.borrow_mut();
         let registry = cell.get_or_insert_with(|| ThreadRings {
-            thread: std::thread::current().id(),
+            thread: this_thread(),
             rings: Vec::new(),
         });
         if registry
