@@ -6,6 +6,9 @@
 
 mod curve;
 pub mod matmul;
+mod object_loss;
+mod profile;
+mod timing;
 
 use std::path::PathBuf;
 
@@ -22,12 +25,15 @@ use segsplat_engine::init::random_gaussians;
 use segsplat_engine::ply::read_ply_file;
 use segsplat_engine::train::convergence::ConvergenceStop;
 use segsplat_engine::train::trainer::initial_model;
-use segsplat_engine::train::{ConvergedAt, PartialFilterReport, TrainConfig, Trainer};
-use segsplat_gpu::profiler::KernelTime;
-use segsplat_gpu::{GpuContext, HostCostReading};
+use segsplat_engine::train::{ConvergedAt, TrainConfig, Trainer};
+use segsplat_gpu::GpuContext;
 use segsplat_scene::Scene;
 use segsplat_service::job_kinds::training::BUSY_TIMELINE_STEPS;
 use serde::Serialize;
+
+use object_loss::{ObjectLossReport, PlainBaselineReport, object_loss_trainer, plain_trainer};
+use profile::{KernelProfileReport, profile_kernels};
+use timing::{HostCostReport, TimedRun, timed_runs};
 
 #[derive(Args)]
 pub struct BenchArgs {
@@ -125,106 +131,6 @@ fn base_train_config(args: &BenchArgs) -> anyhow::Result<TrainConfig> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
     toml::from_str(&text).with_context(|| format!("{} is no training config", path.display()))
-}
-
-#[derive(Serialize)]
-struct ObjectLossReport {
-    objects_per_level: u32,
-    /// `batched` (on the step's full render) or `separate` (`--separate-object-renders`).
-    renders: &'static str,
-    /// `user` or `classical`.
-    masks: &'static str,
-    /// Objects per level (small, middle, large).
-    objects: [usize; 3],
-    mask_seconds: f64,
-}
-
-/// A trainer with the object loss on every level from the start, and what it trains on.
-fn object_loss_trainer(
-    ctx: &segsplat_gpu::GpuContext,
-    scene: &Scene,
-    mut config: TrainConfig,
-    initial: Option<GaussianModel>,
-    objects_per_level: u32,
-    separate_renders: bool,
-) -> anyhow::Result<(Trainer, ObjectLossReport)> {
-    use segsplat_engine::train::ObjectLossConfig;
-    use segsplat_method::segment_then_splat::association::{
-        AssociationOptions, generated_view_masks,
-    };
-    use segsplat_method::segment_then_splat::carved_hulls::CarvedHulls;
-    use segsplat_method::segment_then_splat::training::{
-        SegmentedTrainingOptions, attach_object_training, segmented_trainer_from_view_masks,
-        training_frames,
-    };
-    use segsplat_method::segment_then_splat::view_masks::ViewMaskSet;
-    use segsplat_vision::segment::{ClassicalConfig, MaskGenerator};
-
-    anyhow::ensure!(
-        objects_per_level > 0,
-        "--objects-per-level must be at least 1"
-    );
-    // The partial-mask filter runs after the last step, where its time is reported apart: on a
-    // short, untrained run it leaves out most pairs (88% at 200 steps, against about a tenth on
-    // a trained scene), which would make the steps after it unrepresentatively cheap.
-    config.object_loss = Some(ObjectLossConfig {
-        objects_per_level,
-        middle_from: 0.0,
-        large_from: 0.0,
-        partial_filter_from: 1.0,
-        ..ObjectLossConfig::default()
-    });
-    let started = std::time::Instant::now();
-    let frames = training_frames(scene, &config);
-    let (masks, source) = if scene.masks.is_some() {
-        let masks = ViewMaskSet::from_user_masks(scene, &frames, config.max_resolution)?;
-        (masks, "user")
-    } else {
-        let mut generator = MaskGenerator::Classical(ClassicalConfig::default());
-        let (masks, _) = generated_view_masks(
-            scene,
-            &frames,
-            &mut generator,
-            config.max_resolution,
-            &AssociationOptions::default(),
-        )?;
-        (masks, "classical")
-    };
-    let mask_seconds = started.elapsed().as_secs_f64();
-    let options = SegmentedTrainingOptions::default();
-    let mut trainer = match initial {
-        // Random Gaussians carry no ids: the object loss then renders empty objects, which
-        // still costs the renders it measures.
-        Some(model) => {
-            let mut trainer = Trainer::new(ctx, scene, config, Some(model))?;
-            attach_object_training(ctx, &mut trainer, &masks, &options)?;
-            trainer
-        }
-        None => segmented_trainer_from_view_masks(
-            ctx,
-            scene,
-            config,
-            &masks,
-            &options,
-            CarvedHulls::default(),
-        )?,
-    };
-    trainer.set_separate_object_renders(separate_renders);
-    let objects = segsplat_scene::Level::ALL.map(|level| masks.object_count(level));
-    Ok((
-        trainer,
-        ObjectLossReport {
-            objects_per_level,
-            renders: if separate_renders {
-                "separate"
-            } else {
-                "batched"
-            },
-            masks: source,
-            objects,
-            mask_seconds,
-        },
-    ))
 }
 
 /// `count` random Gaussians spread uniformly over the box holding the central 98% of the sparse
@@ -342,247 +248,6 @@ struct BenchReport {
     fit_checks: Vec<(u32, f64)>,
 }
 
-/// The plain step on the object-loss run's own starting Gaussians (background shell included),
-/// so the ratio compares like with like.
-#[derive(Serialize)]
-struct PlainBaselineReport {
-    gaussians_start: usize,
-    steps_per_sec: f64,
-    dispatches_per_step: f64,
-    psnr: f64,
-    /// Object-loss step time over plain step time, the partial-mask filter's one-off time left
-    /// out of the object-loss side (it is a stage of the job, not part of a step).
-    step_time_ratio: f64,
-    /// The same with the filter's time counted in the object-loss steps (what a job of exactly
-    /// this many steps pays).
-    step_time_ratio_with_filter: f64,
-    /// Wall seconds of the partial-mask filter (every (object, view) pair rendered once, after
-    /// the last step here), inside the object-loss run's `train_seconds`.
-    partial_filter_seconds: f64,
-    /// Its kernel dispatches (not in `dispatches_per_step`).
-    partial_filter_dispatches: u64,
-    /// What it found: pairs and left-out pairs per level, IoU quartiles, left-out pairs whose
-    /// object renders nothing (as in a job's metrics.json).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    partial_filter: Option<PartialFilterReport>,
-    /// Object-loss dispatches per step over plain dispatches per step.
-    dispatch_ratio: f64,
-    /// With `--profile-kernels`: the plain trainer's kernels over as many more steps, after its
-    /// timed run, to set beside the object-loss run's `kernel_profile`.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    kernel_profile: Option<KernelProfileReport>,
-}
-
-/// Trains `steps` on `trainer`, returning its progress and the dispatches it recorded per step,
-/// the partial-mask filter's left out (a stage of the job, reported apart).
-/// Steps of one trainer between turns when two are timed together.
-const INTERLEAVED_STEPS: u32 = 25;
-
-/// One trainer's timed training loop.
-#[derive(Debug, Default, Clone, Copy)]
-struct TimedRun {
-    steps: u32,
-    seconds: f64,
-    /// Kernel dispatches per step, the partial-mask filter's left out.
-    dispatches_per_step: f64,
-    /// What the host waited for and read back over the run.
-    host: HostCostReading,
-}
-
-impl TimedRun {
-    fn steps_per_sec(&self) -> f64 {
-        f64::from(self.steps) / self.seconds.max(f64::MIN_POSITIVE)
-    }
-
-    /// Trains `trainer` to `last_step`, adding the turn's time, steps and host costs to this
-    /// run; returns the kernel dispatches it recorded, the partial-mask filter's left out.
-    fn train_turn(
-        &mut self,
-        ctx: &GpuContext,
-        trainer: &mut Trainer,
-        last_step: u32,
-    ) -> anyhow::Result<u64> {
-        let first_step = trainer.step();
-        let before = segsplat_gpu::dispatches_on_this_thread();
-        let filter_before = trainer.partial_filter_cost().dispatches;
-        let host_before = ctx.host_costs.reading_on_this_thread();
-        let started = std::time::Instant::now();
-        // Ends on a read-back, so the turn's GPU work is done when the clock stops.
-        let progress = trainer.run_until(last_step, |_| true)?;
-        self.seconds += started.elapsed().as_secs_f64();
-        self.host
-            .add(&ctx.host_costs.reading_on_this_thread().since(&host_before));
-        self.steps += progress.step - first_step;
-        let filter = trainer.partial_filter_cost().dispatches - filter_before;
-        Ok(segsplat_gpu::dispatches_on_this_thread() - before - filter)
-    }
-
-    /// The host's side of a step, per step.
-    fn host_report(&self) -> HostCostReport {
-        let steps = f64::from(self.steps.max(1));
-        let waited = self.host.wait_seconds().min(self.seconds);
-        let submitted = self.host.submit_seconds().min(self.seconds - waited);
-        HostCostReport {
-            bytes_read_back_per_step: self.host.bytes_read_back as f64 / steps,
-            read_backs_per_step: self.host.read_backs as f64 / steps,
-            host_ms_per_step: (self.seconds - waited - submitted) * 1e3 / steps,
-            wait_ms_per_step: waited * 1e3 / steps,
-            submit_ms_per_step: submitted * 1e3 / steps,
-            finish_ms_per_step: self.host.finish_seconds() * 1e3 / steps,
-            bind_groups_created_per_step: self.host.bind_groups_created as f64 / steps,
-            buffers_created_per_step: self.host.buffers_created as f64 / steps,
-            compute_passes_per_step: self.host.compute_passes as f64 / steps,
-        }
-    }
-}
-
-/// Per training step: what the host read back, and its time outside the device's work
-/// (encoding, progress, densification on the CPU), waiting for the device, and inside queue
-/// submissions. A GPU's queue returns from a submission at once and the waits hold its
-/// arithmetic; lavapipe's queue runs the work inside the submission, so there the submit
-/// milliseconds hold it. Either way `host_ms_per_step` is the host's own share.
-#[derive(Debug, Clone, Copy, Serialize)]
-struct HostCostReport {
-    bytes_read_back_per_step: f64,
-    read_backs_per_step: f64,
-    host_ms_per_step: f64,
-    wait_ms_per_step: f64,
-    submit_ms_per_step: f64,
-    /// Of `host_ms_per_step`, the time in wgpu's `finish` of the step's encoders, where wgpu 30
-    /// checks the recorded commands, works out their barriers and records the backend's
-    /// commands (on Vulkan the driver's `vkCmd*`): what is left of the host's share is
-    /// segsplat's own recording and wgpu's argument capture.
-    finish_ms_per_step: f64,
-    /// Bind groups made a step (the rest come from the cache; see docs/engine.md).
-    bind_groups_created_per_step: f64,
-    /// Buffers made a step for kernel parameters or slot tables (0 in a steady step).
-    buffers_created_per_step: f64,
-    /// Compute passes recorded a step: consecutive dispatches share one (`segsplat_gpu::Encoder`),
-    /// so this is far below `dispatches_per_step`.
-    compute_passes_per_step: f64,
-}
-
-/// Trains each of `trainers` to its last step, timing each. With more than one they take turns
-/// of [`INTERLEAVED_STEPS`] steps, each turn waited for to its end, so a change in the machine's
-/// speed (other processes, a shared host) falls on every trainer alike instead of on whichever
-/// ran in those seconds: the step-time ratio of `--object-loss` comes from this.
-fn timed_runs(ctx: &GpuContext, trainers: &mut [&mut Trainer]) -> anyhow::Result<Vec<TimedRun>> {
-    let turn = if trainers.len() > 1 {
-        INTERLEAVED_STEPS
-    } else {
-        u32::MAX
-    };
-    let mut runs = vec![TimedRun::default(); trainers.len()];
-    let mut dispatches = vec![0u64; trainers.len()];
-    while trainers
-        .iter()
-        .any(|trainer| trainer.step() < trainer.end_step())
-    {
-        for ((trainer, run), dispatched) in trainers.iter_mut().zip(&mut runs).zip(&mut dispatches)
-        {
-            let first_step = trainer.step();
-            if first_step >= trainer.end_step() {
-                continue;
-            }
-            *dispatched += run.train_turn(ctx, trainer, first_step.saturating_add(turn))?;
-        }
-    }
-    for (run, dispatched) in runs.iter_mut().zip(dispatches) {
-        run.dispatches_per_step = dispatched as f64 / f64::from(run.steps.max(1));
-    }
-    Ok(runs)
-}
-
-/// The plain half of `--object-loss`: `config` without the object loss, from `model`.
-fn plain_trainer(
-    ctx: &GpuContext,
-    scene: &Scene,
-    config: &TrainConfig,
-    model: GaussianModel,
-    timing_repeats: u32,
-) -> anyhow::Result<Trainer> {
-    // At the object run's resolution throughout: without the object loss the schedule would
-    // otherwise start coarse, and the ratio would compare steps of different sizes.
-    let config = TrainConfig {
-        object_loss: None,
-        coarse_until: Some(0),
-        ..config.clone()
-    };
-    let mut trainer = Trainer::new(ctx, scene, config, Some(model))?;
-    // The same warm-up as the timed run gets, so neither pays first-use costs in its loop.
-    trainer.time_passes(timing_repeats)?;
-    Ok(trainer)
-}
-
-/// `--profile-kernels`: GPU time per training step by kernel, averaged over `steps`, and how
-/// full the host kept the GPU over `--busy-steps` steps before them.
-#[derive(Serialize)]
-struct KernelProfileReport {
-    steps: u32,
-    /// GPU milliseconds a step inside the kernels (each dispatch timed in a pass of its own).
-    gpu_ms_per_step: f64,
-    /// Wall time per step of the timeline's steps, from an idle device to an idle device.
-    wall_ms_per_step: f64,
-    /// Wall time per step of the kernel-timed steps: each timed dispatch has a pass of its own,
-    /// which costs the host more than the shared pass of untimed steps.
-    profiled_wall_ms_per_step: f64,
-    /// The share of the GPU's timeline the steps' passes filled (issue 38's target is at least
-    /// 0.9); `timeline` has the figures behind it.
-    gpu_busy_fraction: f64,
-    timeline: segsplat_gpu::BusySummary,
-    kernels: Vec<KernelTime>,
-}
-
-/// Runs `busy_steps` more training steps with their passes timed and `steps` more with every
-/// dispatch timed (`segsplat_gpu::measure_busy`), and averages per step.
-fn profile_kernels(
-    ctx: &GpuContext,
-    trainer: &mut Trainer,
-    steps: u32,
-    busy_steps: u32,
-) -> anyhow::Result<KernelProfileReport> {
-    anyhow::ensure!(
-        ctx.profiler.is_some(),
-        "kernel profiling is not enabled on this GPU context"
-    );
-    let steps = steps.max(1);
-    let busy_steps = busy_steps.max(1);
-    let reading = segsplat_gpu::measure_busy(
-        ctx,
-        busy_steps,
-        steps,
-        |count| -> anyhow::Result<()> {
-            for _ in 0..count {
-                trainer.train_step()?;
-            }
-            Ok(())
-        },
-        anyhow::Error::from,
-    )?
-    .context(
-        "more passes than the profiler holds: use fewer --profile-kernels or --busy-steps steps",
-    )?;
-    let timeline = reading.summary(busy_steps, steps);
-    let per_step = |ms: f64| ms / f64::from(steps);
-    Ok(KernelProfileReport {
-        steps,
-        gpu_ms_per_step: timeline.kernel_ms_per_step,
-        wall_ms_per_step: timeline.wall_ms_per_step,
-        profiled_wall_ms_per_step: per_step(reading.profiled_wall_ms),
-        gpu_busy_fraction: timeline.gpu_busy_fraction,
-        timeline,
-        kernels: reading
-            .profile
-            .kernels
-            .into_iter()
-            .map(|time| KernelTime {
-                ms: per_step(time.ms),
-                ..time
-            })
-            .collect(),
-    })
-}
-
 /// The field `--deformation` trains: the shape a job gets on this adapter, resized by the flags.
 fn deformation_config(args: &BenchArgs, software: bool) -> DeformationConfig {
     let mut field = FieldShape::for_adapter(software);
@@ -604,7 +269,7 @@ fn deformation_config(args: &BenchArgs, software: bool) -> DeformationConfig {
 
 /// A trainer for `config` (with the object loss when asked), and its object-loss report.
 fn bench_trainer(
-    ctx: &segsplat_gpu::GpuContext,
+    ctx: &GpuContext,
     scene: &Scene,
     config: TrainConfig,
     initial: Option<GaussianModel>,
@@ -629,7 +294,7 @@ fn bench_trainer(
 /// returning (steps/s, seconds, held-out PSNR). Its trainer is dropped before the dynamic run
 /// so the two never hold memory at once.
 fn static_baseline(
-    ctx: &segsplat_gpu::GpuContext,
+    ctx: &GpuContext,
     scene: &Scene,
     config: &TrainConfig,
     initial: Option<GaussianModel>,

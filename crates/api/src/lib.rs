@@ -9,6 +9,7 @@ mod extract;
 mod gpu_release;
 mod grpc;
 mod grpc_calls;
+mod grpc_convert;
 mod grpc_reflection;
 mod jobs;
 mod json_numbers;

@@ -8,9 +8,10 @@
 //! buffer in GPU kernels and reads back only counts (`crate::densify::gpu`).
 //!
 //! This file holds the step loop; each other concern has its own file under `trainer/`: the
-//! Adam update (`adam_step`), densification within the Gaussian budget (`densification`),
-//! checkpoints (`checkpointing`, and `checkpoint_snapshot` for jobs), timing and evaluation (`measure`), the object loss
-//! (`object_step`, `object_separate`, `partial_filter`) and the deformation field (`dynamics`).
+//! starting Gaussians (`initial`), the Adam update (`adam_step`), densification within the
+//! Gaussian budget (`densification`), checkpoints (`checkpointing`, and `checkpoint_snapshot`
+//! for jobs), timing and evaluation (`measure`), the object loss (`object_step`,
+//! `object_separate`, `partial_filter`) and the deformation field (`dynamics`).
 
 mod adam_step;
 mod checkpoint_snapshot;
@@ -18,6 +19,7 @@ mod checkpointing;
 mod densification;
 mod dynamics;
 mod fit_check;
+mod initial;
 mod measure;
 mod object_separate;
 mod object_step;
@@ -34,11 +36,9 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::adam::{Adam, AdamError, AdamSettings};
-use crate::background_shell::{append_points, background_shell_points};
 use crate::checkpoint::CheckpointError;
 use crate::densify::PruneGuard;
 use crate::densify::gpu::GpuDensifier;
-use crate::init::gaussians_from_points;
 use crate::loss::{LossError, LossImages, LossOutputs, RenderLoss};
 use crate::model::{
     GaussianModel, GaussianParameterBuffers, GpuGaussianGrads, GpuGaussians, ModelError,
@@ -46,14 +46,14 @@ use crate::model::{
 };
 use crate::render::{RenderError, RenderOutput, Renderer};
 use crate::schedule::scene_extent;
-use crate::train::budget::{scene_gaussian_budget, scene_random_init_count};
+use crate::train::budget::scene_gaussian_budget;
 use crate::train::config::{ConfigError, TrainConfig};
 use crate::train::densify_stats::DensifyAccumulators;
 use crate::train::object_loss::{MAX_OBJECTS_PER_LEVEL, ObjectTargets, SkippedPair};
 use crate::train::partial_filter_report::PartialFilterReport;
-use crate::train::random_init::{camera_centres, has_sparse_points, random_visible_gaussians};
+use crate::train::random_init::{camera_centres, has_sparse_points};
 use crate::train::schedule::{DeformationSchedule, SPARSE_CAPTURE_VIEWS, TrainSchedule};
-use crate::train::views::{Views, ViewsError, training_pixels};
+use crate::train::views::{Views, ViewsError};
 use crate::{ObjectFilter, RenderSettings};
 use segsplat_gpu::deferred_read::DeferredRead;
 use segsplat_gpu::{GpuContext, GpuError};
@@ -61,6 +61,10 @@ use segsplat_scene::Scene;
 
 pub use checkpoint_snapshot::PendingCheckpoint;
 pub use fit_check::ConvergedAt;
+pub use initial::{
+    initial_model, plain_initial_model, resolve_adapter_sized, resolve_random_init,
+    scene_sized_random_init,
+};
 
 /// Steps between loss / capacity read-backs.
 const SYNC_EVERY: u32 = 25;
@@ -228,80 +232,6 @@ pub struct PartialFilterCost {
 /// the trainer steps in one dispatch, before the SH rest groups.
 const SMALL_ADAM_GROUPS: usize = 5;
 
-/// The initial model for a scene: its sparse points, or random points in the cameras' bounds.
-pub fn initial_model(scene: &Scene, config: &TrainConfig) -> Result<GaussianModel, TrainError> {
-    let model = match &scene.points {
-        Some(points) if has_sparse_points(scene) => {
-            gaussians_from_points(&points.positions, &points.colors)
-        }
-        _ => {
-            let mut rng = ChaCha8Rng::seed_from_u64(config.seed ^ 0x1417);
-            let count = config
-                .random_init_count
-                .unwrap_or_else(|| scene_sized_random_init(scene, config, false));
-            random_visible_gaussians(scene, count, &mut rng)
-        }
-    };
-    if model.is_empty() {
-        return Err(TrainError::EmptyModel);
-    }
-    Ok(model)
-}
-
-/// The random start [`scene_random_init_count`] sizes for `scene` under `config` (its training
-/// views at its resolution), on a software adapter or not.
-pub fn scene_sized_random_init(scene: &Scene, config: &TrainConfig, software: bool) -> usize {
-    let pixels = training_pixels(scene, config.max_resolution, config.eval_split_every);
-    scene_random_init_count(pixels, software)
-}
-
-/// Fills in `random_init_count` when `config` leaves it out and `scene` has no sparse points
-/// (so the start is random), sized for the adapter of `ctx`; an explicit count is kept. The
-/// config then says what the job started from.
-pub fn resolve_random_init(config: &mut TrainConfig, scene: &Scene, ctx: &GpuContext) {
-    if config.random_init_count.is_none() && !has_sparse_points(scene) {
-        config.random_init_count = Some(scene_sized_random_init(
-            scene,
-            config,
-            ctx.report.is_software,
-        ));
-    }
-}
-
-/// Fills in what `config` leaves to the adapter of `ctx`: the random start's size
-/// ([`resolve_random_init`]) and the deformation field's shape (`DeformationConfig::field_for`:
-/// narrower on a CPU adapter). The trainer does this when it starts; a job does it first too,
-/// so the settings it records before training say what will train.
-pub fn resolve_adapter_sized(config: &mut TrainConfig, scene: &Scene, ctx: &GpuContext) {
-    resolve_random_init(config, scene, ctx);
-    resolve_field_shape(config, ctx);
-}
-
-fn resolve_field_shape(config: &mut TrainConfig, ctx: &GpuContext) {
-    if let Some(deformation) = config.deformation.as_mut() {
-        deformation.field = Some(deformation.field_for(ctx.report.is_software));
-    }
-}
-
-/// The initial model of plain training: [`initial_model`], plus `background_shell` Gaussians on
-/// a far sphere when it comes from sparse points (which miss the far background: on the
-/// figurine at 500 steps the shell raised held-out PSNR from 16.4 to 19.1 dB, docs/benchmarks.md).
-pub fn plain_initial_model(
-    scene: &Scene,
-    config: &TrainConfig,
-) -> Result<GaussianModel, TrainError> {
-    let mut model = initial_model(scene, config)?;
-    let from_points = has_sparse_points(scene);
-    if from_points && config.background_shell > 0 {
-        let shell = background_shell_points(scene, config.background_shell);
-        append_points(&mut model, &shell);
-    }
-    Ok(model)
-}
-
-/// Where random initial Gaussians go: Blender / D-NeRF scenes follow the NeRF-synthetic
-/// convention of an object inside [-1.3, 1.3]^3 around the origin (3DGS and Deformable 3DGS
-/// initialise there); other scenes fill the cameras' bounds.
 impl Trainer {
     /// Loads the views and uploads `model` (or the scene's initial model).
     pub fn new(
@@ -314,7 +244,7 @@ impl Trainer {
         if model.is_none() {
             resolve_random_init(&mut config, scene, ctx);
         }
-        resolve_field_shape(&mut config, ctx);
+        initial::resolve_field_shape(&mut config, ctx);
         let model = match model {
             Some(model) => model,
             None => plain_initial_model(scene, &config)?,
