@@ -1,6 +1,6 @@
-//! Compiles the gRPC protos with protox (pure Rust), so no system `protoc` is needed.
-
-use std::path::PathBuf;
+//! Records the commit being built. The gRPC code is generated ahead, not here
+//! (`src/generated/`, `scripts/protogen.sh`): compiling protox and its regex in every build
+//! cost about 50 CPU-seconds of a cold one.
 
 /// The commit being built, for `segsplat_build_info`: `SEGSPLAT_GIT_COMMIT` when the build sets
 /// it (an image built without `.git`), else `git rev-parse`, else `unknown`. Reruns when HEAD
@@ -33,22 +33,6 @@ fn git_commit() -> String {
     git(&["rev-parse", "--short=12", "HEAD"]).unwrap_or_else(|| "unknown".to_string())
 }
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
+fn main() {
     println!("cargo:rustc-env=SEGSPLAT_GIT_COMMIT={}", git_commit());
-    let protos = ["proto/segsplat/v1/segsplat.proto"];
-    for proto in protos {
-        println!("cargo:rerun-if-changed={proto}");
-    }
-    let file_descriptors = protox::compile(protos, ["proto"])?;
-    let out_dir = PathBuf::from(std::env::var("OUT_DIR")?);
-    let descriptor_path = out_dir.join("segsplat_descriptor.bin");
-    std::fs::write(
-        &descriptor_path,
-        prost::Message::encode_to_vec(&file_descriptors),
-    )?;
-    tonic_prost_build::configure()
-        .file_descriptor_set_path(&descriptor_path)
-        .skip_protoc_run()
-        .compile_fds(file_descriptors)?;
-    Ok(())
 }

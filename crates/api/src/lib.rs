@@ -33,12 +33,34 @@ mod workers;
 pub use openapi::ApiDoc;
 pub use server::{RunningService, ServiceBuilder, ServiceError, ServiceMode};
 
-/// Generated gRPC types and services (`crates/api/proto/segsplat/v1`).
+/// Generated gRPC types and services (`crates/api/proto/segsplat/v1`), committed in
+/// `src/generated/` and rewritten by `scripts/protogen.sh` when the proto changes.
 pub mod proto {
     #![allow(clippy::all, missing_docs)]
-    tonic::include_proto!("segsplat.v1");
+    include!("generated/segsplat.v1.rs");
 
     /// Encoded file descriptors, for the gRPC reflection service.
-    pub const FILE_DESCRIPTOR_SET: &[u8] =
-        tonic::include_file_descriptor_set!("segsplat_descriptor");
+    pub const FILE_DESCRIPTOR_SET: &[u8] = include_bytes!("generated/segsplat_descriptor.bin");
+
+    #[cfg(test)]
+    mod tests {
+        use sha2::{Digest, Sha256};
+
+        /// The committed code says which proto it came from; a proto edited without running
+        /// `scripts/protogen.sh` would otherwise build and serve the old messages.
+        #[test]
+        fn generated_grpc_code_is_from_the_proto_in_the_tree() {
+            let proto = include_bytes!("../proto/segsplat/v1/segsplat.proto");
+            let recorded = include_str!("generated/proto.sha256");
+            let digest: String = Sha256::digest(proto)
+                .iter()
+                .map(|byte| format!("{byte:02x}"))
+                .collect();
+            assert_eq!(
+                recorded.split_whitespace().next(),
+                Some(digest.as_str()),
+                "crates/api/proto changed since src/generated/ was written: run scripts/protogen.sh"
+            );
+        }
+    }
 }
