@@ -8,22 +8,25 @@
 //! buffer in GPU kernels and reads back only counts (`crate::densify::gpu`).
 //!
 //! This file holds the step loop; each other concern has its own file under `trainer/`: the
-//! starting Gaussians (`initial`), the Adam update (`adam_step`), densification within the
-//! Gaussian budget (`densification`), checkpoints (`checkpointing`, and `checkpoint_snapshot`
-//! for jobs), timing and evaluation (`measure`), the object loss (`object_step`,
-//! `object_separate`, `partial_filter`) and the deformation field (`dynamics`).
+//! starting Gaussians (`initial`), what it reports and records (`reports`) and its errors
+//! (`error`), the Adam update (`adam_step`), densification within the Gaussian budget
+//! (`densification`), checkpoints (`checkpointing`, and `checkpoint_snapshot` for jobs), timing
+//! and evaluation (`measure`), the object loss (`object_step`, `object_separate`,
+//! `partial_filter`) and the deformation field (`dynamics`).
 
 mod adam_step;
 mod checkpoint_snapshot;
 mod checkpointing;
 mod densification;
 mod dynamics;
+mod error;
 mod fit_check;
 mod initial;
 mod measure;
 mod object_separate;
 mod object_step;
 mod partial_filter;
+mod reports;
 mod warm_kernels;
 
 use std::collections::BTreeSet;
@@ -33,38 +36,38 @@ use std::time::Instant;
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use serde::{Deserialize, Serialize};
 
-use crate::adam::{Adam, AdamError, AdamSettings};
-use crate::checkpoint::CheckpointError;
+use crate::adam::{Adam, AdamSettings};
 use crate::densify::PruneGuard;
 use crate::densify::gpu::GpuDensifier;
-use crate::loss::{LossError, LossImages, LossOutputs, RenderLoss};
+use crate::loss::{LossImages, LossOutputs, RenderLoss};
 use crate::model::{
-    GaussianModel, GaussianParameterBuffers, GpuGaussianGrads, GpuGaussians, ModelError,
+    GaussianModel, GaussianParameterBuffers, GpuGaussianGrads, GpuGaussians,
     max_gaussians_for_adapter,
 };
-use crate::render::{RenderError, RenderOutput, Renderer};
+use crate::render::{RenderOutput, Renderer};
 use crate::schedule::scene_extent;
 use crate::train::budget::scene_gaussian_budget;
-use crate::train::config::{ConfigError, TrainConfig};
+use crate::train::config::TrainConfig;
 use crate::train::densify_stats::DensifyAccumulators;
 use crate::train::object_loss::{MAX_OBJECTS_PER_LEVEL, ObjectTargets, SkippedPair};
 use crate::train::partial_filter_report::PartialFilterReport;
 use crate::train::random_init::{camera_centres, has_sparse_points};
 use crate::train::schedule::{DeformationSchedule, SPARSE_CAPTURE_VIEWS, TrainSchedule};
-use crate::train::views::{Views, ViewsError};
+use crate::train::views::Views;
 use crate::{ObjectFilter, RenderSettings};
+use segsplat_gpu::GpuContext;
 use segsplat_gpu::deferred_read::DeferredRead;
-use segsplat_gpu::{GpuContext, GpuError};
 use segsplat_scene::Scene;
 
 pub use checkpoint_snapshot::PendingCheckpoint;
+pub use error::TrainError;
 pub use fit_check::ConvergedAt;
 pub use initial::{
     initial_model, plain_initial_model, resolve_adapter_sized, resolve_random_init,
     scene_sized_random_init,
 };
+pub use reports::{EvalReport, PartialFilterCost, TrainProgress, TrainerMeta};
 
 /// Steps between loss / capacity read-backs.
 const SYNC_EVERY: u32 = 25;
@@ -73,100 +76,8 @@ const CAPACITY_GROWTH: f64 = 1.5;
 /// Loss slots per step: the full render, then up to `m` object renders at each of three levels.
 const LOSS_SLOTS: u32 = 1 + 3 * MAX_OBJECTS_PER_LEVEL;
 
-#[derive(Debug, thiserror::Error)]
-pub enum TrainError {
-    #[error(transparent)]
-    Config(#[from] ConfigError),
-    #[error(transparent)]
-    Views(#[from] ViewsError),
-    #[error(transparent)]
-    Model(#[from] ModelError),
-    #[error(transparent)]
-    Render(#[from] RenderError),
-    #[error(transparent)]
-    Loss(#[from] LossError),
-    #[error(transparent)]
-    Adam(#[from] AdamError),
-    #[error(transparent)]
-    Gpu(#[from] GpuError),
-    #[error(transparent)]
-    Checkpoint(#[from] CheckpointError),
-    #[error(transparent)]
-    Deform(#[from] crate::deform::DeformError),
-    #[error(transparent)]
-    ObjectTargets(#[from] object_step::ObjectTargetsError),
-    #[error("checkpoint does not match this scene or config: {0}")]
-    CheckpointMismatch(String),
-    #[error("the initial model is empty: the scene has no points and random_init_count is 0")]
-    EmptyModel,
-    /// The stop check ([`Trainer::set_stop_check`]) said yes inside a long pass of one step.
-    #[error("training stopped on request inside step {step}")]
-    Stopped { step: u32 },
-}
-
 /// Asked inside the passes of a step that take long (the partial-mask filter); `true` stops.
 pub type StopCheck = Arc<dyn Fn() -> bool + Send + Sync>;
-
-/// Reported every [`SYNC_EVERY`] steps and at the end.
-#[derive(Debug, Clone, Serialize)]
-pub struct TrainProgress {
-    pub step: u32,
-    pub total_steps: u32,
-    /// Loss of the latest step (0.8 L1 + 0.2 D-SSIM).
-    pub loss: f32,
-    /// Sum of the latest step's weighted object losses (0 without the object loss).
-    pub object_loss: f32,
-    pub gaussians: usize,
-    pub elapsed_secs: f64,
-    pub steps_per_sec: f64,
-}
-
-/// Held-out quality.
-#[derive(Debug, Clone, Serialize, Deserialize, Default)]
-pub struct EvalReport {
-    pub views: usize,
-    /// Means over the held-out views.
-    pub psnr: f64,
-    pub ssim: f64,
-    /// The worst held-out view's PSNR (floaters in front of a few cameras show here first), and
-    /// its index among the held-out views (absent in reports written before they were kept).
-    #[serde(default)]
-    pub worst_psnr: f64,
-    #[serde(default)]
-    pub worst_view: usize,
-    /// The worst held-out view as the scene knows it: its frame index among all the scene's
-    /// frames and its name (absent in reports written before they were kept).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub worst_frame_index: Option<usize>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub worst_frame_name: Option<String>,
-}
-
-/// What a checkpoint's header records besides the arrays.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct TrainerMeta {
-    pub step: u32,
-    pub gaussians: usize,
-    pub rng: ChaCha8Rng,
-    pub view_queue: Vec<usize>,
-    pub intersection_capacity: u32,
-    pub config: TrainConfig,
-    pub train_views: usize,
-    /// (object, view) pairs the partial-mask filter has left out.
-    #[serde(default)]
-    pub skipped_pairs: Vec<SkippedPair>,
-    /// The job's Gaussian budget (absent in checkpoints written before budgets: the resumed
-    /// trainer then sizes it from the scene again, at least the checkpoint's count).
-    #[serde(default)]
-    pub gaussian_budget: Option<usize>,
-    /// Where the convergence stop ended the run (a resumed run that had ended stays ended; the
-    /// checks' history is not kept, so a run resumed before its stop refills its window).
-    #[serde(default)]
-    pub converged_at: Option<ConvergedAt>,
-    /// What the partial-mask filter found, when it has run (absent in older checkpoints).
-    #[serde(default)]
-    pub partial_filter: Option<PartialFilterReport>,
-}
 
 pub struct Trainer {
     ctx: GpuContext,
@@ -218,14 +129,6 @@ pub struct Trainer {
     gaussian_budget: usize,
     /// The convergence stop's checks and verdict (`config.stop_when_converged`).
     fit_check: fit_check::FitCheck,
-}
-
-/// Wall time and kernel dispatches the partial-mask filter has taken, inside [`Trainer::run`]'s
-/// time and the context's dispatch count.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct PartialFilterCost {
-    pub seconds: f64,
-    pub dispatches: u64,
 }
 
 /// Adam groups of 1 to 4 floats per Gaussian (means, scales, rotations, opacities, SH DC), which
