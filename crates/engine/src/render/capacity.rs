@@ -5,7 +5,8 @@
 
 use segsplat_gpu::GpuContext;
 
-use super::renderer::{RenderError, Renderer};
+use super::output::RenderError;
+use super::renderer::Renderer;
 
 /// What [`Renderer::sync_capacity`] found.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -35,6 +35,7 @@
 mod capacity;
 mod kernels;
 mod object_batch;
+mod output;
 mod renderer;
 mod uniforms;
 mod workspace;
@@ -42,7 +43,8 @@ mod workspace;
 pub use capacity::CapacityReport;
 pub use kernels::RasterVariant;
 pub use object_batch::{ObjectBatchError, ObjectBatchOutput, ObjectSlot, slot_table};
+pub use output::{RenderError, RenderOutput};
 pub(crate) use renderer::RENDER_ATTEMPTS;
-pub use renderer::{RenderError, RenderOutput, Renderer};
+pub use renderer::Renderer;
 pub use uniforms::RenderUniforms;
 pub use workspace::GRAD_STRIDE;

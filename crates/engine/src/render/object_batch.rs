@@ -26,7 +26,8 @@ use std::sync::Arc;
 
 use wgpu::util::DeviceExt;
 
-use super::renderer::{RenderError, RenderOutput, Renderer};
+use super::output::{RenderError, RenderOutput};
+use super::renderer::Renderer;
 use super::uniforms::RenderUniforms;
 use super::workspace::{RenderWorkspace, SLOT_TABLE_CAPACITY, WorkspacePool};
 use crate::model::GaussianView;
