@@ -44,18 +44,16 @@ pub mod proto {
 
     #[cfg(test)]
     mod tests {
-        use sha2::{Digest, Sha256};
+        use segsplat_vision::models::store::sha256_file;
 
         /// The committed code says which proto it came from; a proto edited without running
         /// `scripts/protogen.sh` would otherwise build and serve the old messages.
         #[test]
         fn generated_grpc_code_is_from_the_proto_in_the_tree() {
-            let proto = include_bytes!("../proto/segsplat/v1/segsplat.proto");
+            let proto = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("proto/segsplat/v1/segsplat.proto");
             let recorded = include_str!("generated/proto.sha256");
-            let digest: String = Sha256::digest(proto)
-                .iter()
-                .map(|byte| format!("{byte:02x}"))
-                .collect();
+            let digest = sha256_file(&proto).expect("the proto is readable");
             assert_eq!(
                 recorded.split_whitespace().next(),
                 Some(digest.as_str()),
