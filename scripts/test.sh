@@ -58,10 +58,9 @@ source scripts/test_servers.sh
 # and binaries (bench = true by default) and ran their unit tests a second time.
 phase "benches"
 cargo test --locked --workspace --bench '*'
-# The REST contract and the web console run beside the tests, not after them: the test binaries
-# run one at a time and keep about 1.5 of two cores busy (386 s of wall time for 584 CPU-seconds),
-# and these two checks are mostly a live server waiting on schemathesis and a browser (together
-# 4m52s after the tests on CI's last run). Their output is kept and printed when the tests end.
+# The REST contract and the web console run beside the tests, not after them: they are mostly a
+# live server waiting on schemathesis and a browser (together 4m52s when they ran after the
+# tests). Their output is kept and printed when the tests end.
 # - contract: the REST contract against a live server: the served OpenAPI document validates, and
 #   schemathesis finds no failures in a bounded run (scripts/contract.sh; skips without its
 #   tools, except under CI=true).
@@ -79,8 +78,11 @@ setsid bash -c 'set -euo pipefail
 live_checks=$!
 # (test_servers.sh's own EXIT trap, which stops the storage servers, is kept in this one.)
 trap 'kill -TERM -- "-$live_checks" 2>/dev/null || true; stop_test_servers' EXIT
+# Every unit and integration test (`cargo test --workspace --lib --bins --tests`), the test
+# binaries two at a time, longest first (scripts/run_tests.sh): one at a time, a binary's last
+# long test left a core idle (390 s alone on two cores; two at a time 271 s).
 phase "tests"
-cargo test --locked --workspace --lib --bins --tests
+bash scripts/run_tests.sh
 # The job and store tests again with every service on PostgreSQL instead of SQLite (each test
 # gets a fresh database on the server test_servers.sh started), so both backends pass the same
 # tests. `--workspace` keeps the feature set of the run above, so nothing is rebuilt.
