@@ -58,6 +58,9 @@ export class ScenePage {
     this.hovered = null;
     this.masks = [];
     this.frameCount = 0;
+    // Queries asked so far: an answer that arrives after a newer query was asked is dropped, so
+    // a slow answer never overwrites a newer one's masks and selection.
+    this.queriesAsked = 0;
     attachControls(this.canvas, () => this.camera, () => {
       this.masks = [];
       this.requestDraw();
@@ -346,6 +349,8 @@ export class ScenePage {
   }
 
   async ask() {
+    const asked = ++this.queriesAsked;
+    const superseded = () => asked !== this.queriesAsked;
     showError($("query-error"), "");
     $("query-nothing").hidden = true;
     $("query-results").replaceChildren();
@@ -353,15 +358,17 @@ export class ScenePage {
     try {
       answer = await sendJson("POST", this.path("/query"), this.queryRequest());
     } catch (error) {
-      showError($("query-error"), describeError(error));
+      if (!superseded()) showError($("query-error"), describeError(error));
       return;
     }
+    if (superseded()) return;
     this.lastQuery = answer;
     if (!answer.matched || !answer.objects.length) {
       $("query-nothing").hidden = false;
       this.masks = [];
       this.pinned.clear();
       this.applySelection();
+      this.answered(asked);
       return;
     }
     $("query-results").replaceChildren(...answer.objects.map((match, index) => el("li", {
@@ -373,14 +380,23 @@ export class ScenePage {
     }
     const level = answer.objects[0].level;
     if (level !== this.level) await this.showLevel(level);
+    if (superseded()) return;
     this.toTrainingView();
     const masks = answer.objects.map((match, index) => {
       const mask = $("query-visible").checked ? match.visible_mask || match.mask : match.mask;
       return mask ? tintedMask(mask, MASK_COLORS[index % MASK_COLORS.length]) : null;
     });
-    this.masks = (await Promise.all(masks)).filter(Boolean);
+    const tinted = (await Promise.all(masks)).filter(Boolean);
+    if (superseded()) return;
+    this.masks = tinted;
     this.pinned = new Set(answer.objects.filter((match) => match.level === level).map((match) => match.object_id));
     this.applySelection();
+    this.answered(asked);
+  }
+
+  // Test and automation hook: the number of the last query whose answer the view shows.
+  answered(asked) {
+    $("query-results").dataset.answered = String(asked);
   }
 
   async moveToTime() {

@@ -283,9 +283,13 @@ async function main() {
     await shot(page, "05-query-green");
 
     step("visible-only masks");
+    // Wait for this query's own answer, not the masks the last one left: an answer still on its
+    // way when the next query is asked must not be taken for it.
+    const answeredBefore = await page.evaluate(() => Number(document.getElementById("query-results").dataset.answered || 0));
     await page.check("#query-visible");
     await page.click("#query-run");
-    await page.waitForFunction(() => Number(document.getElementById("view3d").dataset.masks) >= 1);
+    await page.waitForFunction((before) => Number(document.getElementById("query-results").dataset.answered || 0) > before
+      && Number(document.getElementById("view3d").dataset.masks) >= 1, answeredBefore);
     await page.uncheck("#query-visible");
 
     step("nothing matches");
