@@ -7,9 +7,9 @@
 # before it runs a test, so the lanes do not wait on each other; the build is done before this
 # runs (scripts/test.sh builds every target first), so no lane compiles.
 #
-# Each job's output is printed whole when it ends, never interleaved with another's, and the
-# run fails, naming the failed jobs, if any job fails. Extra arguments go to every cargo
-# invocation (e.g. `--release`).
+# Each job's output is printed whole when it ends, never interleaved with another's (the queue
+# is scripts/lanes.sh), and the run fails, naming the failed jobs, if any job fails. Extra
+# arguments go to every cargo invocation (e.g. `--release`).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 lanes=${SEGSPLAT_TEST_LANES:-2}
@@ -33,17 +33,17 @@ long=(
   service_masks                  # 11
 )
 
-jobs_file=$(mktemp)
 work=$(mktemp -d)
-trap 'rm -rf "$jobs_file" "$work"' EXIT
+trap 'rm -rf "$work"' EXIT
+source scripts/lanes.sh
 for name in "${long[@]}"; do
   [ -f "tests/$name.rs" ] || { echo "run_tests.sh lists tests/$name.rs, which is gone" >&2; exit 1; }
-  echo "--test $name" >>"$jobs_file"
+  lane_job "$name" cargo test --locked --workspace "$@" --test "$name"
 done
 # Every other integration test, dealt round-robin into four batches (one cargo process each:
 # a cargo invocation costs about half a second even when it builds nothing), and the unit tests
 # of every crate and binary as one more job.
-batches=(" " " " " " " ")
+batches=("" "" "" "")
 index=0
 for path in tests/*.rs; do
   name=$(basename "$path" .rs)
@@ -51,36 +51,14 @@ for path in tests/*.rs; do
   batches[index % 4]+=" --test $name"
   index=$((index + 1))
 done
-for batch in "${batches[@]}"; do
-  [ -n "${batch// /}" ] && echo "$batch" >>"$jobs_file"
+for index in "${!batches[@]}"; do
+  # shellcheck disable=SC2086 # the batch is words
+  [ -z "${batches[index]}" ] ||
+    lane_job "batch-$((index + 1))" cargo test --locked --workspace "$@" ${batches[index]}
 done
-echo "--lib --bins" >>"$jobs_file"
+lane_job unit cargo test --locked --workspace "$@" --lib --bins
 
-# One job: its cargo run into a log of its own, then the log printed under a lock.
-run_job() {
-  local work=$1 targets
-  # shellcheck disable=SC2086 # one space between words
-  targets=$(echo $2)
-  shift 2
-  local log
-  log=$(mktemp -p "$work")
-  local status=0
-  # shellcheck disable=SC2086 # the targets are words
-  cargo test --locked --workspace "$@" $targets >"$log" 2>&1 || status=$?
-  {
-    flock 9
-    echo "== $(date +%H:%M:%S) cargo test $targets (exit $status)"
-    cat "$log"
-    [ "$status" -eq 0 ] || echo "$targets" >>"$work/failed"
-  } 9>"$work/lock"
-  rm -f "$log"
-  return 0
-}
-export -f run_job
-
-tr '\n' '\0' <"$jobs_file" | xargs -0 -P "$lanes" -I{} bash -c 'run_job "$0" "$1" "${@:2}"' "$work" {} "$@"
-if [ -s "$work/failed" ]; then
-  echo "failed test jobs:" >&2
-  sed 's/^/  cargo test --workspace /' "$work/failed" >&2
+if ! lanes_run "$lanes" "$work" log; then
+  echo "failed test jobs (their commands are above):" $(cat "$work/failed") >&2
   exit 1
 fi

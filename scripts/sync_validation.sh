@@ -53,30 +53,7 @@ export RUST_TEST_THREADS=${RUST_TEST_THREADS:-2}
 logs=$(mktemp -d)
 trap 'rm -rf "$logs"' EXIT
 
-# job NAME COMMAND...: queued, and run below two at a time (the layer's checks are mostly one
-# thread's work); its output kept for the search below, a failure counted.
-queued=()
-job() {
-  local name=$1
-  shift
-  queued+=("$name $(printf '%q ' "$@")")
-}
-# run_job LOGS NAME COMMAND-LINE: one queued job, its result printed under a lock.
-run_job() {
-  local logs=$1 name=$2 command=$3 began=$SECONDS status=0
-  eval "$command" >"$logs/$name.log" 2>&1 || status=$?
-  {
-    flock 9
-    if [ $status -eq 0 ]; then
-      echo "  $name: passed in $((SECONDS - began)) s"
-    else
-      echo "  $name: FAILED (exit $status) in $((SECONDS - began)) s; its log's end:"
-      tail -20 "$logs/$name.log" | sed 's/^/    /'
-      echo "$name" >>"$logs/failed"
-    fi
-  } 9>"$logs/lock"
-}
-export -f run_job
+source scripts/lanes.sh
 
 # Longest first (two at a time below, so nothing long starts last).
 tests=(gpu_loss gpu_adam gpu_sort object_batch_gpu deform_gpu object_step_batched render_bands_gpu
@@ -120,21 +97,20 @@ fi
 # The training runs first: they take longest. Each kernel variant the adapter has; the plain
 # runs densify (the synthetic scene grows from 1144 to 2151 Gaussians).
 for gemm in tiled rows broadcast; do
-  job "bench-deformation-$gemm" env SEGSPLAT_GEMM_KERNEL=$gemm "$bin" bench "$dynamic_scene" \
+  lane_job "bench-deformation-$gemm" env SEGSPLAT_GEMM_KERNEL=$gemm "$bin" bench "$dynamic_scene" \
     --steps 4 --timing-repeats 1 --deformation --field-depth 4 --field-width 80 --json
 done
 for raster in pixels columns; do
-  job "bench-plain-$raster" env SEGSPLAT_RASTER_KERNEL=$raster "$bin" bench "$static_scene" \
+  lane_job "bench-plain-$raster" env SEGSPLAT_RASTER_KERNEL=$raster "$bin" bench "$static_scene" \
     --steps 250 --timing-repeats 1 --json
 done
-job bench-object-loss "$bin" bench "$static_scene" --steps 120 --timing-repeats 1 --object-loss \
+lane_job bench-object-loss "$bin" bench "$static_scene" --steps 120 --timing-repeats 1 --object-loss \
   --json
 for name in "${tests[@]}"; do
-  job "test-$name" cargo test --locked --workspace --test "$name"
+  lane_job "test-$name" cargo test --locked --workspace --test "$name"
 done
 echo "== GPU tests and training runs under synchronization validation, two at a time"
-printf '%s\0' "${queued[@]}" |
-  xargs -0 -P 2 -I{} bash -c 'run_job "$0" "${1%% *}" "${1#* }"' "$logs" {}
+lanes_run 2 "$logs" failures || true
 failures=()
 [ ! -e "$logs/failed" ] || mapfile -t failures <"$logs/failed"
 
