@@ -9,6 +9,10 @@ use std::path::{Path, PathBuf};
 
 use serde_json::{Value, json};
 
+mod tokenizer;
+
+use tokenizer::tokenizer_entry;
+
 use super::error::ModelError;
 use super::manifest::{Family, MANIFEST_FILE, MANIFEST_FORMAT_VERSION, Manifest, Preprocess, Role};
 use super::recognise::{Recognised, describe_signature, recognise};
@@ -28,9 +32,6 @@ const SAM_STD: [f32; 3] = [58.395, 57.12, 57.375];
 const SAM2_MEAN: [f32; 3] = [0.485, 0.456, 0.406];
 const SAM2_STD: [f32; 3] = [0.229, 0.224, 0.225];
 const DEFAULT_CONTEXT_LENGTH: usize = 77;
-const TOKENIZER_FILE: &str = "tokenizer.json";
-const START_TOKEN: &str = "<|startoftext|>";
-const END_TOKEN: &str = "<|endoftext|>";
 
 /// What a graph cannot tell; `None` takes the family's published value.
 #[derive(Debug, Clone, Default)]
@@ -544,100 +545,6 @@ fn role_outputs(role: Role) -> &'static [&'static str] {
         Role::SamEncoder => &["image_embeddings", "high_res_feats_0", "high_res_feats_1"],
         Role::SamDecoder => &["masks", "iou_predictions", "low_res_masks"],
     }
-}
-
-/// The tokenizer file of the folder: the one named, else `tokenizer.json`, else the folder's
-/// only `*tokenizer*.json` (exports name it `clip_tokenizer.json` and the like). `Ok(None)`
-/// when there is none; an error when the choice is ambiguous or the named file is elsewhere.
-fn find_tokenizer(dir: &Path, named: Option<&Path>) -> Result<Option<String>, ModelError> {
-    if let Some(named) = named {
-        let name = named
-            .file_name()
-            .and_then(|name| name.to_str())
-            .map(str::to_string);
-        return match name {
-            Some(name) if dir.join(&name).is_file() => Ok(Some(name)),
-            _ => Err(init_error(
-                dir,
-                format!(
-                    "--tokenizer {}: no such file in {} (the tokenizer must sit beside the models)",
-                    named.display(),
-                    dir.display()
-                ),
-            )),
-        };
-    }
-    if dir.join(TOKENIZER_FILE).is_file() {
-        return Ok(Some(TOKENIZER_FILE.to_string()));
-    }
-    let mut candidates: Vec<String> = std::fs::read_dir(dir)
-        .map_err(|error| init_error(dir, format!("cannot list the folder: {error}")))?
-        .filter_map(|entry| entry.ok()?.file_name().into_string().ok())
-        .filter(|name| {
-            let lower = name.to_lowercase();
-            lower.contains("tokenizer") && lower.ends_with(".json")
-        })
-        .collect();
-    candidates.sort();
-    match candidates.len() {
-        0 => Ok(None),
-        1 => Ok(candidates.pop()),
-        _ => Err(init_error(
-            dir,
-            format!(
-                "several tokenizer files ({}); name the CLIP text model's with --tokenizer",
-                candidates.join(", ")
-            ),
-        )),
-    }
-}
-
-/// The tokenizer entry when the folder has a tokenizer; a CLIP text model needs one.
-fn tokenizer_entry(
-    dir: &Path,
-    by_role: &BTreeMap<&'static str, Graph>,
-    named: Option<&Path>,
-) -> Result<Option<Value>, ModelError> {
-    let text_model = by_role.get(Role::ClipText.as_str());
-    let Some(file) = find_tokenizer(dir, named)? else {
-        return match text_model {
-            Some(graph) => Err(init_error(
-                dir,
-                format!(
-                    "{} is a CLIP text model but no tokenizer file is there ({TOKENIZER_FILE} \
-                     or one *tokenizer*.json: the HuggingFace tokenizers file of the model's \
-                     BPE, which scripts/export_models.py writes; --tokenizer names another)",
-                    graph.file
-                ),
-            )),
-            None => Ok(None),
-        };
-    };
-    let path = dir.join(&file);
-    let tokenizer =
-        tokenizers::Tokenizer::from_file(&path).map_err(|error| ModelError::Tokenizer {
-            path: path.clone(),
-            reason: error.to_string(),
-        })?;
-    let id = |token: &str| {
-        tokenizer
-            .token_to_id(token)
-            .ok_or_else(|| ModelError::Tokenizer {
-                path: path.clone(),
-                reason: format!("has no {token} token; CLIP's BPE frames every text with it"),
-            })
-    };
-    let context_length = text_model
-        .and_then(|graph| fixed_dim(&graph.inputs, "input_ids", 1))
-        .unwrap_or(DEFAULT_CONTEXT_LENGTH as i64);
-    Ok(Some(json!({
-        "file": file,
-        "sha256": sha256_file(&path)?,
-        "size": file_size(&path)?,
-        "context_length": context_length,
-        "start_token": id(START_TOKEN)?,
-        "end_token": id(END_TOKEN)?,
-    })))
 }
 
 fn file_size(path: &Path) -> Result<u64, ModelError> {
