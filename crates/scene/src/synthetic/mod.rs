@@ -12,17 +12,11 @@ use std::path::Path;
 
 use glam::{Mat4, Vec3};
 use image::{ImageFormat, Luma, Rgb, Rgba};
-use serde_json::json;
 
-use super::colmap::{
-    self, CameraModel, ColmapCamera, ColmapEncoding, ColmapImage, ColmapKeypoint, ColmapModel,
-    ColmapPoint, ColmapTrackElement,
-};
+use super::colmap::{CameraModel, ColmapEncoding};
 use super::distortion::{Lens, distort_pixel, undistort_pixel};
 use super::masks::mask_path;
-use super::point_ply::write_point_ply;
-use super::transforms_json::opencv_from_opengl_camera;
-use super::{Intrinsics, Level, SparsePoints, blender, nerfstudio};
+use super::{Intrinsics, Level, SparsePoints};
 
 mod writers;
 

@@ -1,7 +1,26 @@
 //! The three-sphere world written out in each still-scene format the loaders read: COLMAP,
 //! nerfstudio and Blender NeRF.
 
-use super::*;
+use std::fs;
+use std::io;
+use std::path::Path;
+
+use glam::Mat4;
+use image::ImageFormat;
+use serde_json::json;
+
+use super::{
+    NERFSTUDIO_POINTS_FILE, SyntheticLens, SyntheticSpec, observe, render_distorted_view,
+    render_view, surface_point_cloud, surface_points, synthetic_camera, synthetic_intrinsics,
+    synthetic_objects, synthetic_world_from_cameras, write_image, write_masks,
+};
+use crate::colmap::{
+    self, CameraModel, ColmapCamera, ColmapEncoding, ColmapImage, ColmapKeypoint, ColmapModel,
+    ColmapPoint, ColmapTrackElement,
+};
+use crate::point_ply::write_point_ply;
+use crate::transforms_json::opencv_from_opengl_camera;
+use crate::{blender, nerfstudio};
 
 /// A COLMAP dataset: `images/frame_NNNN.<ext>` and `sparse/0/` in the given encoding, one
 /// PINHOLE camera (or the spec's lens model), images listed in reverse name order (loaders must
