@@ -19,12 +19,12 @@ const GOLDEN_TURN: f32 = 0.618_034;
 use image::{ImageFormat, Luma, Rgba};
 use serde_json::json;
 
+use super::Level;
 use super::masks::mask_path;
 use super::synthetic::{
     SyntheticObject, SyntheticSpec, camera_looking_at_origin, cast_ray, opengl_matrix_rows,
-    pixel_ray, synthetic_intrinsics, synthetic_objects, write_json,
+    pixel_ray, synthetic_intrinsics, synthetic_objects, write_blender_transforms,
 };
-use super::{Level, blender};
 
 /// The spheres' centres at normalised time `t`: a straight line, an arc, and a bob.
 pub fn dynamic_object_center(object_index: usize, t: f32) -> Vec3 {
@@ -168,16 +168,7 @@ pub fn write_dynamic_blender(dir: &Path, spec: &SyntheticSpec) -> io::Result<()>
             train.push(frame);
         }
     }
-    for (file, frames) in [
-        (blender::TRAIN_TRANSFORMS_FILE, train),
-        (blender::TEST_TRANSFORMS_FILE, test),
-    ] {
-        write_json(
-            &dir.join(file),
-            &json!({ "camera_angle_x": camera_angle_x, "frames": frames }),
-        )?;
-    }
-    Ok(())
+    write_blender_transforms(dir, camera_angle_x, train, test)
 }
 
 /// The true instance ids of a view at time `t` for `level` (0 = background), row-major.

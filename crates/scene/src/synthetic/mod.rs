@@ -21,7 +21,7 @@ use super::{Intrinsics, Level, SparsePoints};
 mod writers;
 
 pub use writers::{is_synthetic_test_frame, write_blender, write_colmap, write_nerfstudio};
-pub(crate) use writers::{opengl_matrix_rows, write_json};
+pub(crate) use writers::{opengl_matrix_rows, write_blender_transforms, write_json};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SyntheticImageFormat {

@@ -226,6 +226,16 @@ pub fn write_blender(dir: &Path, spec: &SyntheticSpec) -> io::Result<()> {
             train.push(frame)
         }
     }
+    write_blender_transforms(dir, camera_angle_x, train, test)
+}
+
+/// `transforms_train.json` and `transforms_test.json` of a Blender dataset from its frames.
+pub(crate) fn write_blender_transforms(
+    dir: &Path,
+    camera_angle_x: f64,
+    train: Vec<serde_json::Value>,
+    test: Vec<serde_json::Value>,
+) -> io::Result<()> {
     for (file, frames) in [
         (blender::TRAIN_TRANSFORMS_FILE, train),
         (blender::TEST_TRANSFORMS_FILE, test),
