@@ -14,7 +14,7 @@
 # - Chromium (Debian's package) and playwright-core (npm), which scripts/console_e2e.sh uses to
 #   test the web console in a real browser;
 # - promtool (Debian's prometheus package, installed without its recommends), which
-#   tests/deploy_observability.rs runs on the alert rules' unit tests.
+#   tests/deploy/observability.rs runs on the alert rules' unit tests.
 # Idempotent: skips what is already there.
 set -euo pipefail
 

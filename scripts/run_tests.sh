@@ -37,16 +37,20 @@ work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 source scripts/lanes.sh
 for name in "${long[@]}"; do
-  [ -f "tests/$name.rs" ] || { echo "run_tests.sh lists tests/$name.rs, which is gone" >&2; exit 1; }
+  [ -f "tests/$name.rs" ] || [ -f "tests/$name/main.rs" ] ||
+    { echo "run_tests.sh lists the test $name, which is gone" >&2; exit 1; }
   lane_job "$name" cargo test --locked --workspace "$@" --test "$name"
 done
-# Every other integration test, dealt round-robin into four batches (one cargo process each:
-# a cargo invocation costs about half a second even when it builds nothing), and the unit tests
-# of every crate and binary as one more job.
+# Every other integration test (a file `tests/NAME.rs` or a folder `tests/NAME/main.rs`, as
+# cargo finds them), dealt round-robin into four batches (one cargo process each: a cargo
+# invocation costs about half a second even when it builds nothing), and the unit tests of
+# every crate and binary as one more job.
 batches=("" "" "" "")
 index=0
-for path in tests/*.rs; do
-  name=$(basename "$path" .rs)
+for path in tests/*.rs tests/*/main.rs; do
+  name=${path#tests/}
+  name=${name%/main.rs}
+  name=${name%.rs}
   case " ${long[*]} " in *" $name "*) continue ;; esac
   batches[index % 4]+=" --test $name"
   index=$((index + 1))

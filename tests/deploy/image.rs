@@ -3,9 +3,6 @@
 //! service accepts, its exposed ports are the ones they set, the binary it copies is the one
 //! cargo builds, and its commands are `segsplat` subcommands.
 
-#[path = "common/segsplat_bin.rs"]
-mod segsplat_bin;
-
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -111,7 +108,7 @@ fn the_images_binary_and_commands_exist() {
     };
     assert_eq!(command("ENTRYPOINT"), vec!["segsplat"]);
     for subcommand in [command("CMD")[0].as_str(), "worker"] {
-        let output = std::process::Command::new(segsplat_bin::segsplat_bin())
+        let output = std::process::Command::new(crate::common::segsplat_bin::segsplat_bin())
             .args([subcommand, "--help"])
             .output()
             .unwrap();

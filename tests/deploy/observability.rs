@@ -3,15 +3,13 @@
 //! upload, a gRPC call and a job), the rule and scrape files parse, and the scrape path and the
 //! API's and workers' ports are the service's.
 
-mod common;
-
 use std::collections::BTreeSet;
 use std::path::Path;
 use std::sync::Arc;
 use std::time::Duration;
 
-use common::handlers::{STEPS_KIND, StepsHandler};
-use common::{TestService, test_config};
+use crate::common::handlers::{STEPS_KIND, StepsHandler};
+use crate::common::{TestService, test_config};
 use yaml_rust2::{Yaml, YamlLoader};
 
 fn deploy_file(relative: &str) -> String {
