@@ -10,7 +10,7 @@ use crate::settings::{assert_command_exists, load_environment};
 
 /// Compose's variable substitution with each variable's default (`${NAME:-default}`, `$$`),
 /// applied to values as compose does; returns the variables named.
-pub(crate) fn substitute(value: &str, variables: &mut BTreeSet<String>) -> String {
+fn substitute(value: &str, variables: &mut BTreeSet<String>) -> String {
     let mut out = String::new();
     let mut rest = value;
     while let Some(start) = rest.find('$') {
@@ -37,7 +37,7 @@ pub(crate) fn substitute(value: &str, variables: &mut BTreeSet<String>) -> Strin
     out
 }
 
-pub(crate) fn substitute_all(yaml: &Yaml, variables: &mut BTreeSet<String>) -> Yaml {
+fn substitute_all(yaml: &Yaml, variables: &mut BTreeSet<String>) -> Yaml {
     match yaml {
         Yaml::String(value) => Yaml::String(substitute(value, variables)),
         Yaml::Array(items) => Yaml::Array(
@@ -58,14 +58,14 @@ pub(crate) fn substitute_all(yaml: &Yaml, variables: &mut BTreeSet<String>) -> Y
 }
 
 /// compose.yaml with defaults substituted, and the variables it names.
-pub(crate) fn compose() -> (Yaml, BTreeSet<String>) {
+fn compose() -> (Yaml, BTreeSet<String>) {
     let raw = single_document(&deploy("compose.yaml"));
     let mut variables = BTreeSet::new();
     let compose = substitute_all(&raw, &mut variables);
     (compose, variables)
 }
 
-pub(crate) fn compose_environment(service: &Yaml, name: &str) -> Vec<(String, String)> {
+fn compose_environment(service: &Yaml, name: &str) -> Vec<(String, String)> {
     match &service["environment"] {
         Yaml::Hash(entries) => entries
             .iter()
@@ -89,7 +89,7 @@ pub(crate) fn compose_environment(service: &Yaml, name: &str) -> Vec<(String, St
     }
 }
 
-pub(crate) fn env_value(environment: &[(String, String)], name: &str) -> String {
+fn env_value(environment: &[(String, String)], name: &str) -> String {
     environment
         .iter()
         .find(|(key, _)| key == name)
@@ -98,7 +98,7 @@ pub(crate) fn env_value(environment: &[(String, String)], name: &str) -> String 
 }
 
 /// `host:port` of a URL such as `postgres://user:password@host:5432/db` or `http://host:9000`.
-pub(crate) fn url_host_port(url: &str) -> (String, u16) {
+fn url_host_port(url: &str) -> (String, u16) {
     let after_scheme = url.split_once("://").map_or(url, |(_, rest)| rest);
     let authority = after_scheme.split('/').next().unwrap_or_default();
     let host_port = authority.rsplit('@').next().unwrap_or_default();
@@ -109,7 +109,7 @@ pub(crate) fn url_host_port(url: &str) -> (String, u16) {
 }
 
 #[test]
-pub(crate) fn compose_runs_the_services_commands_with_valid_settings() {
+fn compose_runs_the_services_commands_with_valid_settings() {
     let (compose, _) = compose();
     let services = &compose["services"];
     let mut images = BTreeSet::new();
@@ -142,7 +142,7 @@ pub(crate) fn compose_runs_the_services_commands_with_valid_settings() {
 }
 
 #[test]
-pub(crate) fn compose_ports_healthchecks_and_gpu_match_the_settings() {
+fn compose_ports_healthchecks_and_gpu_match_the_settings() {
     let (compose, _) = compose();
     let services = &compose["services"];
     let api = load_environment(&compose_environment(&services["api"], "api"), "api");
@@ -202,7 +202,7 @@ pub(crate) fn compose_ports_healthchecks_and_gpu_match_the_settings() {
 }
 
 #[test]
-pub(crate) fn compose_services_start_in_order_and_reach_each_other() {
+fn compose_services_start_in_order_and_reach_each_other() {
     let (compose, _) = compose();
     let services = compose["services"].as_hash().unwrap();
     let names: BTreeSet<String> = services.keys().map(|key| text(key, "service")).collect();
@@ -281,7 +281,7 @@ pub(crate) fn compose_services_start_in_order_and_reach_each_other() {
 }
 
 #[test]
-pub(crate) fn compose_prometheus_and_grafana_are_wired_to_the_services() {
+fn compose_prometheus_and_grafana_are_wired_to_the_services() {
     let (compose, _) = compose();
     let services = &compose["services"];
     // Every folder or file compose mounts from this repository exists.
@@ -356,7 +356,7 @@ pub(crate) fn compose_prometheus_and_grafana_are_wired_to_the_services() {
 }
 
 #[test]
-pub(crate) fn compose_variables_are_in_the_example_env_file() {
+fn compose_variables_are_in_the_example_env_file() {
     let (_, variables) = compose();
     let example: BTreeSet<String> = env_file(&deploy(".env.example"))
         .into_iter()

@@ -20,7 +20,7 @@ pub(crate) fn kustomization(dir: &Path) -> Yaml {
 }
 
 /// The objects of the base's resource files, in order.
-pub(crate) fn base_objects() -> Vec<Yaml> {
+fn base_objects() -> Vec<Yaml> {
     let base = kubernetes("base");
     strings(&kustomization(&base)["resources"], "resources")
         .iter()
@@ -28,7 +28,7 @@ pub(crate) fn base_objects() -> Vec<Yaml> {
         .collect()
 }
 
-pub(crate) fn object<'a>(objects: &'a [Yaml], kind: &str, name: &str) -> &'a Yaml {
+fn object<'a>(objects: &'a [Yaml], kind: &str, name: &str) -> &'a Yaml {
     objects
         .iter()
         .find(|object| {
@@ -38,16 +38,13 @@ pub(crate) fn object<'a>(objects: &'a [Yaml], kind: &str, name: &str) -> &'a Yam
         .unwrap_or_else(|| panic!("no {kind} {name}"))
 }
 
-pub(crate) fn of_kind<'a>(
-    objects: &'a [Yaml],
-    kind: &'a str,
-) -> impl Iterator<Item = &'a Yaml> + 'a {
+fn of_kind<'a>(objects: &'a [Yaml], kind: &'a str) -> impl Iterator<Item = &'a Yaml> + 'a {
     objects
         .iter()
         .filter(move |object| object["kind"].as_str() == Some(kind))
 }
 
-pub(crate) fn labels(yaml: &Yaml) -> BTreeMap<String, String> {
+fn labels(yaml: &Yaml) -> BTreeMap<String, String> {
     yaml.as_hash()
         .map(|entries| {
             entries
@@ -58,7 +55,7 @@ pub(crate) fn labels(yaml: &Yaml) -> BTreeMap<String, String> {
         .unwrap_or_default()
 }
 
-pub(crate) fn selects(selector: &BTreeMap<String, String>, pod: &BTreeMap<String, String>) -> bool {
+fn selects(selector: &BTreeMap<String, String>, pod: &BTreeMap<String, String>) -> bool {
     !selector.is_empty()
         && selector
             .iter()
@@ -67,7 +64,7 @@ pub(crate) fn selects(selector: &BTreeMap<String, String>, pod: &BTreeMap<String
 
 /// Env files of the base's generators, by generated name (`configMapGenerator`,
 /// `secretGenerator`).
-pub(crate) fn generated(dir: &Path, field: &str) -> BTreeMap<String, Vec<(String, String)>> {
+fn generated(dir: &Path, field: &str) -> BTreeMap<String, Vec<(String, String)>> {
     let mut out = BTreeMap::new();
     if let Some(generators) = kustomization(dir)[field].as_vec() {
         for generator in generators {
@@ -92,13 +89,13 @@ pub(crate) fn generated(dir: &Path, field: &str) -> BTreeMap<String, Vec<(String
 }
 
 /// A workload's pod spec (Deployment or Job).
-pub(crate) fn pod_spec(workload: &Yaml) -> &Yaml {
+fn pod_spec(workload: &Yaml) -> &Yaml {
     &workload["spec"]["template"]["spec"]
 }
 
 /// The one container of a workload, with the environment its `envFrom` and `env` give it,
 /// `overlay` values (a `behavior: merge` generator) overriding the base's.
-pub(crate) fn container_environment(
+fn container_environment(
     container: &Yaml,
     overlay: &BTreeMap<String, Vec<(String, String)>>,
 ) -> Vec<(String, String)> {
@@ -137,7 +134,7 @@ pub(crate) fn only_container(workload: &Yaml) -> &Yaml {
     &containers[0]
 }
 
-pub(crate) fn container_ports(container: &Yaml) -> BTreeMap<String, u16> {
+fn container_ports(container: &Yaml) -> BTreeMap<String, u16> {
     list(&container["ports"], "ports")
         .iter()
         .map(|port| {
@@ -164,7 +161,7 @@ pub(crate) fn workload<'a>(objects: &'a [Yaml], subcommand: &str) -> &'a Yaml {
 }
 
 #[test]
-pub(crate) fn every_deploy_yaml_file_parses_and_names_its_objects() {
+fn every_deploy_yaml_file_parses_and_names_its_objects() {
     let mut files = yaml_files(&deploy("kubernetes"));
     assert!(files.len() >= 8, "{files:?}");
     files.extend(yaml_files(&deploy("grafana")));
@@ -192,7 +189,7 @@ pub(crate) fn every_deploy_yaml_file_parses_and_names_its_objects() {
 }
 
 #[test]
-pub(crate) fn kustomizations_name_files_that_exist_and_leave_none_out() {
+fn kustomizations_name_files_that_exist_and_leave_none_out() {
     let base_objects = base_objects();
     for file in yaml_files(&deploy("kubernetes")) {
         if file.file_name().and_then(|name| name.to_str()) != Some("kustomization.yaml") {
@@ -251,7 +248,7 @@ pub(crate) fn kustomizations_name_files_that_exist_and_leave_none_out() {
 }
 
 #[test]
-pub(crate) fn the_example_overlay_builds_on_the_base() {
+fn the_example_overlay_builds_on_the_base() {
     let overlay_dir = kubernetes("overlays/example");
     let overlay = kustomization(&overlay_dir);
     let resources = strings(&overlay["resources"], "resources");
@@ -298,7 +295,7 @@ pub(crate) fn the_example_overlay_builds_on_the_base() {
 }
 
 #[test]
-pub(crate) fn kubernetes_workloads_run_the_services_commands_with_valid_settings() {
+fn kubernetes_workloads_run_the_services_commands_with_valid_settings() {
     let objects = base_objects();
     let uid = image_uid();
     let secrets = generated(&kubernetes("base"), "secretGenerator");
@@ -360,7 +357,7 @@ pub(crate) fn kubernetes_workloads_run_the_services_commands_with_valid_settings
 }
 
 #[test]
-pub(crate) fn kubernetes_ports_probes_and_scraping_match_the_settings() {
+fn kubernetes_ports_probes_and_scraping_match_the_settings() {
     let objects = base_objects();
     for (subcommand, kind) in [("serve", "api"), ("worker", "worker")] {
         let workload = workload(&objects, subcommand);
@@ -469,7 +466,7 @@ pub(crate) fn kubernetes_ports_probes_and_scraping_match_the_settings() {
 }
 
 #[test]
-pub(crate) fn kubernetes_objects_refer_to_each_other() {
+fn kubernetes_objects_refer_to_each_other() {
     let objects = base_objects();
     let api = workload(&objects, "serve");
     let worker = workload(&objects, "worker");

@@ -9,7 +9,7 @@ use crate::files::{read, repo};
 
 /// Dotted paths of every configuration key, and of those that default to null (an unset
 /// `Option`, whose value may be a whole table).
-pub(crate) fn config_keys() -> (BTreeSet<String>, BTreeSet<String>) {
+fn config_keys() -> (BTreeSet<String>, BTreeSet<String>) {
     fn walk(
         value: &serde_json::Value,
         path: &str,
@@ -45,7 +45,7 @@ pub(crate) fn config_keys() -> (BTreeSet<String>, BTreeSet<String>) {
 
 /// `Config::load` ignores variables whose first segment is no top-level key (they belong to
 /// other tools), so a misspelt section would pass silently; this names the key exactly.
-pub(crate) fn assert_config_key(variable: &str, place: &str) {
+fn assert_config_key(variable: &str, place: &str) {
     let (keys, nulls) = config_keys();
     let path = variable
         .strip_prefix("SEGSPLAT_")
@@ -64,7 +64,7 @@ pub(crate) fn assert_config_key(variable: &str, place: &str) {
 }
 
 /// Variables other than `SEGSPLAT_*` that the segsplat processes read.
-pub(crate) const OTHER_VARIABLES: [&str; 6] = [
+const OTHER_VARIABLES: [&str; 6] = [
     "AWS_ACCESS_KEY_ID",
     "AWS_SECRET_ACCESS_KEY",
     "AWS_SESSION_TOKEN",
@@ -124,7 +124,7 @@ pub(crate) fn assert_command_exists(args: &[String], place: &str) {
 /// The probe paths are routes of both listeners: the API's REST router and a worker process's
 /// ops router (`crates/api/src/router.rs`).
 #[test]
-pub(crate) fn probe_paths_are_routes_of_the_api_and_the_worker() {
+fn probe_paths_are_routes_of_the_api_and_the_worker() {
     let source = read(&repo().join("crates/api/src/router.rs"));
     let (api, ops) = source
         .split_once("pub fn ops_router")

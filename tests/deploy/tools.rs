@@ -9,7 +9,7 @@ use yaml_rust2::YamlLoader;
 use crate::files::{list, text};
 use crate::kubernetes::{kubernetes, kustomization, only_container, workload};
 
-pub(crate) fn tool_works(program: &Path, args: &[&str]) -> bool {
+fn tool_works(program: &Path, args: &[&str]) -> bool {
     Command::new(program)
         .args(args)
         .output()
@@ -17,7 +17,7 @@ pub(crate) fn tool_works(program: &Path, args: &[&str]) -> bool {
 }
 
 /// Runs a tool that must succeed; its stdout.
-pub(crate) fn run_ok(command: &mut Command, what: &str) -> String {
+fn run_ok(command: &mut Command, what: &str) -> String {
     let output = command.output().unwrap();
     assert!(
         output.status.success(),
@@ -30,7 +30,7 @@ pub(crate) fn run_ok(command: &mut Command, what: &str) -> String {
 
 /// `kubernetes-validate` (PyPI; its schemas are in the package, no network), on PATH or where
 /// docs/deploy.md installs it.
-pub(crate) fn kubernetes_validate() -> Option<PathBuf> {
+fn kubernetes_validate() -> Option<PathBuf> {
     let on_path = PathBuf::from("kubernetes-validate");
     if tool_works(&on_path, &["--version"]) {
         return Some(on_path);
@@ -45,7 +45,7 @@ pub(crate) fn kubernetes_validate() -> Option<PathBuf> {
 }
 
 #[test]
-pub(crate) fn kustomize_renders_the_overlay_and_the_schemas_accept_it() {
+fn kustomize_renders_the_overlay_and_the_schemas_accept_it() {
     let kubectl = Path::new("kubectl");
     if !tool_works(kubectl, &["version", "--client"]) {
         eprintln!("skipped: no kubectl to render the kustomizations (the checks above still ran)");

@@ -7,8 +7,7 @@ use std::path::{Path, PathBuf};
 use segsplat_scene::{ArchiveError, InputErrorClass, UnpackLimits, UnpackStats, unpack_archive};
 use zip::write::SimpleFileOptions;
 
-#[path = "common/zip_bomb.rs"]
-mod zip_bomb;
+use crate::zip_bomb;
 
 fn limits() -> UnpackLimits {
     UnpackLimits {
