@@ -7,7 +7,7 @@ Usage (from the repository root, in a venv with open_clip_torch and ftfy):
     python scripts/make_tokenizer_table.py
 
 The Rust ClipTokenizer (src/models/clip/text_clean.rs + tokenizer.rs) must reproduce every case
-exactly (tests/models_clip.rs). ftfy's mojibake repair (fix_encoding) is heuristic and not
+exactly (tests/models/clip.rs). ftfy's mojibake repair (fix_encoding) is heuristic and not
 reproduced in Rust, so the script refuses texts whose result depends on it.
 """
 

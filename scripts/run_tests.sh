@@ -24,9 +24,10 @@ long=(
   train_synthetic                # 44
   segment_then_splat_synthetic   # 32
   segment_then_splat_association # 32
+  models                         # 24
   service_blob_outage            # 20, 31 s of wall time waiting on an outage
   gpu_loss                       # 16
-  segment_propagation            # 14
+  segment                        # 15
   store_backends                 # 4, 11 s of wall time
   cluster_processes              # 8, 10 s of wall time
   mask_render_shedding           # 11

@@ -1,5 +1,6 @@
-//! Shared set-up for the model tests (`tests/models_*.rs`): the ONNX Runtime, the tiny stand-in
-//! model directory (tests/fixtures/models/tiny) and copies of it to break.
+//! Shared set-up for the tests that run models (`tests/models/`, `tests/segment/` and, through
+//! `tests/common`, the service tests): the ONNX Runtime, the tiny stand-in model directory
+//! (tests/fixtures/models/tiny) and copies of it to break.
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};

@@ -1,7 +1,7 @@
 //! CLIP: tokenizer ids against open_clip's, preprocessing against open_clip's pixel values, and
 //! the stand-in encoders (colour embeddings) end to end through masked crops.
 
-mod models_support;
+use crate::models_support;
 
 use models_support::{clip_fixtures_dir, discs_image, tiny_models_dir};
 use segsplat_vision::models::clip::{

@@ -8,7 +8,7 @@
 //! single-mask channel, priors fed back, answers at full resolution) on a model that does follow
 //! objects, not SAM's quality.
 
-mod models_support;
+use crate::models_support;
 
 use models_support::{discs_image, mask_iou};
 use segsplat_vision::models::sam::{SamModel, SamPredictor};

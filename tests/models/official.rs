@@ -3,7 +3,7 @@
 //! `models init` turns each into a model directory that `check` accepts, and automatic masks
 //! run through it with 16 prompts per run, batched where the decoder's graph allows.
 
-mod models_support;
+use crate::models_support;
 
 use std::path::{Path, PathBuf};
 

@@ -1,7 +1,7 @@
 //! The SAM driver on the tiny stand-in encoder/decoder: point prompts at disc centres give masks
 //! covering the discs, through the `PointPromptSegmenter` seam and the lower-level prompt API.
 
-mod models_support;
+use crate::models_support;
 
 use models_support::{discs_image, mask_iou};
 use segsplat_scene::Level;

@@ -1,7 +1,7 @@
 //! ONNX Runtime loading: the library is found and loaded, its version read, and a missing or
 //! wrong library is a clear error rather than a panic.
 
-mod models_support;
+use crate::models_support;
 
 use std::path::Path;
 

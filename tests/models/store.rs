@@ -1,7 +1,7 @@
 //! The model store's load-time checks on the tiny stand-in directory and broken copies of it:
 //! every kind of problem gets its own precise error.
 
-mod models_support;
+use crate::models_support;
 
 use models_support::{copy_of_tiny_models, edit_manifest, model_of_role, tiny_models_dir};
 use segsplat_vision::models::{ModelError, ModelStore, Role};
