@@ -24,6 +24,7 @@ long=(
   train_synthetic                # 44
   segment_then_splat_synthetic   # 32
   segment_then_splat_association # 32
+  commands                       # 32, 22 s of wall time (the demo script)
   models                         # 24
   service_blob_outage            # 20, 31 s of wall time waiting on an outage
   gpu_loss                       # 16

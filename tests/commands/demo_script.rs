@@ -3,10 +3,9 @@
 //! colour codes or raw dicts, the server's log in a file, a summary table with each stage's time,
 //! and every output in the one folder it names (nothing in the repository).
 
-#[path = "common/segsplat_bin.rs"]
-mod segsplat_bin;
-
 use std::process::Command;
+
+use crate::segsplat_bin;
 
 fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")

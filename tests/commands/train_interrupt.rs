@@ -2,9 +2,6 @@
 //! final checkpoint, says where it is and how to resume, and exits 130; `--resume` then starts
 //! from that checkpoint's step.
 
-#[path = "common/segsplat_bin.rs"]
-mod segsplat_bin;
-
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
@@ -15,6 +12,8 @@ use segsplat_engine::checkpoint::Checkpoint;
 use segsplat_engine::train::TrainerMeta;
 use segsplat_scene::colmap::ColmapEncoding;
 use segsplat_scene::synthetic::{SyntheticSpec, write_colmap};
+
+use crate::segsplat_bin;
 
 /// Starts `segsplat train` with `extra` flags and returns it once its Ctrl-C handler is in
 /// place (it says so on stderr), with the rest of stderr arriving on the receiver.

@@ -3,13 +3,10 @@
 //! binary cargo built. The environment is read in a child process (this test binary run again
 //! on its ignored `reports_the_binary`), since changing this process's environment is unsafe.
 
-#[path = "common/segsplat_bin.rs"]
-mod segsplat_bin;
-
 use std::ffi::OsString;
 use std::process::Command;
 
-use segsplat_bin::{SEGSPLAT_BIN, resolve, segsplat_bin};
+use crate::segsplat_bin::{SEGSPLAT_BIN, resolve, segsplat_bin};
 
 const BUILT: &str = "/nowhere/target/release/segsplat";
 
@@ -46,7 +43,12 @@ fn reports_the_binary() {
 
 fn chosen_in_child(variable: Option<&std::path::Path>) -> std::process::Output {
     let mut child = Command::new(std::env::current_exe().unwrap());
-    child.args(["--exact", "reports_the_binary", "--ignored", "--nocapture"]);
+    child.args([
+        "--exact",
+        "bin_lookup::reports_the_binary",
+        "--ignored",
+        "--nocapture",
+    ]);
     match variable {
         Some(path) => child.env(SEGSPLAT_BIN, path),
         None => child.env_remove(SEGSPLAT_BIN),

@@ -2,8 +2,7 @@
 //! headless host without `XDG_RUNTIME_DIR`, `segsplat adapters` used to print libwayland's
 //! `XDG_RUNTIME_DIR is invalid or not set` twice (Mesa's device-select layer probing a display).
 
-#[path = "common/segsplat_bin.rs"]
-mod segsplat_bin;
+use crate::segsplat_bin;
 
 #[test]
 fn listing_adapters_headless_prints_no_display_noise() {
