@@ -88,9 +88,7 @@ bash scripts/run_tests.sh
 # tests. `--workspace` keeps the feature set of the run above, so nothing is rebuilt.
 phase "tests on PostgreSQL"
 if [ -n "${SEGSPLAT_TEST_POSTGRES_URL:-}" ]; then
-    SEGSPLAT_TEST_BACKEND=postgres cargo test --locked --workspace --test service_jobs --test service_core \
-        --test service_tenants --test service_workers --test service_upload \
-        --test service_object_store
+    SEGSPLAT_TEST_BACKEND=postgres cargo test --locked --workspace --test service --test service_workers
 fi
 # The GPU tests and short training runs again under the Khronos layer's synchronization
 # validation: a missing barrier gives right answers on the software adapter, which runs a

@@ -3,24 +3,22 @@
 //! queued, followed to their end through the event stream, and cancelled; failures come back as
 //! typed errors naming the field at fault, and another tenant's resources look missing.
 
-mod common;
-
 use std::io::Write;
 use std::sync::Arc;
 use std::time::Duration;
 
 use futures::StreamExt;
-use serde_json::json;
-use tokio_util::sync::CancellationToken;
-
-use common::archives::{colmap_zip, small_spec};
-use common::handlers::{STEPS_KIND, StepsHandler};
-use common::{TestService, test_config};
 use segsplat_scene::InputErrorClass;
 use segsplat_service::store::Caller;
 use segsplat_service::store::jobs::JobState;
 use segsplat_service::usecases::jobs::{self, JobFailure};
 use segsplat_service::usecases::scenes::{self, SceneFailure};
+use serde_json::json;
+use tokio_util::sync::CancellationToken;
+
+use crate::common::archives::{colmap_zip, small_spec};
+use crate::common::handlers::{STEPS_KIND, StepsHandler};
+use crate::common::{TestService, test_config};
 
 fn archive_file(bytes: &[u8]) -> tempfile::NamedTempFile {
     let mut file = tempfile::NamedTempFile::new().unwrap();

@@ -4,14 +4,10 @@
 //! The routes and methods are iterated from the documents, so a new one without a case here
 //! fails the test instead of going unchecked.
 
-mod common;
-
 use std::collections::BTreeSet;
 use std::sync::Arc;
 use std::time::Duration;
 
-use common::handlers::{STEPS_KIND, StepsHandler};
-use common::{TestService, archives, test_config};
 use prost::Message;
 use segsplat_api::proto;
 use segsplat_api::proto::scene_query_client::SceneQueryClient;
@@ -19,6 +15,9 @@ use segsplat_scene::Level;
 use segsplat_service::config::TenantToken;
 use segsplat_service::store::objects::ObjectRecord;
 use serde_json::{Value, json};
+
+use crate::common::handlers::{STEPS_KIND, StepsHandler};
+use crate::common::{TestService, archives, test_config};
 
 const ALPHA: &str = "alpha-token";
 const BETA: &str = "beta-token";

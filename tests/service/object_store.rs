@@ -4,18 +4,17 @@
 //! deleting a scene empties its prefixes; and with the bucket unreachable an upload is a 503 that
 //! leaves nothing behind.
 
-mod common;
-
 use std::sync::Arc;
 use std::time::Duration;
 
-use common::archives::{colmap_files, zip_of};
-use common::handlers::{STEPS_KIND, StepsHandler};
-use common::object_store::{s3_blobs, unreachable_s3_blobs};
-use common::{TestService, entries_in, files_under, test_config};
 use segsplat_scene::colmap::ColmapEncoding;
 use segsplat_scene::synthetic::SyntheticSpec;
 use serde_json::json;
+
+use crate::common::archives::{colmap_files, zip_of};
+use crate::common::handlers::{STEPS_KIND, StepsHandler};
+use crate::common::object_store::{s3_blobs, unreachable_s3_blobs};
+use crate::common::{TestService, entries_in, files_under, test_config};
 
 const WAIT: Duration = Duration::from_secs(30);
 
@@ -138,7 +137,7 @@ async fn an_unreachable_bucket_is_a_503_that_leaves_nothing() {
     );
     let (status, body) = client
         .upload(
-            common::archives::colmap_zip(common::archives::small_spec()),
+            crate::common::archives::colmap_zip(crate::common::archives::small_spec()),
             "application/zip",
         )
         .await;
