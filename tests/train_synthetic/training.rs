@@ -1,60 +1,18 @@
-//! Training on a synthetic scene with known ground truth: three shaded spheres seen by 32
-//! cameras on a ring (the scene module's synthetic COLMAP dataset). Held-out PSNR after a short
-//! training must clear a bar that a broken gradient cannot reach, and checkpoints must restore
-//! the trainer's state exactly.
+//! Short training runs on the synthetic scene: the held-out PSNR bar, a run past its schedule,
+//! the Gaussian budget, steady steps that allocate nothing, coarse-to-fine steps, the convergence
+//! stop, and the training views loaded the same on one thread and on several.
 
-mod gpu_support;
-
-use gpu_support::segsplat;
-use segsplat_engine::checkpoint::Checkpoint;
 use segsplat_engine::schedule::LearningRates;
 use segsplat_engine::train::convergence::ConvergenceStop;
 use segsplat_engine::train::trainer::{initial_model, plain_initial_model};
-use segsplat_engine::train::{TrainConfig, Trainer, TrainerMeta};
-use segsplat_gpu::GpuContext;
-use segsplat_scene::colmap::ColmapEncoding;
-use segsplat_scene::synthetic::{SYNTHETIC_BACKGROUND, SyntheticSpec, write_colmap};
-use segsplat_scene::{LoadOptions, Scene, load_scene};
+use segsplat_engine::train::{TrainConfig, Trainer};
 
-fn gpu() -> Option<GpuContext> {
-    match GpuContext::new_default() {
-        Ok(ctx) => Some(ctx),
-        Err(error) if std::env::var("SEGSPLAT_SKIP_GPU_TESTS").is_ok() => {
-            eprintln!("skipping: no GPU adapter ({error})");
-            None
-        }
-        Err(error) => panic!("no GPU adapter: {error}"),
-    }
-}
-
-fn synthetic_scene(dir: &std::path::Path) -> Scene {
-    let spec = SyntheticSpec {
-        frame_count: 32,
-        width: 64,
-        height: 48,
-        ..Default::default()
-    };
-    write_colmap(dir, &spec, ColmapEncoding::Text).unwrap();
-    load_scene(dir, &LoadOptions::default()).unwrap()
-}
-
-fn config(steps: u32) -> TrainConfig {
-    TrainConfig {
-        steps,
-        max_resolution: None,
-        background: SYNTHETIC_BACKGROUND.map(|c| c as f32 / 255.0),
-        sh_degree_interval: Some(100),
-        densify_from: Some(100),
-        densify_until: Some(400),
-        densify_interval: Some(100),
-        opacity_reset_interval: Some(0),
-        ..Default::default()
-    }
-}
+use crate::gpu_support::{self, new_gpu_context};
+use crate::support::{config, synthetic_scene};
 
 #[test]
 fn short_training_reaches_held_out_psnr() {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = new_gpu_context() else { return };
     let dir = tempfile::tempdir().unwrap();
     let scene = synthetic_scene(dir.path());
     // Start from the sparse points' positions only: every colour grey, so the colours, like the
@@ -102,7 +60,7 @@ fn short_training_reaches_held_out_psnr() {
 /// ramp and the position decay given alike).
 #[test]
 fn a_run_past_its_schedule_polishes_what_it_laid_out() {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = new_gpu_context() else { return };
     let dir = tempfile::tempdir().unwrap();
     let scene = synthetic_scene(dir.path());
     let moved_after_step_20 = |schedule_steps: Option<u32>| {
@@ -146,7 +104,7 @@ fn a_run_past_its_schedule_polishes_what_it_laid_out() {
 
 #[test]
 fn densification_stays_within_the_gaussian_budget() {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = new_gpu_context() else { return };
     let dir = tempfile::tempdir().unwrap();
     let scene = synthetic_scene(dir.path());
     let start = plain_initial_model(&scene, &config(300)).unwrap().len();
@@ -189,7 +147,7 @@ fn densification_stays_within_the_gaussian_budget() {
 /// cache (issue 38, item 4). Counted, not timed.
 #[test]
 fn steady_steps_create_no_buffers_and_no_bind_groups() {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = new_gpu_context() else { return };
     let dir = tempfile::tempdir().unwrap();
     let scene = synthetic_scene(dir.path());
     let steady = TrainConfig {
@@ -209,7 +167,7 @@ fn steady_steps_create_no_buffers_and_no_bind_groups() {
 /// one at full resolution throughout.
 #[test]
 fn coarse_steps_train_at_half_resolution_as_well_as_full() {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = new_gpu_context() else { return };
     let dir = tempfile::tempdir().unwrap();
     let scene = synthetic_scene(dir.path());
     let coarse = Trainer::new(&ctx, &scene, config(500), None).unwrap();
@@ -262,40 +220,13 @@ fn coarse_steps_train_at_half_resolution_as_well_as_full() {
     );
 }
 
-#[test]
-fn checkpoint_restores_state_exactly() {
-    let Some(ctx) = gpu() else { return };
-    let dir = tempfile::tempdir().unwrap();
-    let scene = synthetic_scene(dir.path());
-    let mut trainer = Trainer::new(&ctx, &scene, config(150), None).unwrap();
-    trainer.run(|progress| progress.step < 120).unwrap();
-    let step = trainer.step();
-    assert!((120..150).contains(&step), "stopped at {step}");
-    let saved = trainer.checkpoint().unwrap();
-    let path = dir.path().join("train.ckpt");
-    saved.save(&path).unwrap();
-    let loaded = Checkpoint::<TrainerMeta>::load(&path).unwrap();
-    let resumed = Trainer::resume(&ctx, &scene, &loaded).unwrap();
-    assert_eq!(resumed.step(), step);
-    let again = resumed.checkpoint().unwrap();
-    assert_eq!(again.sections, saved.sections, "state differs after resume");
-    assert_eq!(
-        serde_json::to_value(&again.meta).unwrap(),
-        serde_json::to_value(&saved.meta).unwrap()
-    );
-    // And it keeps training to the configured end.
-    let mut resumed = resumed;
-    let progress = resumed.run(|_| true).unwrap();
-    assert_eq!(progress.step, 150);
-}
-
 /// The convergence stop (`stop_when_converged`): checks start at the floor (here the end of
 /// densification), a fit that has not gained the rule's minimum over its window ends the run
 /// there (the report, `end_step` and a checkpoint say so, and a resumed trainer stays ended),
 /// and a rule that asks for no gain never ends a run whose fit keeps its best.
 #[test]
 fn the_convergence_stop_ends_a_run_when_the_fit_stops_gaining() {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = new_gpu_context() else { return };
     let dir = tempfile::tempdir().unwrap();
     let scene = synthetic_scene(dir.path());
     // 28 training views: a check every pass (28 steps), a window of two passes.
@@ -357,208 +288,13 @@ fn the_convergence_stop_ends_a_run_when_the_fit_stops_gaining() {
     );
 }
 
-/// A job's checkpoint, GPU copies of the state read back on the writer's thread while the trainer
-/// goes on, is the blocking checkpoint's bit for bit, and taking it reads nothing back and waits
-/// for nothing on the step loop's thread (issue 38, item 4).
-#[test]
-fn checkpoint_snapshot_is_the_blocking_checkpoint() {
-    let Some(ctx) = gpu() else { return };
-    let dir = tempfile::tempdir().unwrap();
-    let scene = synthetic_scene(dir.path());
-    let mut trainer = Trainer::new(&ctx, &scene, config(150), None).unwrap();
-    // Past the first densification, so the moments and statistics are not all zero.
-    trainer.run_until(110, |_| true).unwrap();
-    gpu_support::assert_snapshot_equals_checkpoint(&ctx, &mut trainer, 5);
-}
-
-/// `segsplat train` writes a trained scene and `segsplat bench --init-ply` times steps starting
-/// from its Gaussians (the trained-density benchmark of docs/benchmarks.md), and
-/// `--profile-kernels` breaks a step's GPU time down by kernel.
-#[test]
-fn bench_starts_from_a_trained_ply() {
-    if gpu().is_none() {
-        return;
-    }
-    let dir = tempfile::tempdir().expect("temp dir");
-    let scene = dir.path().join("scene");
-    let scene = scene.to_str().expect("utf-8 path");
-    let out = dir.path().join("trained");
-    let out = out.to_str().expect("utf-8 path");
-    let written = segsplat(&[
-        "synthetic-scene",
-        scene,
-        "--frames",
-        "6",
-        "--width",
-        "32",
-        "--height",
-        "24",
-    ]);
-    assert!(written.status.success(), "{written:?}");
-    let trained = segsplat(&["train", scene, "--steps", "5", "--out", out]);
-    assert!(trained.status.success(), "{trained:?}");
-    let ply = format!("{out}/scene.ply");
-    let count = segsplat_engine::ply::read_ply_file(std::path::Path::new(&ply))
-        .expect("trained ply")
-        .model
-        .len();
-    let output = segsplat(&[
-        "bench",
-        scene,
-        "--steps",
-        "2",
-        "--max-resolution",
-        "32",
-        "--no-densify",
-        "--init-ply",
-        &ply,
-        "--timing-repeats",
-        "1",
-        "--profile-kernels",
-        "2",
-        "--busy-steps",
-        "20",
-        "--json",
-    ]);
-    assert!(output.status.success(), "{output:?}");
-    let report: serde_json::Value =
-        serde_json::from_slice(&output.stdout).expect("bench prints one JSON object");
-    assert_eq!(report["gaussians_start"], count, "{report}");
-    // The kernel profile times every pass of the two profiled steps, by kernel.
-    let profile = &report["kernel_profile"];
-    assert_eq!(profile["steps"], 2, "{report}");
-    let kernels = profile["kernels"].as_array().expect("kernels by time");
-    let timed = |name: &str| {
-        kernels
-            .iter()
-            .find(|k| k["kernel"].as_str().is_some_and(|k| k.starts_with(name)))
-            .and_then(|k| k["ms"].as_f64())
-    };
-    for kernel in [
-        "project_forward",
-        "rasterize_forward",
-        "rasterize_backward",
-        "adam_step",
-    ] {
-        assert!(
-            timed(kernel).is_some_and(|ms| ms >= 0.0),
-            "{kernel}: {report}"
-        );
-    }
-    let total: f64 = kernels.iter().filter_map(|k| k["ms"].as_f64()).sum();
-    let reported = profile["gpu_ms_per_step"].as_f64().expect("gpu ms");
-    assert!(
-        (total - reported).abs() < 1e-6 * reported.max(1.0),
-        "{report}"
-    );
-    // Before the kernels, a job's sample of steps ran with only their shared passes timed: the
-    // GPU's timeline over them, whose filled share is the busy fraction.
-    let timeline = &profile["timeline"];
-    assert_eq!(timeline["timeline_steps"], 20, "{report}");
-    assert_eq!(timeline["kernel_steps"], 2, "{report}");
-    let field = |name: &str| timeline[name].as_f64().expect(name);
-    // Shared passes: a few a step, far fewer than the dispatches.
-    assert!((1.0..20.0).contains(&field("passes_per_step")), "{report}");
-    assert!(field("pass_ms_per_step") > 0.0, "{report}");
-    let busy = field("gpu_busy_fraction");
-    assert!(busy > 0.0 && busy <= 1.0, "{report}");
-    assert_eq!(
-        profile["gpu_busy_fraction"].as_f64(),
-        Some(busy),
-        "{report}"
-    );
-    assert!(
-        field("idle_ms_per_step") >= 0.0 && field("longest_gap_ms") >= 0.0,
-        "{report}"
-    );
-    let missing = segsplat(&[
-        "bench",
-        scene,
-        "--steps",
-        "1",
-        "--init-ply",
-        "/nonexistent.ply",
-    ]);
-    assert!(!missing.status.success());
-    assert!(
-        String::from_utf8_lossy(&missing.stderr).contains("/nonexistent.ply"),
-        "{missing:?}"
-    );
-}
-
-/// `bench --object-loss` times the object-loss run and a plain run on the same Gaussians in
-/// turns (so a change in the machine's speed falls on both) and reports their step-time ratio,
-/// with the partial-mask filter timed apart.
-#[test]
-fn bench_times_the_object_loss_against_plain_steps_in_one_invocation() {
-    if gpu().is_none() {
-        return;
-    }
-    let dir = tempfile::tempdir().expect("temp dir");
-    let scene = dir.path().join("scene");
-    let scene = scene.to_str().expect("utf-8 path");
-    let written = segsplat(&[
-        "synthetic-scene",
-        scene,
-        "--frames",
-        "8",
-        "--width",
-        "40",
-        "--height",
-        "30",
-    ]);
-    assert!(written.status.success(), "{written:?}");
-    // 60 steps: two whole turns of 25 and a short one on each side.
-    let output = segsplat(&[
-        "bench",
-        scene,
-        "--steps",
-        "60",
-        "--max-resolution",
-        "40",
-        "--no-densify",
-        "--object-loss",
-        "--objects-per-level",
-        "1",
-        "--timing-repeats",
-        "1",
-        "--json",
-    ]);
-    assert!(output.status.success(), "{output:?}");
-    let report: serde_json::Value =
-        serde_json::from_slice(&output.stdout).expect("bench prints one JSON object");
-    assert_eq!(report["steps"], 60, "{report}");
-    assert_eq!(report["object_loss"]["masks"], "user", "{report}");
-    let plain = &report["plain_baseline"];
-    assert_eq!(
-        plain["gaussians_start"], report["gaussians_start"],
-        "{report}"
-    );
-    let number = |value: &serde_json::Value| value.as_f64().unwrap_or(f64::NAN);
-    assert!(number(&plain["steps_per_sec"]) > 0.0, "{report}");
-    assert!(number(&report["steps_per_sec"]) > 0.0, "{report}");
-    let ratio = number(&plain["step_time_ratio"]);
-    let with_filter = number(&plain["step_time_ratio_with_filter"]);
-    assert!(ratio > 0.0 && ratio <= with_filter, "{report}");
-    assert!(number(&plain["partial_filter_seconds"]) > 0.0, "{report}");
-    assert!(
-        plain["partial_filter"]["iou_quartiles"].is_array(),
-        "{report}"
-    );
-    // The object slots add their renders' and their batched loss's dispatches to a step.
-    assert!(
-        number(&report["dispatches_per_step"]) > number(&plain["dispatches_per_step"]),
-        "{report}"
-    );
-}
-
 /// Views decode on every core, a batch at a time, and upload in capture order: loading them on
 /// one thread and on three gives the same views in the same order, bit for bit, coarse images
 /// included (the pool's size only changes which thread decodes which frame).
 #[test]
 fn views_load_the_same_on_one_thread_and_on_several() {
     use segsplat_engine::train::views::Views;
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = new_gpu_context() else { return };
     let dir = tempfile::tempdir().unwrap();
     let scene = synthetic_scene(dir.path());
     let load = |threads: usize| {
