@@ -14,9 +14,10 @@ use segsplat_scene::synthetic_dynamic::{
     is_dynamic_test_frame, write_dynamic_blender,
 };
 
+use crate::common::models_support::mask_iou;
 use crate::common::{TestService, archives};
 use crate::support::{
-    FRAMES, centroid_of, distance, get_ok, iou, labelled_centroid, ply_header, png_bools, png_mask,
+    FRAMES, centroid_of, distance, get_ok, labelled_centroid, ply_header, png_bools, png_mask,
     pose_view_of, spec, upload_dynamic,
 };
 
@@ -127,7 +128,7 @@ async fn a_moving_scene_is_segmented_and_queried_in_time() {
             let object_id = object as u32 + 1;
             let true_pixels: Vec<bool> = truth.iter().map(|&id| id == object_id).collect();
             if true_pixels.iter().any(|&inside| inside) {
-                ious.push(iou(&rendered.to_bools(), &true_pixels));
+                ious.push(mask_iou(&rendered.to_bools(), &true_pixels));
             }
         }
         println!("frame {frame} (t = {t:.2}): IoU {ious:.2?}");
@@ -323,7 +324,7 @@ async fn a_moving_scene_is_segmented_and_queried_in_time() {
     );
     let at_start = mask_at(1, pose_view(0.0)).await;
     assert!(
-        iou(&at_start, &at_frame_time) < 0.9,
+        mask_iou(&at_start, &at_frame_time) < 0.9,
         "the object should have moved between t = 0 and t = {t}"
     );
 

@@ -31,16 +31,6 @@ pub(crate) fn png_mask(data: &str) -> BitMask {
     BitMask::from_bools(image.width(), image.height(), &values).expect("mask")
 }
 
-pub(crate) fn iou(a: &[bool], b: &[bool]) -> f64 {
-    let intersection = a.iter().zip(b).filter(|(x, y)| **x && **y).count();
-    let union = a.iter().zip(b).filter(|(x, y)| **x || **y).count();
-    if union == 0 {
-        1.0
-    } else {
-        intersection as f64 / union as f64
-    }
-}
-
 pub(crate) fn distance(a: [f32; 3], b: glam::Vec3) -> f32 {
     (glam::Vec3::from_array(a) - b).length()
 }
