@@ -87,6 +87,22 @@ pub(crate) fn cpu_loss(
     (loss, grad)
 }
 
+/// The reference loss's derivative in one pixel's channel by a central difference of `step`.
+pub(crate) fn central_difference(
+    rendered: &[Rgb],
+    target: &[Rgb],
+    (width, height): (usize, usize),
+    (pixel, channel): (usize, usize),
+    step: f64,
+) -> f64 {
+    let mut plus = rendered.to_vec();
+    let mut minus = rendered.to_vec();
+    plus[pixel][channel] += step;
+    minus[pixel][channel] -= step;
+    (cpu_loss(&plus, target, width, height).0 - cpu_loss(&minus, target, width, height).0)
+        / (2.0 * step)
+}
+
 /// A smooth random target and a rendering near it (so SSIM is far from 0 and L1 has no kinks).
 pub(crate) fn test_images(rng: &mut impl Rng, width: usize, height: usize) -> (Vec<Rgb>, Vec<Rgb>) {
     let phase: [f64; 3] = [rng.random(), rng.random(), rng.random()];
@@ -120,15 +136,9 @@ fn cpu_reference_gradient_matches_finite_differences() {
     let (_, grad) = cpu_loss(&rendered, &target, width, height);
     let step = 1e-6;
     for pixel in [0, 5, width + 3, width * 4 + 6, width * height - 1] {
-        for channel in 0..3 {
-            let mut plus = rendered.clone();
-            let mut minus = rendered.clone();
-            plus[pixel][channel] += step;
-            minus[pixel][channel] -= step;
-            let numeric = (cpu_loss(&plus, &target, width, height).0
-                - cpu_loss(&minus, &target, width, height).0)
-                / (2.0 * step);
-            let analytic = grad[pixel][channel];
+        for (channel, &analytic) in grad[pixel].iter().enumerate() {
+            let numeric =
+                central_difference(&rendered, &target, (width, height), (pixel, channel), step);
             assert!(
                 (numeric - analytic).abs() <= 1e-6 * analytic.abs().max(1e-4),
                 "pixel {pixel} channel {channel}: numeric {numeric:e} analytic {analytic:e}"

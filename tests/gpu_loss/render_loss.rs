@@ -4,7 +4,7 @@ use segsplat_engine::loss::{LossImages, LossOutputs, ObjectMask, RenderLoss};
 use segsplat_gpu::GpuContext;
 
 use crate::gpu_support::{gpu_context, new_encoder, seeded_rng, storage_buffer, submit};
-use crate::reference::{Rgb, cpu_loss, test_images, to_vec4};
+use crate::reference::{Rgb, central_difference, cpu_loss, test_images, to_vec4};
 
 /// What the GPU computed for one call.
 pub(crate) struct GpuLoss {
@@ -183,13 +183,8 @@ fn gpu_loss_gradient_matches_finite_differences_of_the_reference() {
     let step = 1e-6;
     for pixel in [0, 7, width * 5 + 8, width * height - 1] {
         for channel in 0..3 {
-            let mut plus = rendered.clone();
-            let mut minus = rendered.clone();
-            plus[pixel][channel] += step;
-            minus[pixel][channel] -= step;
-            let numeric = (cpu_loss(&plus, &target, width, height).0
-                - cpu_loss(&minus, &target, width, height).0)
-                / (2.0 * step);
+            let numeric =
+                central_difference(&rendered, &target, (width, height), (pixel, channel), step);
             let analytic = f64::from(gpu.grad[pixel][channel]);
             assert!(
                 (numeric - analytic).abs() <= 1e-3 * f64::from(scale),

@@ -12,13 +12,15 @@ use segsplat_scene::{
     validate_scene,
 };
 
-use crate::support::assert_pose_close;
+use crate::support::{assert_pose_close, project};
 
 pub(crate) fn spec() -> SyntheticSpec {
     SyntheticSpec::default()
 }
 
-fn colmap_scene(encoding: ColmapEncoding) -> (tempfile::TempDir, Scene) {
+/// The default synthetic scene written as COLMAP and loaded back (the folder lives as long as
+/// the returned `TempDir`).
+pub(crate) fn colmap_scene(encoding: ColmapEncoding) -> (tempfile::TempDir, Scene) {
     let dir = tempfile::tempdir().unwrap();
     synthetic::write_colmap(dir.path(), &spec(), encoding).unwrap();
     let scene = load_scene(dir.path(), &LoadOptions::default()).unwrap();
@@ -61,16 +63,9 @@ fn colmap_scene_matches_what_was_written() {
     for (position, track) in points.positions.iter().zip(&points.tracks) {
         for observation in track {
             let frame = &scene.frames[observation.frame_index as usize];
-            let camera_point = frame
-                .world_from_camera
-                .inverse()
-                .transform_point3(*position);
-            let u = frame.intrinsics.fx as f32 * camera_point.x / camera_point.z
-                + frame.intrinsics.cx as f32;
-            let v = frame.intrinsics.fy as f32 * camera_point.y / camera_point.z
-                + frame.intrinsics.cy as f32;
-            assert!((u - observation.pixel[0]).abs() < 1e-2);
-            assert!((v - observation.pixel[1]).abs() < 1e-2);
+            let [u, v] = project(frame, *position);
+            assert!((u - f64::from(observation.pixel[0])).abs() < 1e-2);
+            assert!((v - f64::from(observation.pixel[1])).abs() < 1e-2);
             observations += 1;
         }
     }

@@ -12,6 +12,8 @@ use segsplat_scene::{
     load_scene, scale_for_max_side, validate_scene,
 };
 
+use crate::formats::colmap_scene;
+
 fn scene_with_masks(levels: Vec<Level>) -> (tempfile::TempDir, Scene) {
     let dir = tempfile::tempdir().unwrap();
     let spec = SyntheticSpec {
@@ -144,14 +146,7 @@ fn undecodable_masks_are_rejected() {
 
 #[test]
 fn frame_rgb_keeps_srgb_values_as_unit_floats() {
-    let dir = tempfile::tempdir().unwrap();
-    synthetic::write_colmap(
-        dir.path(),
-        &SyntheticSpec::default(),
-        ColmapEncoding::Binary,
-    )
-    .unwrap();
-    let scene = load_scene(dir.path(), &LoadOptions::default()).unwrap();
+    let (_dir, scene) = colmap_scene(ColmapEncoding::Binary);
     let image = load_frame_rgb(&scene, 0, None).unwrap();
     assert_eq!(image.dimensions(), (32, 24));
     let corner = image.get_pixel(0, 0).0;
@@ -266,14 +261,7 @@ fn jpeg_frames_decode_at_a_reduced_scale_like_the_full_decode() {
 
 #[test]
 fn scaled_intrinsics_use_the_rounded_image_size() {
-    let dir = tempfile::tempdir().unwrap();
-    synthetic::write_colmap(
-        dir.path(),
-        &SyntheticSpec::default(),
-        ColmapEncoding::Binary,
-    )
-    .unwrap();
-    let scene = load_scene(dir.path(), &LoadOptions::default()).unwrap();
+    let (_dir, scene) = colmap_scene(ColmapEncoding::Binary);
     let factor = scale_for_max_side(32, 24, 10);
     let image = load_frame_rgb(&scene, 0, Some(10)).unwrap();
     let intrinsics = scene.frames[0].intrinsics.scaled(factor);

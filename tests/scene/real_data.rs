@@ -5,6 +5,8 @@ use std::path::PathBuf;
 
 use segsplat_scene::{LoadOptions, SceneFormat, load_frame_rgb, load_scene, validate_scene};
 
+use crate::support::project;
+
 fn figurine_dir() -> Option<PathBuf> {
     let dir = std::env::var_os("SEGSPLAT_FIGURINE_DIR")
         .map(PathBuf::from)
@@ -62,22 +64,13 @@ fn figurine_loads_and_validates() {
     for (position, track) in points.positions.iter().zip(&points.tracks) {
         for observation in track {
             let frame = &scene.frames[observation.frame_index as usize];
-            let camera_point = frame
-                .world_from_camera
-                .inverse()
-                .transform_point3(*position);
-            assert!(
-                camera_point.z > 0.0,
-                "point behind a camera that observes it"
-            );
-            let u = frame.intrinsics.fx as f32 * camera_point.x / camera_point.z
-                + frame.intrinsics.cx as f32;
-            let v = frame.intrinsics.fy as f32 * camera_point.y / camera_point.z
-                + frame.intrinsics.cy as f32;
-            errors_px.push((u - observation.pixel[0]).hypot(v - observation.pixel[1]));
+            // `project` also fails on a point behind a camera that observes it.
+            let [u, v] = project(frame, *position);
+            let pixel = observation.pixel.map(f64::from);
+            errors_px.push((u - pixel[0]).hypot(v - pixel[1]));
         }
     }
-    errors_px.sort_by(f32::total_cmp);
+    errors_px.sort_by(f64::total_cmp);
     let median_error_px = errors_px[errors_px.len() / 2];
     println!("figurine: median reprojection error {median_error_px:.3} px");
     assert!(
