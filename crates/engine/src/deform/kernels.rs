@@ -123,18 +123,34 @@ impl RowSplit {
     }
 }
 
-/// Block of the broadcast kernel for products of many rows (the Gaussians).
-const BROADCAST_WIDE: BroadcastBlock = BroadcastBlock {
-    lane_rows: 8,
-    col_groups: 4,
-};
-/// Block of the broadcast kernel for products of at most `BROADCAST_NARROW.workgroup_rows()`
-/// rows (weight gradients, whose rows are a layer's outputs): half the wide block's rows, so a
-/// 256-row product fills its workgroups.
-const BROADCAST_NARROW: BroadcastBlock = BroadcastBlock {
-    lane_rows: 4,
-    col_groups: 4,
-};
+/// Blocks of the broadcast kernel, shortest workgroup first: a product takes the first whose
+/// workgroup covers its rows, else the last. Products of many rows (the Gaussians) take the last,
+/// 8 rows an invocation. Weight gradients, whose rows are a layer's outputs (64 in the field a
+/// software adapter trains, 256 in the released one, and a head of up to 10), take 4 rows an
+/// invocation and only as many subgroups as their rows need: rows past the end are computed and
+/// not stored, so the 256-row workgroup alone computed a 64-row product four times over.
+const BROADCAST_BLOCKS: [BroadcastBlock; 4] = [
+    BroadcastBlock {
+        lane_rows: 4,
+        col_groups: 4,
+        subgroups: 2,
+    },
+    BroadcastBlock {
+        lane_rows: 4,
+        col_groups: 4,
+        subgroups: 4,
+    },
+    BroadcastBlock {
+        lane_rows: 4,
+        col_groups: 4,
+        subgroups: 8,
+    },
+    BroadcastBlock {
+        lane_rows: 8,
+        col_groups: 4,
+        subgroups: 8,
+    },
+];
 
 /// Which GEMM kernel the field runs: all compute the same products.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -199,7 +215,8 @@ impl GemmKernel {
 enum GemmPipelines {
     Tiled(Kernel),
     Rows(Kernel),
-    Broadcast { wide: Kernel, narrow: Kernel },
+    /// One pipeline per block of `BROADCAST_BLOCKS`, in its order.
+    Broadcast(Vec<Kernel>),
 }
 
 impl GemmPipelines {
@@ -209,12 +226,12 @@ impl GemmPipelines {
         match self {
             Self::Tiled(kernel) => (kernel, GEMM_TILE, GEMM_TILE),
             Self::Rows(kernel) => (kernel, GEMM_ROWS_COLS, GEMM_ROWS_ROWS),
-            Self::Broadcast { wide, narrow } => {
-                let (kernel, block) = if rows <= BROADCAST_NARROW.workgroup_rows() {
-                    (narrow, BROADCAST_NARROW)
-                } else {
-                    (wide, BROADCAST_WIDE)
-                };
+            Self::Broadcast(kernels) => {
+                let index = BROADCAST_BLOCKS
+                    .iter()
+                    .position(|block| rows <= block.workgroup_rows())
+                    .unwrap_or(BROADCAST_BLOCKS.len() - 1);
+                let (kernel, block) = (&kernels[index], BROADCAST_BLOCKS[index]);
                 (kernel, block.workgroup_cols(), block.workgroup_rows())
             }
         }
@@ -258,18 +275,18 @@ impl DeformKernels {
                 &[GEMM_COMMON, GEMM_ROWS],
                 "gemm_rows",
             )?),
-            GemmKernel::Broadcast => GemmPipelines::Broadcast {
-                wide: build(
-                    "mlp_gemm_broadcast",
-                    &[GEMM_COMMON, &BROADCAST_WIDE.source()],
-                    "gemm_broadcast",
-                )?,
-                narrow: build(
-                    "mlp_gemm_broadcast",
-                    &[GEMM_COMMON, &BROADCAST_NARROW.source()],
-                    "gemm_broadcast",
-                )?,
-            },
+            GemmKernel::Broadcast => GemmPipelines::Broadcast(
+                BROADCAST_BLOCKS
+                    .iter()
+                    .map(|block| {
+                        build(
+                            "mlp_gemm_broadcast",
+                            &[GEMM_COMMON, &block.source()],
+                            "gemm_broadcast",
+                        )
+                    })
+                    .collect::<Result<_, _>>()?,
+            ),
         };
         Ok(Self {
             gemm,
