@@ -92,6 +92,16 @@ pub struct BenchArgs {
     /// Width of the deformation field's hidden layers (default: as `--field-depth`).
     #[arg(long, requires = "deformation")]
     pub field_width: Option<u32>,
+    /// Rows (Gaussians) of the GEMM measurement `--deformation` reports as `matmul` (the rate the
+    /// field's is compared with). Fewer make it quicker where only the run matters, such as the
+    /// synchronization validation's runs.
+    #[arg(
+        long,
+        requires = "deformation",
+        default_value_t = 16_384,
+        value_parser = clap::value_parser!(u32).range(1..)
+    )]
+    pub matmul_rows: u32,
     /// After training and evaluation, time every kernel over this many more training steps
     /// with GPU timestamps (`kernel_profile` in the report: ms per step by kernel), after
     /// `--busy-steps` steps with only their passes timed (`kernel_profile.timeline`: how full
@@ -435,7 +445,13 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
             let field_gflops =
                 field_gflop_per_step / ((field_forward_ms + field_backward_ms) / 1e3);
             let kernel = GemmKernel::for_adapter(&ctx);
-            let matmul = measure_matmul(&ctx, kernel, 16_384, field.width, args.timing_repeats)?;
+            let matmul = measure_matmul(
+                &ctx,
+                kernel,
+                args.matmul_rows,
+                field.width,
+                args.timing_repeats,
+            )?;
             Some(DeformationReport {
                 field,
                 parameters,
