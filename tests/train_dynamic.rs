@@ -122,7 +122,7 @@ fn steady_dynamic_steps_create_no_buffers_and_no_bind_groups() {
         return;
     };
     let ctx = &ctx;
-    // The field warms up in 10 steps and the coarse steps end at 20 (the defaults, 200 and 300
+    // The field warms up in 10 steps and the coarse steps end at 20 (the defaults, 200 and 250
     // here, only make the test longer: what is counted is a steady step, whenever it comes).
     let mut deformation = deformation();
     deformation.warm_up_steps = Some(10);
