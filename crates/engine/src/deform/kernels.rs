@@ -20,9 +20,14 @@ const APPLY_BACKWARD: &str = include_str!("shaders/deform_apply_backward.wgsl");
 const GEMM_TILE: u32 = 64;
 /// Depth tile of `mlp_gemm.wgsl`: split ranges are multiples of it.
 const GEMM_DEPTH_TILE: u32 = 16;
-/// Rows and columns of a `mlp_gemm_rows.wgsl` workgroup (64 invocations of 4 x 8 outputs).
-const GEMM_ROWS_ROWS: u32 = 256;
+/// Rows and columns of one `mlp_gemm_rows.wgsl` invocation's outputs.
+const GEMM_ROWS_PER_LANE: u32 = 4;
 const GEMM_ROWS_COLS: u32 = 8;
+/// Invocations of a `mlp_gemm_rows.wgsl` workgroup (its `LANES`), one pipeline each, shortest
+/// first: a product takes the first whose workgroup covers its rows (64, 128, 256), else the
+/// last. As with the broadcast blocks below, a 64-row weight gradient computed in 256-row
+/// workgroups did its work four times over.
+const ROWS_LANES: [u32; 3] = [16, 32, 64];
 pub const FLAG_BIAS: u32 = 1;
 pub const FLAG_RELU: u32 = 2;
 pub const FLAG_MASK: u32 = 4;
@@ -214,7 +219,8 @@ impl GemmKernel {
 #[derive(Debug)]
 enum GemmPipelines {
     Tiled(Kernel),
-    Rows(Kernel),
+    /// One pipeline per entry of `ROWS_LANES`, in its order.
+    Rows(Vec<Kernel>),
     /// One pipeline per block of `BROADCAST_BLOCKS`, in its order.
     Broadcast(Vec<Kernel>),
 }
@@ -225,7 +231,14 @@ impl GemmPipelines {
     fn for_rows(&self, rows: u32) -> (&Kernel, u32, u32) {
         match self {
             Self::Tiled(kernel) => (kernel, GEMM_TILE, GEMM_TILE),
-            Self::Rows(kernel) => (kernel, GEMM_ROWS_COLS, GEMM_ROWS_ROWS),
+            Self::Rows(kernels) => {
+                let index = ROWS_LANES
+                    .iter()
+                    .position(|lanes| rows <= lanes * GEMM_ROWS_PER_LANE)
+                    .unwrap_or(ROWS_LANES.len() - 1);
+                let workgroup_rows = ROWS_LANES[index] * GEMM_ROWS_PER_LANE;
+                (&kernels[index], GEMM_ROWS_COLS, workgroup_rows)
+            }
             Self::Broadcast(kernels) => {
                 let index = BROADCAST_BLOCKS
                     .iter()
@@ -270,11 +283,20 @@ impl DeformKernels {
             GemmKernel::Tiled => {
                 GemmPipelines::Tiled(build("mlp_gemm", &[GEMM_COMMON, GEMM], "gemm")?)
             }
-            GemmKernel::Rows => GemmPipelines::Rows(build(
-                "mlp_gemm_rows",
-                &[GEMM_COMMON, GEMM_ROWS],
-                "gemm_rows",
-            )?),
+            GemmKernel::Rows => GemmPipelines::Rows(
+                ROWS_LANES
+                    .iter()
+                    .map(|&lanes| {
+                        Kernel::new(
+                            ctx,
+                            "mlp_gemm_rows",
+                            &[GEMM_COMMON, GEMM_ROWS],
+                            "gemm_rows",
+                            &[("LANES", f64::from(lanes))],
+                        )
+                    })
+                    .collect::<Result<_, _>>()?,
+            ),
             GemmKernel::Broadcast => GemmPipelines::Broadcast(
                 BROADCAST_BLOCKS
                     .iter()

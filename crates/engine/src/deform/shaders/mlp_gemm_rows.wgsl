@@ -7,7 +7,10 @@
 // read: 32 per 12 here. The tiled kernel's barrier every 16 depth steps costs more on a CPU than
 // its reuse saves (8 x 256 field, 1443 Gaussians, lavapipe: forward 486 ms tiled, 140 ms here).
 
-const LANES: u32 = 64u;
+// Invocations per workgroup, set by the host per product (kernels.rs, `ROWS_LANES`): rows past
+// a product's end are computed and not stored, so a weight gradient's few rows (a layer's
+// outputs) take a workgroup only as tall as they need.
+override LANES: u32 = 64u;
 const ROWS_PER_LANE: u32 = 4u;
 const COLS_PER_LANE: u32 = 8u;
 
@@ -22,7 +25,7 @@ fn store_row(row: u32, col0: u32, low: vec4<f32>, high: vec4<f32>, split: u32) {
     store_output(row, col0 + 7u, high.w, split);
 }
 
-@compute @workgroup_size(64, 1, 1)
+@compute @workgroup_size(LANES, 1, 1)
 fn gemm_rows(
     @builtin(workgroup_id) group: vec3<u32>,
     @builtin(local_invocation_id) local: vec3<u32>,
