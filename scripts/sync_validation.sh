@@ -99,7 +99,7 @@ fi
 # from 1100 random Gaussians, not the scene's 5000, and measure the GEMM rate over 1100 rows, not
 # the report's 16,384: the same dispatches (1100 rows split the weight gradients in two, as more
 # would), and the tiled kernel, 0.2-0.4 GFLOP/s on lavapipe, took 65-70 s of the phase's 111 s
-# with 5000 (9.5 s now).
+# with 5000 (16-17 s now).
 for gemm in tiled rows broadcast; do
   lane_job "bench-deformation-$gemm" env SEGSPLAT_GEMM_KERNEL=$gemm "$bin" bench "$dynamic_scene" \
     --steps 4 --timing-repeats 1 --deformation --field-depth 4 --field-width 80 \

@@ -364,9 +364,9 @@ fn gpu_gradient_matches_central_differences_of_the_gpu_forward() {
 /// `measure_matmul` (behind `segsplat bench-matmul` and `bench --deformation`'s `matmul`) times
 /// products that are right: each of the three, for every kernel the adapter runs, matches an
 /// f64 product on sampled outputs, on shapes that are no multiple of any block. Three widths: the
-/// weight gradients' rows are the width, and the broadcast kernel stacks as many subgroups in a
-/// workgroup as those rows need, 2, 4 or 8 (60, 72 and 200 take one each; the widest over fewer
-/// Gaussians, as the tiled kernel takes seconds for it on a software adapter).
+/// weight gradients' rows are the width, and the broadcast and row kernels size their
+/// workgroups to those rows, short, middle or tall (60, 72 and 200 take one each; the widest
+/// over fewer Gaussians, as the tiled kernel takes seconds for it on a software adapter).
 #[test]
 fn matmul_benchmark_measures_correct_products() {
     let Some(ctx) = small_ring_gpu_context() else {

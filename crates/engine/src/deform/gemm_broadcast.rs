@@ -25,8 +25,9 @@ pub const SUBGROUP_LANES: u32 = 8;
 /// Why the subgroup count varies: a workgroup's rows past the product's end are computed in full
 /// and not stored (the loop has no per-lane branch), so a workgroup taller than the product
 /// wastes its extra subgroups' work. A weight gradient's rows are a layer's outputs, 64 for the
-/// field a software adapter trains: eight subgroups of 32 rows left three quarters of every
-/// weight-gradient workgroup idle-but-busy (docs/engine.md, "The deformation field's GEMMs").
+/// field a software adapter trains: eight subgroups of 32 rows spent three quarters of every
+/// weight-gradient workgroup on rows nobody stores (docs/engine.md, "The deformation field's
+/// GEMMs").
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BroadcastBlock {
     pub lane_rows: u32,
