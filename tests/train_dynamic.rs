@@ -231,20 +231,20 @@ fn bench_reports_the_deformation_field_cost() {
         return;
     }
     let dir = tempfile::tempdir().expect("temp dir");
-    let scene_dir = dir.path().join("dynamic");
-    let scene = scene_dir.to_str().expect("utf-8 path");
-    let written = segsplat(&[
-        "synthetic-scene",
-        scene,
-        "--dynamic",
-        "--frames",
-        "8",
-        "--width",
-        "32",
-        "--height",
-        "24",
-    ]);
-    assert!(written.status.success(), "{written:?}");
+    let scene = gpu_support::write_synthetic_scene(
+        dir.path(),
+        "dynamic",
+        &[
+            "--dynamic",
+            "--frames",
+            "8",
+            "--width",
+            "32",
+            "--height",
+            "24",
+        ],
+    );
+    let scene = scene.as_str();
     let output = segsplat(&[
         "bench",
         scene,

@@ -123,6 +123,15 @@ pub fn segsplat(args: &[&str]) -> std::process::Output {
         .expect("run segsplat")
 }
 
+/// Writes a synthetic scene into `dir/name` with `segsplat synthetic-scene` (`flags` as on its
+/// command line: frames, size, `--dynamic`) and returns the scene's path.
+pub fn write_synthetic_scene(dir: &std::path::Path, name: &str, flags: &[&str]) -> String {
+    let scene = dir.join(name).to_str().expect("utf-8 path").to_string();
+    let written = segsplat(&[&["synthetic-scene", scene.as_str()], flags].concat());
+    assert!(written.status.success(), "{written:?}");
+    scene
+}
+
 /// Runs `steps` more steps of `trainer` and asserts that they created no buffer and no bind
 /// group on `ctx` (a context of the test's own: a shared one counts other tests' work too).
 pub fn assert_steps_allocate_nothing(

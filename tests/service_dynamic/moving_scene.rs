@@ -11,14 +11,14 @@ use segsplat_engine::ply::read_ply;
 use segsplat_scene::Level;
 use segsplat_scene::synthetic_dynamic::{
     dynamic_frame_time, dynamic_object_center, dynamic_true_mask, dynamic_world_from_cameras,
-    is_dynamic_test_frame, write_dynamic_blender,
+    is_dynamic_test_frame,
 };
 
+use crate::common::TestService;
 use crate::common::models_support::mask_iou;
-use crate::common::{TestService, archives};
 use crate::support::{
     FRAMES, centroid_of, distance, get_ok, labelled_centroid, ply_header, png_bools, png_mask,
-    pose_view_of, spec, upload_dynamic,
+    pose_view_of, spec, upload_moving_spheres,
 };
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -27,8 +27,7 @@ async fn a_moving_scene_is_segmented_and_queried_in_time() {
     let Some(client) = TestService::start_with_tiny_models(data.path()).await else {
         return;
     };
-    let files = archives::dataset_files(|dir| write_dynamic_blender(dir, &spec()));
-    let scene_id = upload_dynamic(&client, &files, FRAMES).await;
+    let scene_id = upload_moving_spheres(&client).await;
 
     // The deformation field, the scene's white background and user masks all come from the
     // scene, and the field's shape from the adapter; the schedule is shortened for the test.

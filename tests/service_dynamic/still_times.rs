@@ -3,11 +3,9 @@
 
 use std::time::Duration;
 
-use segsplat_scene::synthetic_dynamic::write_dynamic_blender;
-
 use crate::common;
-use crate::common::{TestService, archives};
-use crate::support::{FRAMES, get_ok, spec, upload_dynamic};
+use crate::common::TestService;
+use crate::support::{get_ok, upload_moving_spheres};
 
 /// `?time=` on a static scene's trained files is refused, saying why, whether or not it is
 /// trained (no GPU needed); without a time the files answer as before.
@@ -56,8 +54,7 @@ async fn a_dynamic_scene_trained_static_serves_its_stored_scene_at_any_time() {
     let Some(client) = TestService::start_on_gpu(data.path(), |_| {}).await else {
         return;
     };
-    let files = archives::dataset_files(|dir| write_dynamic_blender(dir, &spec()));
-    let scene_id = upload_dynamic(&client, &files, FRAMES).await;
+    let scene_id = upload_moving_spheres(&client).await;
     let job_id = client
         .create_job(
             &scene_id,

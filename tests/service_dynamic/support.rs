@@ -50,6 +50,14 @@ pub(crate) async fn upload_dynamic(
     scene["id"].as_str().expect("id").to_string()
 }
 
+/// Uploads the moving spheres of [`spec`] (D-NeRF layout, one time per frame); the scene's id.
+pub(crate) async fn upload_moving_spheres(client: &TestService) -> String {
+    let files = archives::dataset_files(|dir| {
+        segsplat_scene::synthetic_dynamic::write_dynamic_blender(dir, &spec())
+    });
+    upload_dynamic(client, &files, FRAMES).await
+}
+
 /// A trained camera (an entry of `cameras.json`) as a gRPC pose view.
 pub(crate) fn pose_view_of(camera: &serde_json::Value) -> proto::PoseView {
     let rows: Vec<f64> = camera["camera_to_world"]

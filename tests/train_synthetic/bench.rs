@@ -1,7 +1,7 @@
 //! `segsplat bench` through the CLI: from a trained PLY, and timing the object loss against plain
 //! steps in one invocation.
 
-use crate::gpu_support::{new_gpu_context, segsplat};
+use crate::gpu_support::{new_gpu_context, segsplat, write_synthetic_scene};
 
 /// `segsplat train` writes a trained scene and `segsplat bench --init-ply` times steps starting
 /// from its Gaussians (the trained-density benchmark of docs/benchmarks.md), and
@@ -12,21 +12,14 @@ fn bench_starts_from_a_trained_ply() {
         return;
     }
     let dir = tempfile::tempdir().expect("temp dir");
-    let scene = dir.path().join("scene");
-    let scene = scene.to_str().expect("utf-8 path");
+    let scene = write_synthetic_scene(
+        dir.path(),
+        "scene",
+        &["--frames", "6", "--width", "32", "--height", "24"],
+    );
+    let scene = scene.as_str();
     let out = dir.path().join("trained");
     let out = out.to_str().expect("utf-8 path");
-    let written = segsplat(&[
-        "synthetic-scene",
-        scene,
-        "--frames",
-        "6",
-        "--width",
-        "32",
-        "--height",
-        "24",
-    ]);
-    assert!(written.status.success(), "{written:?}");
     let trained = segsplat(&["train", scene, "--steps", "5", "--out", out]);
     assert!(trained.status.success(), "{trained:?}");
     let ply = format!("{out}/scene.ply");
@@ -127,19 +120,12 @@ fn bench_times_the_object_loss_against_plain_steps_in_one_invocation() {
         return;
     }
     let dir = tempfile::tempdir().expect("temp dir");
-    let scene = dir.path().join("scene");
-    let scene = scene.to_str().expect("utf-8 path");
-    let written = segsplat(&[
-        "synthetic-scene",
-        scene,
-        "--frames",
-        "8",
-        "--width",
-        "40",
-        "--height",
-        "30",
-    ]);
-    assert!(written.status.success(), "{written:?}");
+    let scene = write_synthetic_scene(
+        dir.path(),
+        "scene",
+        &["--frames", "8", "--width", "40", "--height", "30"],
+    );
+    let scene = scene.as_str();
     // 60 steps: two whole turns of 25 and a short one on each side.
     let output = segsplat(&[
         "bench",
