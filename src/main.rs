@@ -1,5 +1,9 @@
 //! The `segsplat` command line: parse, load the configuration, call into the library.
 
+// No `unwrap()` outside tests: input, I/O and GPU failures become errors that name the
+// problem (an invariant the code relies on says why in an `expect`).
+#![cfg_attr(not(test), deny(clippy::unwrap_used))]
+
 mod cli;
 
 use std::net::SocketAddr;

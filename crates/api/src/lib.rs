@@ -1,6 +1,10 @@
 //! The service edge: REST (axum) and gRPC (tonic) APIs, authentication, metrics, health, and
 //! the process lifecycle that ties them to the store and the worker pool.
 
+// No `unwrap()` outside tests: input, I/O and GPU failures become errors that name the
+// problem (an invariant the code relies on says why in an `expect`).
+#![cfg_attr(not(test), deny(clippy::unwrap_used))]
+
 mod auth;
 mod console;
 pub mod error;

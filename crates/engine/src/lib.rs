@@ -3,6 +3,10 @@
 //!
 //! Rasterisation constants follow 3DGS / gsplat exactly so trained scenes behave like theirs.
 
+// No `unwrap()` outside tests: input, I/O and GPU failures become errors that name the
+// problem (an invariant the code relies on says why in an `expect`).
+#![cfg_attr(not(test), deny(clippy::unwrap_used))]
+
 pub mod adam;
 pub mod background_shell;
 pub mod camera;

@@ -2,6 +2,10 @@
 //! LERF_OVS and 3D-OVS benchmark ground truth (loaders, mIoU as the papers compute it, and the
 //! oracle that scores the 3D segmentation apart from language). Pure CPU code: no GPU, no store.
 
+// No `unwrap()` outside tests: input, I/O and GPU failures become errors that name the
+// problem (an invariant the code relies on says why in an `expect`).
+#![cfg_attr(not(test), deny(clippy::unwrap_used))]
+
 pub mod error;
 pub mod ground_truth;
 mod lerf_ovs;

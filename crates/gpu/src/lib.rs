@@ -1,6 +1,10 @@
 //! GPU foundation: adapter discovery, device creation, and (in their own files) the generic compute
 //! primitives the engine is built from. Knows nothing of splats, HTTP or databases.
 
+// No `unwrap()` outside tests: input, I/O and GPU failures become errors that name the
+// problem (an invariant the code relies on says why in an `expect`).
+#![cfg_attr(not(test), deny(clippy::unwrap_used))]
+
 pub mod bind_cache;
 pub mod context;
 pub mod deferred_read;

@@ -7,6 +7,10 @@
 //! images and masks are loaded ([`distortion`]): callers see pinhole frames with the same
 //! `fx, fy, cx, cy` whatever the source's camera model.
 
+// No `unwrap()` outside tests: input, I/O and GPU failures become errors that name the
+// problem (an invariant the code relies on says why in an `expect`).
+#![cfg_attr(not(test), deny(clippy::unwrap_used))]
+
 pub mod archive;
 pub mod blender;
 mod camera_checks;
