@@ -224,7 +224,8 @@ fn checkpoint_snapshot_holds_the_field() {
 
 /// `segsplat synthetic-scene --dynamic` writes a D-NeRF scene and `segsplat bench
 /// --deformation --json` trains it with and without the field (tiny settings: 3 steps, 32 px,
-/// a 2 x 16 field) and reports the field's shape, size, both step rates and their ratio.
+/// a 2 x 16 field) and reports the field's shape, size, both step rates and their ratio; its
+/// kernel profile times the GEMM's three products apart.
 #[test]
 fn bench_reports_the_deformation_field_cost() {
     if gpu_context().is_none() {
@@ -262,12 +263,30 @@ fn bench_reports_the_deformation_field_cost() {
         "2",
         "--field-width",
         "16",
+        "--profile-kernels",
+        "1",
+        "--busy-steps",
+        "2",
         "--json",
     ]);
     assert!(output.status.success(), "{output:?}");
     let report: serde_json::Value =
         serde_json::from_slice(&output.stdout).expect("bench prints one JSON object");
     assert_eq!(report["steps"], 3, "{report}");
+    let profiled: Vec<&str> = report["kernel_profile"]["kernels"]
+        .as_array()
+        .expect("kernels by time")
+        .iter()
+        .filter_map(|kernel| kernel["kernel"].as_str())
+        .collect();
+    for product in ["forward", "input_gradient", "weight_gradient"] {
+        assert!(
+            profiled
+                .iter()
+                .any(|name| name.starts_with("mlp_gemm") && name.ends_with(&format!(" {product}"))),
+            "no GEMM {product} in the profile: {profiled:?}"
+        );
+    }
     assert_eq!(report["gaussians_start"], 500, "{report}");
     assert_eq!(report["gaussians_end"], 500, "--no-densify keeps the count");
     let deformation = &report["deformation"];

@@ -261,15 +261,28 @@ impl Kernel {
         }
     }
 
-    fn timestamp_writes(&self) -> Option<wgpu::ComputePassTimestampWrites<'_>> {
+    fn timestamp_writes(&self, name: &'static str) -> Option<wgpu::ComputePassTimestampWrites<'_>> {
         self.profiler
             .as_ref()
-            .and_then(|profiler| profiler.pass_writes(self.label))
+            .and_then(|profiler| profiler.pass_writes(name))
     }
 
     /// Records one dispatch of `workgroups` groups, in the encoder's open pass.
     pub fn dispatch(&self, encoder: &mut Encoder, bound: &Bound, workgroups: [u32; 3]) {
-        self.record(encoder, bound, |pass| {
+        self.dispatch_named(encoder, bound, workgroups, self.label);
+    }
+
+    /// [`Kernel::dispatch`], timed by a kernel profile under `name` instead of the kernel's
+    /// label: for a kernel that does several jobs (the deformation field's GEMM does a layer's
+    /// three products), so the profile says which of them takes the time.
+    pub fn dispatch_named(
+        &self,
+        encoder: &mut Encoder,
+        bound: &Bound,
+        workgroups: [u32; 3],
+        name: &'static str,
+    ) {
+        self.record(encoder, bound, name, |pass| {
             pass.dispatch_workgroups(workgroups[0], workgroups[1], workgroups[2]);
         });
     }
@@ -283,22 +296,23 @@ impl Kernel {
         indirect: &wgpu::Buffer,
         offset: u64,
     ) {
-        self.record(encoder, bound, |pass| {
+        self.record(encoder, bound, self.label, |pass| {
             pass.dispatch_workgroups_indirect(indirect, offset);
         });
     }
 
     /// Sets this kernel and its bindings on the encoder's shared pass, or on a pass of its own
-    /// when the profiler times it, then records the dispatch.
+    /// when the profiler times it (under `name`), then records the dispatch.
     fn record(
         &self,
         encoder: &mut Encoder,
         bound: &Bound,
+        name: &'static str,
         dispatch: impl FnOnce(&mut wgpu::ComputePass<'_>),
     ) {
-        match self.timestamp_writes() {
+        match self.timestamp_writes(name) {
             Some(writes) => {
-                let mut pass = encoder.timed_pass(self.label, writes);
+                let mut pass = encoder.timed_pass(name, writes);
                 self.set_and_dispatch(&mut pass, bound, dispatch);
             }
             None => self.set_and_dispatch(encoder.shared_pass(), bound, dispatch),

@@ -13,7 +13,7 @@ use super::field::{FieldShape, LinearLayer, WarpKind};
 use super::geometry::DeformedGeometry;
 use super::kernels::{
     ApplyParams, DeformKernels, EncodeParams, FLAG_BIAS, FLAG_MASK, FLAG_RELU, GemmBuffers,
-    GemmKernel, GemmParams, MAX_SPLITS, RowSplit,
+    GemmKernel, GemmParams, GemmProduct, MAX_SPLITS, RowSplit,
 };
 
 #[derive(Debug, thiserror::Error)]
@@ -360,6 +360,7 @@ impl DeformationField {
             self.kernels.gemm(
                 ctx,
                 encoder,
+                GemmProduct::Forward,
                 params,
                 1,
                 GemmBuffers {
@@ -498,6 +499,7 @@ impl DeformationField {
             self.kernels.gemm(
                 ctx,
                 encoder,
+                GemmProduct::WeightGradient,
                 GemmParams {
                     rows: outputs,
                     cols: inputs,
@@ -562,6 +564,7 @@ impl DeformationField {
             self.kernels.gemm(
                 ctx,
                 encoder,
+                GemmProduct::InputGradient,
                 GemmParams {
                     rows,
                     cols: width,

@@ -56,6 +56,45 @@ pub struct GemmParams {
     pub _pad: [u32; 3],
 }
 
+/// Which of a linear layer's three products a GEMM computes (`mlp_gemm_common.wgsl`): the same
+/// kernel runs all three, and a kernel profile times each under its own name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GemmProduct {
+    Forward,
+    InputGradient,
+    WeightGradient,
+}
+
+impl GemmProduct {
+    /// The name `bench --profile-kernels` and a job's kernel times give this product on
+    /// `pipelines`' kernel: the kernel's label, then the product.
+    fn profile_name(self, pipelines: &GemmPipelines) -> &'static str {
+        const NAMES: [[&str; 3]; 3] = [
+            [
+                "mlp_gemm forward",
+                "mlp_gemm input_gradient",
+                "mlp_gemm weight_gradient",
+            ],
+            [
+                "mlp_gemm_rows forward",
+                "mlp_gemm_rows input_gradient",
+                "mlp_gemm_rows weight_gradient",
+            ],
+            [
+                "mlp_gemm_broadcast forward",
+                "mlp_gemm_broadcast input_gradient",
+                "mlp_gemm_broadcast weight_gradient",
+            ],
+        ];
+        let kernel = match pipelines {
+            GemmPipelines::Tiled(_) => 0,
+            GemmPipelines::Rows(_) => 1,
+            GemmPipelines::Broadcast(_) => 2,
+        };
+        NAMES[kernel][self as usize]
+    }
+}
+
 /// The buffers of one GEMM; `bias` and `mask` are bound even when the flags ignore them.
 pub struct GemmBuffers<'a> {
     pub a: &'a wgpu::Buffer,
@@ -328,11 +367,13 @@ impl DeformKernels {
         })
     }
 
-    /// Records `c = epilogue(a b)` over `splits` depth ranges (`params.c_split_stride` apart).
+    /// Records `c = epilogue(a b)` over `splits` depth ranges (`params.c_split_stride` apart);
+    /// `product` names it in kernel profiles.
     pub fn gemm(
         &self,
         ctx: &GpuContext,
         encoder: &mut segsplat_gpu::Encoder,
+        product: GemmProduct,
         params: GemmParams,
         splits: u32,
         buffers: GemmBuffers<'_>,
@@ -348,7 +389,7 @@ impl DeformKernels {
             params.rows.div_ceil(row_block).max(1),
             splits.max(1),
         ];
-        kernel.dispatch(encoder, &bind, grid);
+        kernel.dispatch_named(encoder, &bind, grid, product.profile_name(&self.gemm));
     }
 
     /// Records per-split column sums of `source` rows (`[rows, cols]`, row stride given) into

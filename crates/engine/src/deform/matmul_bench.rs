@@ -14,7 +14,7 @@ use wgpu::util::DeviceExt;
 use segsplat_gpu::GpuContext;
 
 use super::field_gpu::DeformError;
-use super::kernels::{DeformKernels, GemmBuffers, GemmKernel, GemmParams, RowSplit};
+use super::kernels::{DeformKernels, GemmBuffers, GemmKernel, GemmParams, GemmProduct, RowSplit};
 
 /// One product's rate.
 #[derive(Debug, Clone, Serialize)]
@@ -70,6 +70,7 @@ fn random_buffer(ctx: &GpuContext, rng: &mut ChaCha8Rng, len: usize) -> (wgpu::B
 /// How a product reads its operands: `a[r, d]` and `b[d, c]` as (offset-free) strides.
 struct Product {
     name: &'static str,
+    product: GemmProduct,
     params: GemmParams,
     splits: u32,
     /// `true` when A is `x` and B is `w` (forward, input gradient); `false` for the weight
@@ -81,6 +82,7 @@ struct Product {
 /// weight row) and the input gradient (`W`, depth down a weight column).
 fn activation_product(
     name: &'static str,
+    product: GemmProduct,
     rows: u32,
     width: u32,
     b_depth_stride: u32,
@@ -88,6 +90,7 @@ fn activation_product(
 ) -> Product {
     Product {
         name,
+        product,
         params: GemmParams {
             rows,
             cols: width,
@@ -108,10 +111,18 @@ fn activation_product(
 fn products(rows: u32, width: u32) -> [Product; 3] {
     let split = RowSplit::for_rows(rows);
     [
-        activation_product("forward", rows, width, 1, width),
-        activation_product("input_gradient", rows, width, width, 1),
+        activation_product("forward", GemmProduct::Forward, rows, width, 1, width),
+        activation_product(
+            "input_gradient",
+            GemmProduct::InputGradient,
+            rows,
+            width,
+            width,
+            1,
+        ),
         Product {
             name: "weight_gradient",
+            product: GemmProduct::WeightGradient,
             params: GemmParams {
                 rows: width,
                 cols: width,
@@ -195,6 +206,7 @@ pub fn measure_matmul(
                 kernels.gemm(
                     ctx,
                     &mut encoder,
+                    product.product,
                     product.params,
                     product.splits,
                     GemmBuffers {
