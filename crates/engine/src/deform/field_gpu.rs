@@ -13,7 +13,7 @@ use super::field::{FieldShape, LinearLayer, WarpKind};
 use super::geometry::DeformedGeometry;
 use super::kernels::{
     ApplyParams, DeformKernels, EncodeParams, FLAG_BIAS, FLAG_MASK, FLAG_RELU, GemmBuffers,
-    GemmKernel, GemmParams, GemmProduct, MAX_SPLITS, RowSplit,
+    GemmKernel, GemmParams, GemmProduct, MAX_SPLITS,
 };
 
 #[derive(Debug, thiserror::Error)]
@@ -228,14 +228,15 @@ impl DeformationField {
         let encoding = shape.encoding_width();
         let skip_width = encoding + if shape.skip_after > 0 { width } else { 0 };
         let heads = shape.head_outputs();
-        let split = RowSplit::for_rows(rows as u32);
         let widest_layer = self
             .layers
             .iter()
             .map(|l| l.inputs * l.outputs)
             .max()
             .unwrap_or(1);
-        let partial_words = widest_layer * split.splits.min(MAX_SPLITS) as usize;
+        // For the most splits any row count gets (`RowSplit::for_rows`): a product of fewer
+        // rows than the workspace's can have more splits.
+        let partial_words = widest_layer * MAX_SPLITS as usize;
         let hidden = (0..shape.depth as usize)
             .map(|l| storage_buffer(ctx, &format!("deform.hidden{l}"), rows * width))
             .collect::<Result<Vec<_>, _>>()?;
@@ -484,7 +485,7 @@ impl DeformationField {
         workspace: &Workspace,
         rows: u32,
     ) {
-        let split = RowSplit::for_rows(rows);
+        let split = self.kernels.row_split(rows);
         let width = self.shape.width;
         // d loss / d pre-activation of the current layer, and its row stride.
         let mut grad = (&workspace.grad_head, self.shape.head_outputs() as u32);

@@ -155,9 +155,22 @@ pub struct RowSplit {
 
 pub const MAX_SPLITS: u32 = 32;
 
+/// Rows a split aims at with the tiled kernel (hardware GPUs). A weight gradient's output is a
+/// layer's weights, only (outputs / 64) x (inputs / 64) tiles (16-24 for a 256-wide layer), so
+/// its workgroups are that times the splits, each looping over its split's rows: at 1024 rows a
+/// split, a field over 4,000 Gaussians gave a GPU of 132 compute units 64-96 workgroups of 64
+/// depth tiles each; at 256, 256-384 of 16.
+const TILED_SPLIT_ROWS: u32 = 256;
+/// Rows a split aims at with the software kernels: a CPU adapter runs on a few cores, where more
+/// splits only add partial sums to reduce.
+const SOFTWARE_SPLIT_ROWS: u32 = 1024;
+
 impl RowSplit {
-    pub fn for_rows(rows: u32) -> Self {
-        let wanted = rows.div_ceil(1024).clamp(1, MAX_SPLITS);
+    /// Splits of about `target` rows (a whole number of depth tiles each), at most
+    /// [`MAX_SPLITS`]. Rounding to depth tiles can give a few more rows one split fewer than
+    /// fewer rows get, so partial sums are sized for [`MAX_SPLITS`], not for a row count.
+    pub fn for_rows(rows: u32, target: u32) -> Self {
+        let wanted = rows.div_ceil(target.max(1)).clamp(1, MAX_SPLITS);
         let rows_per_split =
             rows.div_ceil(wanted).div_ceil(GEMM_DEPTH_TILE).max(1) * GEMM_DEPTH_TILE;
         Self {
@@ -367,6 +380,15 @@ impl DeformKernels {
         })
     }
 
+    /// How a weight or bias gradient over `rows` rows is split with this kernel.
+    pub fn row_split(&self, rows: u32) -> RowSplit {
+        let target = match self.gemm {
+            GemmPipelines::Tiled(_) => TILED_SPLIT_ROWS,
+            GemmPipelines::Rows(_) | GemmPipelines::Broadcast(_) => SOFTWARE_SPLIT_ROWS,
+        };
+        RowSplit::for_rows(rows, target)
+    }
+
     /// Records `c = epilogue(a b)` over `splits` depth ranges (`params.c_split_stride` apart);
     /// `product` names it in kernel profiles.
     pub fn gemm(
@@ -497,4 +519,38 @@ fn dispatch_apply(
 ) {
     let bind = kernel.bind_params(ctx, bytemuck::bytes_of(&params), buffers);
     kernel.dispatch(encoder, &bind, per_item_grid(ctx, params.count));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn row_splits_cover_the_rows_in_depth_tiles() {
+        for target in [TILED_SPLIT_ROWS, SOFTWARE_SPLIT_ROWS] {
+            for rows in 1..40_000u32 {
+                let split = RowSplit::for_rows(rows, target);
+                assert!(
+                    (1..=MAX_SPLITS).contains(&split.splits),
+                    "{rows}: {split:?}"
+                );
+                assert_eq!(
+                    split.rows_per_split % GEMM_DEPTH_TILE,
+                    0,
+                    "{rows}: {split:?}"
+                );
+                assert!(
+                    split.splits * split.rows_per_split >= rows,
+                    "{rows}: {split:?}"
+                );
+                assert!(
+                    (split.splits - 1) * split.rows_per_split < rows,
+                    "{rows}: an empty split {split:?}"
+                );
+            }
+        }
+        // A field over 4,000 Gaussians: 16 splits on a GPU, 4 on a CPU adapter.
+        assert_eq!(RowSplit::for_rows(4000, TILED_SPLIT_ROWS).splits, 16);
+        assert_eq!(RowSplit::for_rows(4000, SOFTWARE_SPLIT_ROWS).splits, 4);
+    }
 }

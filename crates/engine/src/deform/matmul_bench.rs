@@ -108,8 +108,7 @@ fn activation_product(
     }
 }
 
-fn products(rows: u32, width: u32) -> [Product; 3] {
-    let split = RowSplit::for_rows(rows);
+fn products(rows: u32, width: u32, split: RowSplit) -> [Product; 3] {
     [
         activation_product("forward", GemmProduct::Forward, rows, width, 1, width),
         activation_product(
@@ -182,7 +181,7 @@ pub fn measure_matmul(
     let mut rng = ChaCha8Rng::seed_from_u64(0x6e_6d);
     let (x, x_host) = random_buffer(ctx, &mut rng, (rows * width) as usize);
     let (w, w_host) = random_buffer(ctx, &mut rng, (width * width) as usize);
-    let split = RowSplit::for_rows(rows);
+    let split = kernels.row_split(rows);
     let out_words = (rows * width).max(split.splits * width * width) as u64;
     let operands = Operands {
         x,
@@ -194,7 +193,7 @@ pub fn measure_matmul(
     let repeats = repeats.max(1);
     let mut rates = Vec::new();
     let (mut total_flops, mut total_seconds) = (0.0, 0.0);
-    for product in products(rows, width) {
+    for product in products(rows, width, split) {
         let b = if product.reads_weights {
             &operands.w
         } else {
