@@ -428,7 +428,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     let eval = trainer.evaluate()?;
     // The steps and the model the report's quality figures are of: the kernel profile below
     // trains more steps after them.
-    let (steps, gaussians_end) = (trainer.step(), trainer.gaussian_count());
+    let (trained_steps, gaussians_end) = (trainer.step(), trainer.gaussian_count());
     let kernel_profile = match args.profile_kernels {
         Some(steps) => Some(profile_kernels(&ctx, &mut trainer, steps, args.busy_steps)?),
         None => None,
@@ -483,7 +483,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         image_height,
         train_views: trainer.views().train.len(),
         test_views: trainer.views().test.len(),
-        steps,
+        steps: trained_steps,
         gaussians_start,
         gaussians_end,
         gaussian_budget: trainer.gaussian_budget(),
