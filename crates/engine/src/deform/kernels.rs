@@ -66,6 +66,15 @@ pub enum GemmProduct {
 }
 
 impl GemmProduct {
+    /// The product's name in `bench-matmul`'s report.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Forward => "forward",
+            Self::InputGradient => "input_gradient",
+            Self::WeightGradient => "weight_gradient",
+        }
+    }
+
     /// The name `bench --profile-kernels` and a job's kernel times give this product on
     /// `pipelines`' kernel: the kernel's label, then the product.
     fn profile_name(self, pipelines: &GemmPipelines) -> &'static str {
@@ -277,6 +286,15 @@ enum GemmPipelines {
     Broadcast(Vec<Kernel>),
 }
 
+/// The first of `heights` (workgroup rows, shortest first) that covers `rows`, else the last:
+/// rows past a product's end are computed and not stored, so a taller workgroup only wastes work.
+fn shortest_covering(heights: &[u32], rows: u32) -> usize {
+    heights
+        .iter()
+        .position(|&height| rows <= height)
+        .unwrap_or(heights.len().saturating_sub(1))
+}
+
 impl GemmPipelines {
     /// The pipeline for a product of `rows` rows and the output block one workgroup covers
     /// (columns, rows).
@@ -284,18 +302,13 @@ impl GemmPipelines {
         match self {
             Self::Tiled(kernel) => (kernel, GEMM_TILE, GEMM_TILE),
             Self::Rows(kernels) => {
-                let index = ROWS_LANES
-                    .iter()
-                    .position(|lanes| rows <= lanes * GEMM_ROWS_PER_LANE)
-                    .unwrap_or(ROWS_LANES.len() - 1);
-                let workgroup_rows = ROWS_LANES[index] * GEMM_ROWS_PER_LANE;
-                (&kernels[index], GEMM_ROWS_COLS, workgroup_rows)
+                let heights = ROWS_LANES.map(|lanes| lanes * GEMM_ROWS_PER_LANE);
+                let index = shortest_covering(&heights, rows);
+                (&kernels[index], GEMM_ROWS_COLS, heights[index])
             }
             Self::Broadcast(kernels) => {
-                let index = BROADCAST_BLOCKS
-                    .iter()
-                    .position(|block| rows <= block.workgroup_rows())
-                    .unwrap_or(BROADCAST_BLOCKS.len() - 1);
+                let index =
+                    shortest_covering(&BROADCAST_BLOCKS.map(|block| block.workgroup_rows()), rows);
                 let (kernel, block) = (&kernels[index], BROADCAST_BLOCKS[index]);
                 (kernel, block.workgroup_cols(), block.workgroup_rows())
             }

@@ -69,7 +69,6 @@ fn random_buffer(ctx: &GpuContext, rng: &mut ChaCha8Rng, len: usize) -> (wgpu::B
 
 /// How a product reads its operands: `a[r, d]` and `b[d, c]` as (offset-free) strides.
 struct Product {
-    name: &'static str,
     product: GemmProduct,
     params: GemmParams,
     splits: u32,
@@ -81,7 +80,6 @@ struct Product {
 /// `[rows, width] x B` with B read at the given strides: the forward (`W^T`, depth along a
 /// weight row) and the input gradient (`W`, depth down a weight column).
 fn activation_product(
-    name: &'static str,
     product: GemmProduct,
     rows: u32,
     width: u32,
@@ -89,7 +87,6 @@ fn activation_product(
     b_col_stride: u32,
 ) -> Product {
     Product {
-        name,
         product,
         params: GemmParams {
             rows,
@@ -110,17 +107,9 @@ fn activation_product(
 
 fn products(rows: u32, width: u32, split: RowSplit) -> [Product; 3] {
     [
-        activation_product("forward", GemmProduct::Forward, rows, width, 1, width),
-        activation_product(
-            "input_gradient",
-            GemmProduct::InputGradient,
-            rows,
-            width,
-            width,
-            1,
-        ),
+        activation_product(GemmProduct::Forward, rows, width, 1, width),
+        activation_product(GemmProduct::InputGradient, rows, width, width, 1),
         Product {
-            name: "weight_gradient",
             product: GemmProduct::WeightGradient,
             params: GemmParams {
                 rows: width,
@@ -233,7 +222,7 @@ pub fn measure_matmul(
         total_flops += flops;
         total_seconds += seconds;
         rates.push(ProductRate {
-            product: product.name,
+            product: product.product.name(),
             rows: p.rows,
             cols: p.cols,
             depth: p.depth,
