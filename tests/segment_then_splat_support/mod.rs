@@ -11,6 +11,12 @@ use segsplat_scene::synthetic::{
 };
 use segsplat_scene::{Level, LoadOptions, Scene, load_scene};
 
+// The IoU of two boolean masks, written once for every test binary that scores masks.
+#[path = "../models_support/mod.rs"]
+mod models_support;
+#[allow(unused_imports)] // not every binary that includes this module scores masks
+pub use models_support::mask_iou as iou;
+
 /// The adapter, or `None` (skip, with the reason printed) when there is none and
 /// `SEGSPLAT_SKIP_GPU_TESTS=1` is set; without that variable a missing adapter fails.
 /// (A test using this module declares `mod gpu_support;` beside it.)
@@ -80,17 +86,6 @@ pub fn full_truth(scene: &Scene, frame_index: usize, level: Level, object: u32) 
             })
         })
         .collect()
-}
-
-pub fn iou(predicted: &[bool], truth: &[bool]) -> f64 {
-    let both = predicted.iter().zip(truth).filter(|(p, t)| **p && **t);
-    let either = predicted.iter().zip(truth).filter(|(p, t)| **p || **t);
-    let (intersection, union) = (both.count(), either.count());
-    if union == 0 {
-        1.0
-    } else {
-        intersection as f64 / union as f64
-    }
 }
 
 pub fn mean(values: &[f64]) -> f64 {
