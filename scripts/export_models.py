@@ -39,7 +39,6 @@ index.json describing every file.
 """
 
 import argparse
-import hashlib
 import json
 import os
 import sys
@@ -50,6 +49,7 @@ import numpy as np
 
 SCRIPT_DIR = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, SCRIPT_DIR)
+from file_digest import sha256_of  # noqa: E402  (scripts/ is on the path from the line above)
 
 IR_VERSION = 8
 OPSET = 17
@@ -364,7 +364,7 @@ def load_or_generate_image(path):
 
     if path:
         return np.asarray(Image.open(path).convert("RGB"))
-    from make_tiny_models import synthetic_image
+    from tiny_models.fixtures import synthetic_image
 
     return synthetic_image(320, 240)
 
@@ -980,17 +980,9 @@ def export_sam_family_official(spec, checkpoint, image, out_dir, reference_root)
 # ---------------------------------------------------------------------------------------------
 
 
-def sha256_of(path):
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            digest.update(chunk)
-    return digest.hexdigest()
-
-
 def write_tokenizer(out_dir):
     import open_clip
-    from make_tiny_models import build_tokenizer_json
+    from tiny_models.tokenizer import build_tokenizer_json
 
     bpe_path = os.path.join(os.path.dirname(open_clip.__file__), "bpe_simple_vocab_16e6.txt.gz")
     path = os.path.join(out_dir, "tokenizer.json")
