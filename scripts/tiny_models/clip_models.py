@@ -3,10 +3,10 @@
 import numpy as np
 from onnx import TensorProto
 
-from .graph import GraphBuilder, tensor_info
 from .constants import (
     CLIP_IMAGE_SIZE, CLIP_MEAN, CLIP_STD, COLOUR_PROTOTYPES, COLOUR_TEMPERATURE, CONTEXT_LENGTH,
     EMBED_DIM, IMAGE_GENERIC_WEIGHT, NOT_BLACK_THRESHOLD, SOT_TOKEN, TEXT_GENERIC_WEIGHT)
+from .graph import GraphBuilder, tensor_info
 
 # ---------------------------------------------------------------------------------------------
 # Colour directions shared by the two CLIP stand-ins

@@ -6,8 +6,6 @@ from onnx import helper, numpy_helper
 
 from .constants import IR_VERSION, OPSET
 
-# ---------------------------------------------------------------------------------------------
-
 
 class GraphBuilder:
     """Accumulates nodes and constant initialisers; every op returns its output tensor name."""

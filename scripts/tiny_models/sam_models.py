@@ -1,17 +1,14 @@
-"""The SAM-family stand-ins: the encoder packs cell colours, the decoder answers points by colour and distance."""
+"""The SAM-family stand-ins: the encoder packs cell colours, the decoder answers points by colour
+and distance."""
 
 import numpy as np
 from onnx import TensorProto
 
-from .graph import GraphBuilder, tensor_info
 from .constants import (
     SAM_CELL, SAM_CHANNEL_RADII, SAM_COLOUR_SLOPE, SAM_COLOUR_TOLERANCE, SAM_EMBED_GRID,
     SAM_IMAGE_SIZE, SAM_LOGIT_LIMIT, SAM_LOW_RES, SAM_MASK_INPUT_WEIGHT, SAM_NO_PROMPT_LOGIT,
     SAM_PACKED_CHANNELS, SAM_SPATIAL_SLOPE)
-
-# ---------------------------------------------------------------------------------------------
-# SAM stand-ins
-# ---------------------------------------------------------------------------------------------
+from .graph import GraphBuilder, tensor_info
 
 
 def build_sam_encoder():

@@ -1,13 +1,9 @@
-"""tokenizer.json (HuggingFace format) from open_clip's BPE file, and the texts whose ids the fixtures record."""
+"""tokenizer.json (HuggingFace format) from open_clip's BPE file, and the texts whose ids the
+fixtures record."""
 
 import gzip
 
 from .constants import COLOUR_PROTOTYPES, COLOUR_SYNONYMS, CONTEXT_LENGTH, EOT_TOKEN, SOT_TOKEN
-
-
-# ---------------------------------------------------------------------------------------------
-# Tokenizer: HuggingFace tokenizers-format JSON built from open_clip's BPE file
-# ---------------------------------------------------------------------------------------------
 
 
 def bytes_to_unicode():
