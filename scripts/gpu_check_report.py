@@ -73,6 +73,17 @@ def test_result(step):
                                            re.M)))
     if result["status"] != "passed":
         result["tail"] = tail(output)
+    if result["status"] == "timeout":
+        # The tests the binary lists (gpu_check.sh keeps `--list`'s names as `listed`) that got
+        # no result before the cut: with one test at a time, the first of them is the one it
+        # was cut in, which libtest names as it starts ("test NAME ... " with nothing after).
+        finished = set(re.findall(r"^test (\S+) \.\.\. (?:ok|FAILED|ignored)", output, re.M))
+        listed = (step.get("listed") or "").split()
+        if listed:
+            result["unfinished"] = [name for name in listed if name not in finished]
+        started = re.findall(r"^test (\S+) \.\.\. *$", step.get("stdout") or "", re.M)
+        if started and started[-1] not in finished:
+            result["cut_in"] = started[-1]
     return result
 
 
@@ -180,7 +191,7 @@ def adapters_result(step):
 def load_step(path):
     step = {"name": os.path.basename(path).split("-", 1)[-1]}
     for field in ("kind", "name", "command", "stdout", "stderr", "skipped", "demo_out",
-                  "job_steps", "env"):
+                  "job_steps", "env", "listed"):
         value = read(os.path.join(path, field))
         if value is not None:
             step[field] = value if field in ("stdout", "stderr", "command") else value.strip()
@@ -214,11 +225,12 @@ def assemble(work):
         if kind == "test":
             tests.append(test_result(step))
         elif kind == "test-serial" and tests and tests[-1]["name"] == step.get("name"):
-            # The failed binary's rerun with one test at a time (gpu_check.sh): kept with it,
-            # not counted again.
+            # The failed or timed-out binary's rerun with one test at a time (gpu_check.sh):
+            # kept with it, not counted again.
             rerun = test_result(step)
             tests[-1]["serial_rerun"] = {key: rerun[key] for key in
-                                         ("status", "passed", "failed", "failures", "seconds")
+                                         ("status", "passed", "failed", "failures", "cut_in",
+                                          "seconds")
                                          if key in rerun}
         elif kind == "bench":
             benches.append(bench_result(step))
@@ -312,9 +324,14 @@ def print_summary(report):
     for test in tests["binaries"]:
         if test["status"] != "passed":
             rerun = test.get("serial_rerun")
-            serial = f" (one test at a time: {rerun['status']})" if rerun else ""
+            serial = ""
+            if rerun:
+                cut = f", cut in {rerun['cut_in']}" if "cut_in" in rerun else ""
+                serial = f" (one test at a time: {rerun['status']}{cut})"
+            left = test.get("unfinished")
+            left = f"unfinished: {' '.join(left)}" if left else ""
             print(f"  {test['name']}: {test['status']} {test.get('reason', '')}"
-                  f"{' '.join(test.get('failures', []))}{serial}")
+                  f"{' '.join(test.get('failures', []))}{left}{serial}")
     for bench in report["benches"]:
         took = f" in {bench['seconds']:.0f} s" if bench.get("seconds") is not None else ""
         print(f"bench {bench['name']}: {bench['status']}{took} {headline(bench)}".rstrip())

@@ -7,7 +7,7 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
-use serde_json::Value;
+use serde_json::{Value, json};
 
 const SCRIPT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/gpu_check.sh");
 
@@ -133,7 +133,15 @@ echo "test result: FAILED. 1 passed; 1 failed; 0 ignored; 0 measured; 0 filtered
 exit 101
 "#;
 
-const STUB_HANGS: &str = "#!/bin/sh\nexec sleep 30\n";
+/// One test finishes and two never do; listed, and rerun with only those two, one at a time.
+const STUB_HANGS: &str = r#"#!/bin/sh
+case "$*" in
+  "--list --format terse") printf 'quick: test\nstuck: test\nafter: test\n'; exit 0 ;;
+  "--test-threads=1 --exact after stuck") printf 'test after ... ok\ntest stuck ... '; exec sleep 30 ;;
+  "") echo "test quick ... ok"; exec sleep 30 ;;
+  *) echo "unexpected arguments: $*"; exit 2 ;;
+esac
+"#;
 
 /// Writes what scripts/demo.sh leaves: a summary table, the objects, the trained metrics.
 const STUB_DEMO: &str = r#"#!/bin/bash
@@ -228,7 +236,7 @@ fn a_run_over_a_stub_pack_reports_every_step() {
     assert_eq!(by_name("fails")["status"], "failed");
     assert_eq!(by_name("fails")["failures"][0], "broken_on_gpu");
     // A failed binary runs again one test at a time, kept with it and not counted twice; a
-    // timed-out one does not.
+    // timed-out one runs again with only its unfinished tests, which names the one it hangs in.
     assert_eq!(
         by_name("fails")["serial_rerun"]["status"],
         "failed",
@@ -239,8 +247,11 @@ fn a_run_over_a_stub_pack_reports_every_step() {
         "broken_on_gpu"
     );
     assert!(by_name("passes").get("serial_rerun").is_none());
-    assert!(by_name("hangs").get("serial_rerun").is_none());
-    assert_eq!(by_name("hangs")["status"], "timeout");
+    let hangs = by_name("hangs");
+    assert_eq!(hangs["status"], "timeout");
+    assert_eq!(hangs["unfinished"], json!(["stuck", "after"]), "{hangs}");
+    assert_eq!(hangs["serial_rerun"]["status"], "timeout", "{hangs}");
+    assert_eq!(hangs["serial_rerun"]["cut_in"], "stuck", "{hangs}");
     assert_eq!(tests["passed"], 3);
     assert_eq!(tests["failed"], 1);
     assert_eq!(tests["binaries_failed"], 2);
