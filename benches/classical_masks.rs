@@ -19,14 +19,19 @@ use sha2::{Digest, Sha256};
 
 const LONG_SIDE: u32 = 1000;
 
+/// The image `SEGSPLAT_BENCH_IMAGE` names (which must open), else the figurine's first photo
+/// when it is beside the checkout, at most 1000 px on its long side.
 fn photo() -> Option<RgbImage> {
-    let path = std::env::var_os("SEGSPLAT_BENCH_IMAGE")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
+    let image = match std::env::var_os("SEGSPLAT_BENCH_IMAGE").map(PathBuf::from) {
+        Some(path) => image::open(&path)
+            .unwrap_or_else(|error| panic!("SEGSPLAT_BENCH_IMAGE={}: {error}", path.display())),
+        None => image::open(
             PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-                .join("../shared/data/figurine/images/DSC_5283.jpg")
-        });
-    let image = image::open(&path).ok()?.to_rgb8();
+                .join("../shared/data/figurine/images/DSC_5283.jpg"),
+        )
+        .ok()?,
+    }
+    .to_rgb8();
     let (width, height) = image.dimensions();
     let scale = LONG_SIDE as f32 / width.max(height) as f32;
     if scale >= 1.0 {

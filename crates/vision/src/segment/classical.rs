@@ -305,7 +305,7 @@ fn merge_thin_regions(image: &RgbImage, labels: &[u32], count: usize) -> (Vec<u3
 /// largest first.
 fn segment_level(
     image: &RgbImage,
-    graph: &PixelGraph,
+    pixel_graph: &PixelGraph,
     config: &ClassicalConfig,
     k: f32,
     absorb_ratio: f32,
@@ -316,7 +316,7 @@ fn segment_level(
         ((f64::from(config.min_region_fraction) * pixel_count as f64).ceil() as u64).max(1);
     let background_area =
         ((f64::from(config.max_region_fraction) * pixel_count as f64).ceil() as u64).max(1);
-    let (labels, count) = graph.segment(k, min_area);
+    let (labels, count) = pixel_graph.segment(k, min_area);
     let (labels, count) = merge_thin_regions(image, &labels, count);
     let mut graph = RegionGraph::new(&labels, count, width as usize, height as usize);
     let region_from_original = graph.absorb_enclosed(absorb_ratio, background_area);
@@ -362,13 +362,13 @@ pub fn classical_masks(
     }
     let pixel_scale =
         (u64::from(width) * u64::from(height)) as f32 / config.reference_pixels as f32;
-    let graph = PixelGraph::new(image, config.sigma);
+    let pixel_graph = PixelGraph::new(image, config.sigma);
     let levels: Vec<Vec<ScoredMask>> = (0..3)
         .into_par_iter()
         .map(|level| {
             segment_level(
                 image,
-                &graph,
+                &pixel_graph,
                 config,
                 config.scale_per_level[level] * pixel_scale,
                 config.absorb_enclosed_ratio[level],
