@@ -492,12 +492,13 @@ skip() {
 }
 
 # unfinished_tests BINARY STEP_DIR: the tests BINARY lists (libtest's `--list`, which touches no
-# adapter) that the step's output gives no result for, one per line; also kept as the step's
-# `listed` for the report.
+# adapter) that the step's output gives no result for, one per line in the list's order; also
+# kept as the step's `unfinished` for the report.
 unfinished_tests() {
-  timeout 30 "$1" --list --format terse 2>/dev/null | sed -n 's/: test$//p' >"$2/listed" || true
-  sed -n 's/^test \(.*\) \.\.\. \(ok\|FAILED\|ignored\).*$/\1/p' "$2/stdout" |
-    sort -u | comm -23 <(sort -u "$2/listed") -
+  local listed
+  listed=$(timeout 30 "$1" --list --format terse 2>/dev/null | sed -n 's/: test$//p' || true)
+  sed -n 's/^test \(.*\) \.\.\. \(ok\|FAILED\|ignored\).*$/\1/p' "$2/stdout" >"$2/finished"
+  { grep -vxF -f "$2/finished" <<<"$listed" || true; } | tee "$2/unfinished"
 }
 
 # step KIND NAME TIMEOUT COMMAND...: runs COMMAND with its output in the step's folder, its

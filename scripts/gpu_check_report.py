@@ -74,15 +74,13 @@ def test_result(step):
     if result["status"] != "passed":
         result["tail"] = tail(output)
     if result["status"] == "timeout":
-        # The tests the binary lists (gpu_check.sh keeps `--list`'s names as `listed`) that got
-        # no result before the cut: with one test at a time, the first of them is the one it
-        # was cut in, which libtest names as it starts ("test NAME ... " with nothing after).
-        finished = set(re.findall(r"^test (\S+) \.\.\. (?:ok|FAILED|ignored)", output, re.M))
-        listed = (step.get("listed") or "").split()
-        if listed:
-            result["unfinished"] = [name for name in listed if name not in finished]
+        # The tests that got no result before the cut, as gpu_check.sh found them for its rerun;
+        # with one test at a time, the one it was cut in, which libtest names as it starts
+        # ("test NAME ... " with nothing after).
+        if step.get("unfinished"):
+            result["unfinished"] = step["unfinished"].split()
         started = re.findall(r"^test (\S+) \.\.\. *$", step.get("stdout") or "", re.M)
-        if started and started[-1] not in finished:
+        if started:
             result["cut_in"] = started[-1]
     return result
 
@@ -191,7 +189,7 @@ def adapters_result(step):
 def load_step(path):
     step = {"name": os.path.basename(path).split("-", 1)[-1]}
     for field in ("kind", "name", "command", "stdout", "stderr", "skipped", "demo_out",
-                  "job_steps", "env", "listed"):
+                  "job_steps", "env", "unfinished"):
         value = read(os.path.join(path, field))
         if value is not None:
             step[field] = value if field in ("stdout", "stderr", "command") else value.strip()

@@ -137,7 +137,7 @@ exit 101
 const STUB_HANGS: &str = r#"#!/bin/sh
 case "$*" in
   "--list --format terse") printf 'quick: test\nstuck: test\nafter: test\n'; exit 0 ;;
-  "--test-threads=1 --exact after stuck") printf 'test after ... ok\ntest stuck ... '; exec sleep 30 ;;
+  "--test-threads=1 --exact stuck after") printf 'test after ... ok\ntest stuck ... '; exec sleep 30 ;;
   "") echo "test quick ... ok"; exec sleep 30 ;;
   *) echo "unexpected arguments: $*"; exit 2 ;;
 esac
