@@ -20,6 +20,7 @@ mod dataset_root;
 pub mod distortion;
 #[doc(hidden)]
 pub mod fuzz_entry;
+pub mod id_runs;
 mod images;
 mod jpeg_scaled;
 pub mod masks;

@@ -15,6 +15,7 @@ use crate::OBJECT_NONE;
 use crate::loss::object_cell_map;
 use segsplat_gpu::GpuContext;
 use segsplat_scene::Level;
+use segsplat_scene::id_runs::id_pixel_counts;
 
 /// When and how strongly the object loss acts. Stage boundaries are fractions of the run's
 /// steps so one config serves short and long runs (released: 5k / 5k / rest of 40k).
@@ -207,11 +208,9 @@ impl ObjectTargets {
 
 /// The objects of an id map, sorted, and each one's pixels.
 fn present_objects(ids: &[u32]) -> (Vec<u32>, Vec<u32>) {
-    let mut sorted: Vec<u32> = ids.iter().copied().filter(|&id| id != 0).collect();
-    sorted.sort_unstable();
-    sorted
-        .chunk_by(|a, b| a == b)
-        .map(|run| (run[0], run.len() as u32))
+    id_pixel_counts(ids)
+        .into_iter()
+        .map(|(id, pixels)| (id, pixels as u32))
         .unzip()
 }
 

@@ -20,6 +20,7 @@ use super::track_merge::IdRemap;
 use super::view_masks::ViewMaskSet;
 use segsplat_engine::GaussianModel;
 use segsplat_scene::Level;
+use segsplat_scene::id_runs::id_runs;
 
 /// Points carved per object, and what they were carved from besides the masks.
 #[derive(Debug, Clone, Default)]
@@ -104,10 +105,8 @@ impl CarvedHulls {
             for view in &masks.views {
                 let (width, height) = (view.width as usize, view.height as usize);
                 let ids = view.ids(level);
-                for (pixel, id) in ids.iter().enumerate() {
-                    if !remap.contains_key(id) {
-                        continue;
-                    }
+                let merged_away = id_runs(ids).filter(|(id, _)| remap.contains_key(id));
+                for pixel in merged_away.flat_map(|(_, pixels)| pixels) {
                     let (x, y) = (pixel % width, pixel / width);
                     for ny in y.saturating_sub(1)..(y + 2).min(height) {
                         for nx in x.saturating_sub(1)..(x + 2).min(width) {

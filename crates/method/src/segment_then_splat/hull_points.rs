@@ -14,6 +14,7 @@ use super::carved_hulls::CarvedHulls;
 use super::view_masks::{ViewMaskSet, ViewMasks};
 use segsplat_engine::GaussianModel;
 use segsplat_scene::Level;
+use segsplat_scene::id_runs::{id_pixel_counts, id_runs};
 
 /// How missed objects are filled.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -87,8 +88,9 @@ pub fn hull_points_for_missed_objects(
                 }
                 let source = &masks.views[source_index];
                 let depths = *depth_ranges[source_index].get_or_init(|| depth_range(source, model));
+                let pixels = object_pixels(source, level, object_id);
                 let object_points =
-                    carve_object(masks, level, object_id, source_index, depths, fill);
+                    carve_object(masks, level, object_id, source_index, &pixels, depths, fill);
                 Some(object_points)
             })
             .collect();
@@ -113,13 +115,19 @@ fn object_areas(masks: &ViewMaskSet, level: Level) -> BTreeMap<u32, Vec<usize>> 
     let views = masks.views.len();
     let mut areas: BTreeMap<u32, Vec<usize>> = BTreeMap::new();
     for (index, view) in masks.views.iter().enumerate() {
-        for &id in view.ids(level) {
-            if id != 0 {
-                areas.entry(id).or_insert_with(|| vec![0; views])[index] += 1;
-            }
+        for (id, pixels) in id_pixel_counts(view.ids(level)) {
+            areas.entry(id).or_insert_with(|| vec![0; views])[index] = pixels;
         }
     }
     areas
+}
+
+/// The pixels of `object_id` in `view` at `level`, ascending.
+fn object_pixels(view: &ViewMasks, level: Level, object_id: u32) -> Vec<usize> {
+    id_runs(view.ids(level))
+        .filter(|(id, _)| *id == object_id)
+        .flat_map(|(_, pixels)| pixels)
+        .collect()
 }
 
 /// The view where an object is largest (the last of equals, as `Iterator::max_by_key` picks),
@@ -129,34 +137,46 @@ fn largest_view(per_view: &[usize]) -> Option<usize> {
     (area > 0).then_some(index)
 }
 
+/// Carves the object from rays through `pixels`, its pixels in the source view, ascending.
 fn carve_object(
     masks: &ViewMaskSet,
     level: Level,
     object_id: u32,
     source_index: usize,
+    pixels: &[usize],
     depths: (f32, f32),
     fill: HullFill,
 ) -> Vec<Vec3> {
-    carve_object_with(masks, level, object_id, source_index, depths, fill, true)
+    let carve = Carve {
+        level,
+        object_id,
+        source_index,
+        fill,
+        stop_early: true,
+    };
+    carve_object_with(masks, carve, pixels, depths)
+}
+
+/// One object's carve: what `inside_hull` asks every view about.
+#[derive(Debug, Clone, Copy)]
+struct Carve {
+    level: Level,
+    object_id: u32,
+    source_index: usize,
+    fill: HullFill,
+    stop_early: bool,
 }
 
 fn carve_object_with(
     masks: &ViewMaskSet,
-    level: Level,
-    object_id: u32,
-    source_index: usize,
+    carve: Carve,
+    pixels: &[usize],
     (near, far): (f32, f32),
-    fill: HullFill,
-    stop_early: bool,
 ) -> Vec<Vec3> {
+    let Carve {
+        source_index, fill, ..
+    } = carve;
     let source = &masks.views[source_index];
-    let pixels: Vec<usize> = source
-        .ids(level)
-        .iter()
-        .enumerate()
-        .filter(|(_, id)| **id == object_id)
-        .map(|(pixel, _)| pixel)
-        .collect();
     if pixels.is_empty() {
         return Vec::new();
     }
@@ -177,15 +197,7 @@ fn carve_object_with(
             let t = (sample as f32 + 0.5) / fill.depth_samples as f32;
             let depth = near + t * (far - near);
             let point = origin + direction * depth;
-            if inside_hull(
-                masks,
-                source_index,
-                level,
-                object_id,
-                point,
-                fill,
-                stop_early,
-            ) {
+            if inside_hull(masks, carve, point) {
                 kept.push(point);
             }
         }
@@ -199,15 +211,14 @@ fn carve_object_with(
 /// `fill.min_agreement` even if every one of them saw the point inside: most samples along a
 /// ray lie outside the object, and a handful of views settles that (the answer is the same as
 /// asking every view, which the tests check).
-fn inside_hull(
-    masks: &ViewMaskSet,
-    source_index: usize,
-    level: Level,
-    object_id: u32,
-    point: Vec3,
-    fill: HullFill,
-    stop_early: bool,
-) -> bool {
+fn inside_hull(masks: &ViewMaskSet, carve: Carve, point: Vec3) -> bool {
+    let Carve {
+        level,
+        object_id,
+        source_index,
+        fill,
+        stop_early,
+    } = carve;
     let others = masks.views.len() - usize::from(source_index < masks.views.len());
     let (mut seen, mut inside, mut asked) = (0usize, 0usize, 0usize);
     for (index, view) in masks.views.iter().enumerate() {
@@ -302,15 +313,21 @@ mod tests {
                     continue;
                 };
                 let depths = depth_range(source, model);
-                points.extend(carve_object_with(
-                    masks,
+                let pixels: Vec<usize> = source
+                    .ids(level)
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, id)| **id == object_id)
+                    .map(|(pixel, _)| pixel)
+                    .collect();
+                let carve = Carve {
                     level,
                     object_id,
                     source_index,
-                    depths,
                     fill,
-                    false,
-                ));
+                    stop_early: false,
+                };
+                points.extend(carve_object_with(masks, carve, &pixels, depths));
             }
         }
         points

@@ -22,6 +22,7 @@ use segsplat_engine::model::SH_C0;
 use segsplat_engine::schedule::scene_extent;
 use segsplat_engine::train::TrainConfig;
 use segsplat_engine::{GaussianModel, OBJECT_NONE};
+use segsplat_scene::id_runs::replace_ids;
 use segsplat_scene::{Level, Scene};
 
 /// When two objects of a level are one.
@@ -188,11 +189,7 @@ fn apply_remaps(masks: &mut ViewMaskSet, remaps: &[IdRemap; 3]) -> Result<(), Vi
         .map(|view| {
             let mut ids = view.level_ids();
             for (level_ids, remap) in ids.iter_mut().zip(remaps) {
-                for id in level_ids.iter_mut() {
-                    if let Some(&merged) = remap.get(id) {
-                        *id = merged;
-                    }
-                }
+                replace_ids(level_ids, |id| remap.get(&id).copied());
             }
             view.with_level_ids(ids)
         })

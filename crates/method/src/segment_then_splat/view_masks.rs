@@ -9,6 +9,7 @@ use glam::Vec3;
 
 use segsplat_engine::RenderCamera;
 use segsplat_engine::camera::CameraError;
+use segsplat_scene::id_runs::id_runs;
 use segsplat_scene::{
     Frame, InstanceMask, Level, Scene, SceneError, load_instance_mask, scale_for_max_side,
     scaled_size,
@@ -205,10 +206,8 @@ impl ViewMasks {
 
     /// Ids present at `level` (sorted, without 0).
     pub fn objects_at(&self, level: Level) -> Vec<u32> {
-        let mut present: Vec<u32> = self
-            .ids(level)
-            .iter()
-            .copied()
+        let mut present: Vec<u32> = id_runs(self.ids(level))
+            .map(|(id, _)| id)
             .filter(|&id| id != 0)
             .collect();
         present.sort_unstable();
@@ -223,8 +222,7 @@ impl ViewMaskSet {
         let ids: std::collections::BTreeSet<u32> = self
             .views
             .iter()
-            .flat_map(|view| view.ids(level).iter().copied())
-            .filter(|&id| id != 0)
+            .flat_map(|view| view.objects_at(level))
             .collect();
         ids.len()
     }

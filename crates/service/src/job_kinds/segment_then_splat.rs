@@ -38,6 +38,7 @@ use segsplat_method::segment_then_splat::training::{
     segmented_trainer_from_view_masks, training_frames,
 };
 use segsplat_method::segment_then_splat::view_masks::ViewMaskSet;
+use segsplat_scene::id_runs::replace_ids;
 use segsplat_scene::{Level, LoadOptions, Scene, SceneFormat, load_frame_rgb, load_scene};
 use segsplat_vision::language::{EmbeddingAccumulator, ObjectView, image_model_id};
 use segsplat_vision::models::clip::ClipImageEncoder;
@@ -334,12 +335,10 @@ fn embed_objects(
         let image = load_frame_rgb(scene, view.frame_index, max_side).map_err(retryable)?;
         let image = image::DynamicImage::ImageRgb32F(image).into_rgb8();
         // Only objects that kept Gaussians can answer a query: the others are not embedded.
-        let ids = Level::ALL.map(|level| {
-            view.ids(level)
-                .iter()
-                .map(|&id| if kept.contains(&(level, id)) { id } else { 0 })
-                .collect::<Vec<u32>>()
-        });
+        let mut ids = view.level_ids();
+        for (level, level_ids) in Level::ALL.into_iter().zip(&mut ids) {
+            replace_ids(level_ids, |id| (!kept.contains(&(level, id))).then_some(0));
+        }
         let object_view = ObjectView {
             image: &image,
             ids: [&ids[0][..], &ids[1][..], &ids[2][..]],
