@@ -7,6 +7,7 @@
 
 use rand::Rng;
 use rand::seq::IndexedRandom;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use std::collections::BTreeSet;
@@ -136,12 +137,13 @@ impl ObjectLossConfig {
 /// Bounds the loss slots a step needs (1 + 3 levels x m).
 pub const MAX_OBJECTS_PER_LEVEL: u32 = 16;
 
-/// One training view's object masks, as the trainer is given them.
-pub struct ViewIdMaps {
+/// One training view's object masks, as the trainer is given them (borrowed: they are copied
+/// once, into the GPU's buffers).
+pub struct ViewIdMaps<'a> {
     /// Pixels per row of every level's map.
     pub width: u32,
     /// Per level: `width * height` u32 object ids (0 = none), row-major.
-    pub ids: [Vec<u32>; 3],
+    pub ids: [&'a [u32]; 3],
 }
 
 /// One training view's object masks on the GPU.
@@ -168,7 +170,9 @@ pub struct ObjectTargets {
 
 impl ObjectTargets {
     /// Uploads per-view id maps. `masks[v]` must have the training view's size.
-    pub fn upload(ctx: &GpuContext, masks: Vec<ViewIdMaps>) -> Self {
+    /// What each view's maps say (objects, their pixels, the squares' objects) is worked out on
+    /// every core; the uploads follow in view order.
+    pub fn upload(ctx: &GpuContext, masks: &[ViewIdMaps]) -> Self {
         let buffer = |label, contents: &[u32]| {
             wgpu::util::DeviceExt::create_buffer_init(
                 &ctx.device,
@@ -179,28 +183,31 @@ impl ObjectTargets {
                 },
             )
         };
-        let views = masks
-            .into_iter()
+        let summaries: Vec<_> = masks
+            .par_iter()
             .map(|view| {
-                let levels = &view.ids;
-                let [small, middle, large] =
-                    std::array::from_fn(|level| present_objects(&levels[level]));
-                let present = [small.0, middle.0, large.0];
-                let mask_pixels = [small.1, middle.1, large.1];
-                ViewObjectMasks {
-                    ids: std::array::from_fn(|level| buffer("object mask", &levels[level])),
-                    cell_maps: std::array::from_fn(|level| {
-                        buffer(
-                            "object cell map",
-                            &object_cell_map(&levels[level], view.width),
-                        )
-                    }),
+                let [small, middle, large] = view.ids.map(present_objects);
+                let cell_maps = view.ids.map(|ids| object_cell_map(ids, view.width));
+                (
+                    [small.0, middle.0, large.0],
+                    [small.1, middle.1, large.1],
+                    cell_maps,
+                )
+            })
+            .collect();
+        let views = masks
+            .iter()
+            .zip(summaries)
+            .map(
+                |(view, (present, mask_pixels, cell_maps))| ViewObjectMasks {
+                    ids: view.ids.map(|ids| buffer("object mask", ids)),
+                    cell_maps: cell_maps.map(|map| buffer("object cell map", &map)),
                     width: view.width,
                     present,
                     mask_pixels,
-                    pixel_counts: std::array::from_fn(|level| levels[level].len()),
-                }
-            })
+                    pixel_counts: view.ids.map(<[u32]>::len),
+                },
+            )
             .collect();
         Self { views }
     }

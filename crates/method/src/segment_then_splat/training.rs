@@ -19,7 +19,7 @@ use segsplat_engine::train::{
     ObjectLossConfig, ObjectTargets, TrainConfig, TrainError, Trainer, ViewIdMaps,
 };
 use segsplat_gpu::GpuContext;
-use segsplat_scene::{Scene, SparsePoints};
+use segsplat_scene::{Level, Scene, SparsePoints};
 use segsplat_vision::segment::MaskGenerator;
 
 /// Gaussians each object keeps at least (small, middle, large), or all it has when fewer: the
@@ -276,14 +276,14 @@ pub fn attach_object_training(
     trainer.set_prune_guard(Box::new(ObjectFloor {
         floors: options.object_floors,
     }));
-    let ids = masks
+    let ids: Vec<ViewIdMaps> = masks
         .views
         .iter()
         .map(|view| ViewIdMaps {
             width: view.camera.width,
-            ids: view.level_ids(),
+            ids: Level::ALL.map(|level| view.ids(level)),
         })
         .collect();
-    trainer.set_object_targets(ObjectTargets::upload(ctx, ids))?;
+    trainer.set_object_targets(ObjectTargets::upload(ctx, &ids))?;
     Ok(())
 }
