@@ -33,6 +33,69 @@ pub fn id_pixel_counts(ids: &[u32]) -> Vec<(u32, usize)> {
     counts
 }
 
+/// The smallest pixel rectangle holding every pixel of one id: columns `x_min..=x_max`, rows
+/// `y_min..=y_max`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PixelBounds {
+    pub x_min: u32,
+    pub y_min: u32,
+    pub x_max: u32,
+    pub y_max: u32,
+}
+
+impl PixelBounds {
+    fn join(self, other: Self) -> Self {
+        Self {
+            x_min: self.x_min.min(other.x_min),
+            y_min: self.y_min.min(other.y_min),
+            x_max: self.x_max.max(other.x_max),
+            y_max: self.y_max.max(other.y_max),
+        }
+    }
+
+    /// Whether any pixel of the rectangle lies in columns `x..=x + 1` and rows `y..=y + 1`.
+    pub fn touches_square(&self, x: i64, y: i64) -> bool {
+        x + 1 >= i64::from(self.x_min)
+            && x <= i64::from(self.x_max)
+            && y + 1 >= i64::from(self.y_min)
+            && y <= i64::from(self.y_max)
+    }
+}
+
+/// Every object of an id map `width` pixels wide (0 left out), ascending, with its bounds.
+pub fn id_bounds(ids: &[u32], width: usize) -> Vec<(u32, PixelBounds)> {
+    let width = width.max(1);
+    let mut runs: Vec<(u32, PixelBounds)> = id_runs(ids)
+        .filter(|(id, _)| *id != 0)
+        .map(|(id, pixels)| {
+            let (first, last) = (pixels.start, pixels.end - 1);
+            let (y_min, y_max) = (first / width, last / width);
+            // A run that wraps onto the next row holds the last column and the first.
+            let (x_min, x_max) = if y_min == y_max {
+                (first % width, last % width)
+            } else {
+                (0, width - 1)
+            };
+            let bounds = PixelBounds {
+                x_min: x_min as u32,
+                y_min: y_min as u32,
+                x_max: x_max as u32,
+                y_max: y_max as u32,
+            };
+            (id, bounds)
+        })
+        .collect();
+    runs.sort_unstable_by_key(|&(id, _)| id);
+    let mut joined: Vec<(u32, PixelBounds)> = Vec::new();
+    for (id, bounds) in runs {
+        match joined.last_mut() {
+            Some((last, so_far)) if *last == id => *so_far = so_far.join(bounds),
+            _ => joined.push((id, bounds)),
+        }
+    }
+    joined
+}
+
 /// Replaces every id `replacement` maps to something, run by run.
 pub fn replace_ids(ids: &mut [u32], mut replacement: impl FnMut(u32) -> Option<u32>) {
     for run in ids.chunk_by_mut(|a, b| a == b) {
@@ -94,6 +157,38 @@ mod tests {
             assert_eq!(id_pixel_counts(&ids), expected);
         }
         assert!(id_pixel_counts(&[0, 0, 0]).is_empty());
+    }
+
+    #[test]
+    fn bounds_are_the_pixels_tightest_rectangle() {
+        for (seed, width) in [(1, 37), (2, 100), (4, 1)] {
+            let ids = random_ids(seed, 3700, 30);
+            let mut expected: BTreeMap<u32, PixelBounds> = BTreeMap::new();
+            for (pixel, &id) in ids.iter().enumerate().filter(|(_, id)| **id != 0) {
+                let (x, y) = ((pixel % width) as u32, (pixel / width) as u32);
+                let here = PixelBounds {
+                    x_min: x,
+                    y_min: y,
+                    x_max: x,
+                    y_max: y,
+                };
+                expected
+                    .entry(id)
+                    .and_modify(|bounds| *bounds = bounds.join(here))
+                    .or_insert(here);
+            }
+            let expected: Vec<(u32, PixelBounds)> = expected.into_iter().collect();
+            assert_eq!(id_bounds(&ids, width), expected, "width {width}");
+        }
+        let bounds = PixelBounds {
+            x_min: 4,
+            y_min: 2,
+            x_max: 6,
+            y_max: 2,
+        };
+        assert!(bounds.touches_square(3, 1) && bounds.touches_square(6, 2));
+        assert!(!bounds.touches_square(2, 2) && !bounds.touches_square(7, 2));
+        assert!(!bounds.touches_square(4, 0) && !bounds.touches_square(4, 3));
     }
 
     #[test]

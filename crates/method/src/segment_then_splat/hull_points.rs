@@ -14,7 +14,7 @@ use super::carved_hulls::CarvedHulls;
 use super::view_masks::{ViewMaskSet, ViewMasks};
 use segsplat_engine::GaussianModel;
 use segsplat_scene::Level;
-use segsplat_scene::id_runs::{id_pixel_counts, id_runs};
+use segsplat_scene::id_runs::{PixelBounds, id_bounds, id_pixel_counts, id_runs};
 
 /// How missed objects are filled.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -54,8 +54,8 @@ impl Default for HullFill {
 /// The figurine at 256 px has hundreds of such objects; each used to rescan every view's mask
 /// for its area and project every point for its depth range (4.9 s of the job's lost-track merge
 /// on two cores, and again when the trainer was built). The areas, vote counts and depth ranges
-/// are now counted once, and the objects are carved in parallel: the same points, in the same
-/// order.
+/// are now counted once (the areas and each object's bounds in every view run by run), and the
+/// objects are carved in parallel: the same points, in the same order.
 pub fn hull_points_for_missed_objects(
     masks: &ViewMaskSet,
     model: &GaussianModel,
@@ -80,6 +80,11 @@ pub fn hull_points_for_missed_objects(
             .filter(|(id, _)| voted.get(id).copied().unwrap_or(0) < fill.min_gaussians)
             .filter_map(|(&id, per_view)| Some((id, largest_view(per_view)?)))
             .collect();
+        let bounds: Vec<Vec<(u32, PixelBounds)>> = masks
+            .views
+            .par_iter()
+            .map(|view| id_bounds(view.ids(level), view.width as usize))
+            .collect();
         let fresh: Vec<Option<Vec<Vec3>>> = missed
             .par_iter()
             .map(|&(object_id, source_index)| {
@@ -89,9 +94,22 @@ pub fn hull_points_for_missed_objects(
                 let source = &masks.views[source_index];
                 let depths = *depth_ranges[source_index].get_or_init(|| depth_range(source, model));
                 let pixels = object_pixels(source, level, object_id);
-                let object_points =
-                    carve_object(masks, level, object_id, source_index, &pixels, depths, fill);
-                Some(object_points)
+                let object_bounds: Vec<Option<PixelBounds>> = bounds
+                    .iter()
+                    .map(|view_bounds| {
+                        let found = view_bounds.binary_search_by_key(&object_id, |(id, _)| *id);
+                        found.ok().map(|index| view_bounds[index].1)
+                    })
+                    .collect();
+                let carve = Carve {
+                    level,
+                    object_id,
+                    source_index,
+                    fill,
+                    stop_early: true,
+                    bounds: Some(&object_bounds),
+                };
+                Some(carve_object(masks, carve, &pixels, depths))
             })
             .collect();
         for (&(object_id, _), fresh) in missed.iter().zip(fresh) {
@@ -137,37 +155,22 @@ fn largest_view(per_view: &[usize]) -> Option<usize> {
     (area > 0).then_some(index)
 }
 
-/// Carves the object from rays through `pixels`, its pixels in the source view, ascending.
-fn carve_object(
-    masks: &ViewMaskSet,
-    level: Level,
-    object_id: u32,
-    source_index: usize,
-    pixels: &[usize],
-    depths: (f32, f32),
-    fill: HullFill,
-) -> Vec<Vec3> {
-    let carve = Carve {
-        level,
-        object_id,
-        source_index,
-        fill,
-        stop_early: true,
-    };
-    carve_object_with(masks, carve, pixels, depths)
-}
-
 /// One object's carve: what `inside_hull` asks every view about.
 #[derive(Debug, Clone, Copy)]
-struct Carve {
+struct Carve<'a> {
     level: Level,
     object_id: u32,
     source_index: usize,
     fill: HullFill,
+    /// Stop asking views once the answer is settled.
     stop_early: bool,
+    /// The object's bounds in each view (`None`: not in it), so a sample that projects away
+    /// from them is outside without reading the view's ids; `None`: read them always.
+    bounds: Option<&'a [Option<PixelBounds>]>,
 }
 
-fn carve_object_with(
+/// Carves the object from rays through `pixels`, its pixels in the source view, ascending.
+fn carve_object(
     masks: &ViewMaskSet,
     carve: Carve,
     pixels: &[usize],
@@ -218,6 +221,7 @@ fn inside_hull(masks: &ViewMaskSet, carve: Carve, point: Vec3) -> bool {
         source_index,
         fill,
         stop_early,
+        bounds,
     } = carve;
     let others = masks.views.len() - usize::from(source_index < masks.views.len());
     let (mut seen, mut inside, mut asked) = (0usize, 0usize, 0usize);
@@ -228,7 +232,12 @@ fn inside_hull(masks: &ViewMaskSet, carve: Carve, point: Vec3) -> bool {
         asked += 1;
         if let Some(position) = view.position_of_point(point) {
             seen += 1;
-            inside += usize::from(view.id_near(level, position) == object_id);
+            // `id_near` reads the pixel under the position and the 2 x 2 around it.
+            let square = [position[0] - 0.5, position[1] - 0.5].map(|side| side.floor() as i64);
+            let near_object = bounds.is_none_or(|bounds| {
+                bounds[index].is_some_and(|bounds| bounds.touches_square(square[0], square[1]))
+            });
+            inside += usize::from(near_object && view.id_near(level, position) == object_id);
             let left = others - asked;
             if stop_early && ((inside + left) as f32) < fill.min_agreement * (seen + left) as f32 {
                 return false;
@@ -326,8 +335,9 @@ mod tests {
                     source_index,
                     fill,
                     stop_early: false,
+                    bounds: None,
                 };
-                points.extend(carve_object_with(masks, carve, &pixels, depths));
+                points.extend(carve_object(masks, carve, &pixels, depths));
             }
         }
         points
