@@ -102,12 +102,9 @@ pub fn hull_points_for_missed_objects(
                     })
                     .collect();
                 let carve = Carve {
-                    level,
-                    object_id,
-                    source_index,
-                    fill,
                     stop_early: true,
                     bounds: Some(&object_bounds),
+                    ..Carve::asking_every_view(level, object_id, source_index, fill)
                 };
                 Some(carve_object(masks, carve, &pixels, depths))
             })
@@ -167,6 +164,25 @@ struct Carve<'a> {
     /// The object's bounds in each view (`None`: not in it), so a sample that projects away
     /// from them is outside without reading the view's ids; `None`: read them always.
     bounds: Option<&'a [Option<PixelBounds>]>,
+}
+
+impl Carve<'_> {
+    /// The carve that reads every other view's ids for every sample: the plain way.
+    fn asking_every_view(
+        level: Level,
+        object_id: u32,
+        source_index: usize,
+        fill: HullFill,
+    ) -> Self {
+        Self {
+            level,
+            object_id,
+            source_index,
+            fill,
+            stop_early: false,
+            bounds: None,
+        }
+    }
 }
 
 /// Carves the object from rays through `pixels`, its pixels in the source view, ascending.
@@ -329,14 +345,7 @@ mod tests {
                     .filter(|(_, id)| **id == object_id)
                     .map(|(pixel, _)| pixel)
                     .collect();
-                let carve = Carve {
-                    level,
-                    object_id,
-                    source_index,
-                    fill,
-                    stop_early: false,
-                    bounds: None,
-                };
+                let carve = Carve::asking_every_view(level, object_id, source_index, fill);
                 points.extend(carve_object(masks, carve, &pixels, depths));
             }
         }
