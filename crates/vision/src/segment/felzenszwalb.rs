@@ -197,7 +197,7 @@ impl PixelGraph {
         }
         // Components only grow, so an edge between two that already hold `min_size` pixels never
         // joins in this pass: only the edges touching a smaller one are looked at (the same
-        // joins in the same order; most edges are inside or between large regions).
+        // joins in the same order).
         let in_small: Vec<bool> = (0..pixel_count as u32)
             .map(|pixel| {
                 let root = components.find(pixel);
