@@ -80,11 +80,20 @@ pub fn hull_points_for_missed_objects(
             .filter(|(id, _)| voted.get(id).copied().unwrap_or(0) < fill.min_gaussians)
             .filter_map(|(&id, per_view)| Some((id, largest_view(per_view)?)))
             .collect();
-        let bounds: Vec<Vec<(u32, PixelBounds)>> = masks
-            .views
-            .par_iter()
-            .map(|view| id_bounds(view.ids(level), view.width as usize))
-            .collect();
+        // The views' bounds only for a level with objects left to carve: the trainer's model
+        // reuses most of the merge's carves.
+        let to_carve = missed
+            .iter()
+            .any(|&(id, _)| carved.get(level, id).is_none());
+        let bounds: Vec<Vec<(u32, PixelBounds)>> = if to_carve {
+            masks
+                .views
+                .par_iter()
+                .map(|view| id_bounds(view.ids(level), view.width as usize))
+                .collect()
+        } else {
+            Vec::new()
+        };
         let fresh: Vec<Option<Vec<Vec3>>> = missed
             .par_iter()
             .map(|&(object_id, source_index)| {
