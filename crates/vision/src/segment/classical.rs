@@ -17,7 +17,7 @@ use image::RgbImage;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::felzenszwalb::PixelGraph;
+use super::felzenszwalb::{MAX_PIXELS, PixelGraph};
 use super::mask::BitMask;
 use super::scored::{FrameMasks, ScoredMask};
 
@@ -31,6 +31,12 @@ pub enum ClassicalError {
     },
     #[error("cannot segment an empty {width}x{height} image")]
     EmptyImage { width: u32, height: u32 },
+    #[error("cannot segment a {width}x{height} image: at most {max_pixels} pixels")]
+    TooLarge {
+        width: u32,
+        height: u32,
+        max_pixels: u64,
+    },
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -359,6 +365,13 @@ pub fn classical_masks(
     let (width, height) = image.dimensions();
     if width == 0 || height == 0 {
         return Err(ClassicalError::EmptyImage { width, height });
+    }
+    if u64::from(width) * u64::from(height) > MAX_PIXELS {
+        return Err(ClassicalError::TooLarge {
+            width,
+            height,
+            max_pixels: MAX_PIXELS,
+        });
     }
     let pixel_scale =
         (u64::from(width) * u64::from(height)) as f32 / config.reference_pixels as f32;
