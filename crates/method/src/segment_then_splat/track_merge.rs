@@ -13,16 +13,16 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use glam::Vec3;
+use rayon::prelude::*;
 
 use super::carved_hulls::CarvedHulls;
 use super::id_voting::VotingRule;
 use super::training::{SegmentedTrainingError, initial_segmented_model};
-use super::view_masks::{ViewMaskSet, ViewMaskSetError};
+use super::view_masks::ViewMaskSet;
 use segsplat_engine::model::SH_C0;
 use segsplat_engine::schedule::scene_extent;
 use segsplat_engine::train::TrainConfig;
 use segsplat_engine::{GaussianModel, OBJECT_NONE};
-use segsplat_scene::id_runs::replace_ids;
 use segsplat_scene::{Level, Scene};
 
 /// When two objects of a level are one.
@@ -81,7 +81,7 @@ pub fn merge_lost_tracks(
         merge_ids(&appearance, &views_of, extent, rule)
     });
     carved.forget_remapped(masks, &remaps);
-    apply_remaps(masks, &remaps).map_err(SegmentedTrainingError::Masks)?;
+    apply_remaps(masks, &remaps);
     Ok((remaps.map(|remap| remap.len()), carved))
 }
 
@@ -179,22 +179,15 @@ fn find(parent: &mut [usize], mut index: usize) -> usize {
     index
 }
 
-fn apply_remaps(masks: &mut ViewMaskSet, remaps: &[IdRemap; 3]) -> Result<(), ViewMaskSetError> {
+fn apply_remaps(masks: &mut ViewMaskSet, remaps: &[IdRemap; 3]) {
     if remaps.iter().all(BTreeMap::is_empty) {
-        return Ok(());
+        return;
     }
-    let views = std::mem::take(&mut masks.views);
-    masks.views = views
-        .into_iter()
-        .map(|view| {
-            let mut ids = view.level_ids();
-            for (level_ids, remap) in ids.iter_mut().zip(remaps) {
-                replace_ids(level_ids, |id| remap.get(&id).copied());
-            }
-            view.with_level_ids(ids)
-        })
-        .collect::<Result<_, _>>()?;
-    Ok(())
+    masks.views.par_iter_mut().for_each(|view| {
+        for (level, remap) in Level::ALL.into_iter().zip(remaps) {
+            view.replace_ids(level, |id| remap.get(&id).copied());
+        }
+    });
 }
 
 #[cfg(test)]

@@ -185,13 +185,9 @@ mod tests {
         // Object 1 renamed 9 in the last view: two tracks; the first still recalls it.
         let mut split = truth.clone();
         for view in split.views.iter_mut().skip(5) {
-            let ids = view.level_ids().map(|level| {
-                level
-                    .into_iter()
-                    .map(|id| if id == 1 { 9 } else { id })
-                    .collect()
-            });
-            *view = view.clone().with_level_ids(ids).expect("same size");
+            for level in Level::ALL {
+                view.replace_ids(level, |id| (id == 1).then_some(9));
+            }
         }
         let quality = object_recall_and_duplicates(&split, &truth, Level::Small, 0.5).expect("ok");
         assert_eq!(quality.duplicated_objects, 1);

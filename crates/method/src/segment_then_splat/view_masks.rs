@@ -139,6 +139,12 @@ impl ViewMasks {
         self.ids.clone()
     }
 
+    /// Rewrites, in place and run by run, every id at `level` that `replacement` maps to
+    /// something.
+    pub fn replace_ids(&mut self, level: Level, replacement: impl FnMut(u32) -> Option<u32>) {
+        segsplat_scene::id_runs::replace_ids(&mut self.ids[level.index()], replacement);
+    }
+
     /// Mask pixels per full-resolution frame pixel.
     pub fn frame_scale(&self) -> f32 {
         self.scale
