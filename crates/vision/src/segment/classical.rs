@@ -366,16 +366,13 @@ pub fn classical_masks(
     if width == 0 || height == 0 {
         return Err(ClassicalError::EmptyImage { width, height });
     }
-    if u64::from(width) * u64::from(height) > MAX_PIXELS {
-        return Err(ClassicalError::TooLarge {
-            width,
-            height,
-            max_pixels: MAX_PIXELS,
-        });
-    }
     let pixel_scale =
         (u64::from(width) * u64::from(height)) as f32 / config.reference_pixels as f32;
-    let pixel_graph = PixelGraph::new(image, config.sigma);
+    let pixel_graph = PixelGraph::new(image, config.sigma).ok_or(ClassicalError::TooLarge {
+        width,
+        height,
+        max_pixels: MAX_PIXELS,
+    })?;
     let levels: Vec<Vec<ScoredMask>> = (0..3)
         .into_par_iter()
         .map(|level| {

@@ -162,26 +162,23 @@ pub struct PixelGraph {
 }
 
 impl PixelGraph {
-    /// The graph of `image`, which holds at most [`MAX_PIXELS`] pixels.
-    pub fn new(image: &RgbImage, sigma: f32) -> Self {
+    /// The graph of `image`; `None` when it holds more than [`MAX_PIXELS`] pixels.
+    pub fn new(image: &RgbImage, sigma: f32) -> Option<Self> {
         let width = image.width();
-        assert!(
-            u64::from(width) * u64::from(image.height()) <= MAX_PIXELS,
-            "PixelGraph::new: {}x{} is over MAX_PIXELS",
-            width,
-            image.height()
-        );
+        if u64::from(width) * u64::from(image.height()) > MAX_PIXELS {
+            return None;
+        }
         let mut edges = scan_edges(image, sigma);
         // A stable radix sort on the weight: equal weights keep their scan order, as a stable
         // comparison sort would (the reference code's order), so the regions do not depend on
         // the sort used.
         radsort::sort_by_key(&mut edges, |edge| (edge >> 32) as u32);
-        PixelGraph {
+        Some(PixelGraph {
             pixel_count: image.width() as usize * image.height() as usize,
             // Up-right wraps: `pixel - width + 1` in u32 arithmetic.
             neighbour_offset: [1, width, width + 1, 1u32.wrapping_sub(width)],
             edges,
-        }
+        })
     }
 
     /// An edge's weight and its two pixels.
@@ -266,7 +263,9 @@ mod tests {
     use super::*;
 
     fn felzenszwalb(image: &RgbImage, sigma: f32, k: f32, min_size: u64) -> (Vec<u32>, usize) {
-        PixelGraph::new(image, sigma).segment(k, min_size)
+        PixelGraph::new(image, sigma)
+            .expect("a small image")
+            .segment(k, min_size)
     }
 
     /// The radix sort keeps the order of a stable comparison sort, ties included: an image of
@@ -277,7 +276,7 @@ mod tests {
             let step = ((x * 7 + y * 13) ^ (x * y)) % 4;
             image::Rgb([60 * step as u8, 90, 255 - 50 * step as u8])
         });
-        let graph = PixelGraph::new(&image, 0.0);
+        let graph = PixelGraph::new(&image, 0.0).expect("a small image");
         let mut reference: Vec<(f32, u32, u32)> = scan_edges(&image, 0.0)
             .into_iter()
             .map(|edge| graph.unpack(edge))
@@ -302,7 +301,7 @@ mod tests {
         let image = RgbImage::from_fn(width, height, |x, y| {
             image::Rgb([x as u8 * 30, y as u8 * 40, 9])
         });
-        let graph = PixelGraph::new(&image, 0.0);
+        let graph = PixelGraph::new(&image, 0.0).expect("a small image");
         let mut expected = Vec::new();
         for y in 0..height as i64 {
             for x in 0..width as i64 {
@@ -356,7 +355,7 @@ mod tests {
                 };
                 image::Rgb([base + (noise >> 29) as u8, 100 + speckle, base])
             });
-            let graph = PixelGraph::new(&image, 0.5);
+            let graph = PixelGraph::new(&image, 0.5).expect("a small image");
             for (k, min_size) in [(50.0, 20), (300.0, 60), (1000.0, 200)] {
                 let plain = graph.segment_with(k, min_size, false);
                 assert_eq!(graph.segment(k, min_size), plain, "seed {seed}, k {k}");
