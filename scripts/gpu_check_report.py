@@ -299,7 +299,8 @@ HOST = (("host_ms_per_step", "host ms/step", "{:.3f}"),
         ("compute_passes_per_step", "passes/step", "{:.1f}"),
         ("dispatches_per_step", "dispatches/step", "{:.1f}"),
         ("gpu_busy_fraction", "GPU busy", "{:.2f}"),
-        ("partial_filter_seconds", "partial-mask filter s", "{:.2f}"))
+        ("partial_filter_seconds", "partial-mask filter s", "{:.2f}"),
+        ("clamped_renders", "clamped renders", "{}"))
 
 
 def host_figures(host):

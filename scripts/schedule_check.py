@@ -48,6 +48,7 @@ def run_job(url, scene_id, config):
         "held_out_ssim": held_out.get("ssim"),
         "gpu_busy_fraction": training.get("gpu_busy_fraction"),
         "job_overhead_ratio": training.get("job_overhead_ratio"),
+        "clamped_renders": training.get("clamped_renders"),
         "curve": [[point["step"], round(point["psnr"], 2), round(point["train_seconds"], 1),
                    point["gaussians"]] for point in training.get("held_out_curve", [])],
     }

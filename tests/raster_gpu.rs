@@ -338,6 +338,30 @@ fn gpu_empty_and_culled_scenes_show_background() {
     assert!(visible.iter().any(|p| p[3] > 0.5));
 }
 
+/// Two forward renders, submitted and not read: what the training loop's steps leave for its
+/// next capacity read.
+fn render_twice(
+    ctx: &GpuContext,
+    renderer: &mut Renderer,
+    gaussians: &GpuGaussians,
+    camera: &RenderCamera,
+) {
+    for _ in 0..2 {
+        let mut encoder = segsplat_gpu::Encoder::new(ctx, "test");
+        let output = renderer
+            .forward(
+                ctx,
+                &mut encoder,
+                gaussians,
+                camera,
+                &RenderSettings::default(),
+            )
+            .unwrap();
+        ctx.submit(encoder.finish());
+        drop(output);
+    }
+}
+
 #[test]
 fn gpu_intersection_overflow_is_reported_and_grown() {
     let Some(ctx) = context() else { return };
@@ -367,6 +391,9 @@ fn gpu_intersection_overflow_is_reported_and_grown() {
     assert!(report.overflowed);
     assert_eq!(report.peak_intersections, needed);
     assert!(report.capacity >= needed);
+    // The clamped render was used (nothing rendered it again): counted.
+    assert_eq!(report.clamped_renders, 1);
+    assert_eq!(renderer.clamped_renders(), 1);
     renderer.set_intersection_capacity(1);
     let output = renderer
         .render_checked(&ctx, &gaussians, &camera, &settings)
@@ -374,6 +401,29 @@ fn gpu_intersection_overflow_is_reported_and_grown() {
     let gpu = output.read_image(&ctx).unwrap();
     let cpu = render_forward(&ReferenceGaussians::from_model(&model), &camera, &settings);
     assert!(max_image_error(&gpu, &cpu.image) < 2e-4);
+    // render_checked's clamped first attempt was rendered again, so it is not a used render;
+    // two renders that fit add nothing either.
+    assert_eq!(renderer.clamped_renders(), 1);
+    render_twice(&ctx, &mut renderer, &gaussians, &camera);
+    let report = renderer.sync_capacity(&ctx).unwrap();
+    assert!(!report.overflowed);
+    assert_eq!(report.clamped_renders, 0);
+    // Two clamped renders read without waiting, as the training loop reads them (a renderer of
+    // its own: the first one's pool holds workspaces that fit).
+    let mut renderer = Renderer::new(&ctx).unwrap();
+    renderer.set_intersection_capacity(1);
+    render_twice(&ctx, &mut renderer, &gaussians, &camera);
+    let mut encoder = segsplat_gpu::Encoder::new(&ctx, "test");
+    let slot = renderer.request_capacity_check(&mut encoder).unwrap();
+    ctx.submit(encoder.finish());
+    renderer.capacity_check_submitted(slot);
+    ctx.wait_idle().unwrap();
+    renderer.apply_capacity_check(&ctx).unwrap();
+    assert_eq!(renderer.clamped_renders(), 2);
+    assert!(renderer.intersection_capacity() >= needed);
+    // A sync after the deferred read finds no new clamped render: the count is not read twice.
+    assert_eq!(renderer.sync_capacity(&ctx).unwrap().clamped_renders, 0);
+    assert_eq!(renderer.clamped_renders(), 2);
 }
 
 #[test]

@@ -219,6 +219,9 @@ struct BenchReport {
     gaussians_end: usize,
     /// Gaussians densification may grow to (the config's, or the scene's).
     gaussian_budget: usize,
+    /// Training renders clamped to the intersection capacity (`Trainer::clamped_renders`):
+    /// steps whose images and gradients dropped tile entries.
+    clamped_renders: u64,
     /// Mean wall time of one forward render (submit to completion), at the start and the end.
     forward_ms_start: f64,
     forward_ms_end: f64,
@@ -429,6 +432,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     // The steps and the model the report's quality figures are of: the kernel profile below
     // trains more steps after them.
     let (trained_steps, gaussians_end) = (trainer.step(), trainer.gaussian_count());
+    let clamped_renders = trainer.clamped_renders();
     let kernel_profile = match args.profile_kernels {
         Some(steps) => Some(profile_kernels(&ctx, &mut trainer, steps, args.busy_steps)?),
         None => None,
@@ -487,6 +491,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         gaussians_start,
         gaussians_end,
         gaussian_budget: trainer.gaussian_budget(),
+        clamped_renders,
         forward_ms_start,
         forward_ms_end,
         backward_ms_start,

@@ -111,6 +111,9 @@ async fn reconstruct_job_trains_and_stores_artifacts() {
             && training["compute_passes_per_step"].as_f64().unwrap() >= 1.0,
         "{training}"
     );
+    // The trainer fits the intersection capacity before its first step and keeps up after it:
+    // no step of the job trained on a clamped render.
+    assert_eq!(training["clamped_renders"], 0, "{training}");
     // wgpu's `finish` is part of the host's own time.
     let finish = training["finish_ms_per_step"].as_f64().unwrap();
     assert!(

@@ -346,3 +346,41 @@ fn views_load_the_same_on_one_thread_and_on_several() {
     assert!(one_train == three_train, "training views differ");
     assert!(one_test == three_test, "held-out views differ");
 }
+
+/// A model that needs far more tile intersections at its first step than the renderer's initial
+/// guess (8 a Gaussian, at least 65,536) trains no step on clamped renders: the trainer fits the
+/// capacity to its first step's render before it (`Trainer::size_intersections`), where the
+/// first read of the renders' peak would come 25 steps in.
+#[test]
+fn the_first_steps_render_every_intersection() {
+    let Some(ctx) = new_gpu_context() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let scene = synthetic_scene(dir.path());
+    let cfg = TrainConfig {
+        coarse_until: Some(0),
+        densify_from: Some(10_000),
+        ..config(30)
+    };
+    // 6000 wide Gaussians at the middle of the scene, where every camera looks: each covers all
+    // 12 tiles of a view, so a step needs 72,000 intersections (the initial guess: 65,536).
+    let mut wide = segsplat_engine::GaussianModel::default();
+    for index in 0..6000 {
+        let mean = [index as f32 * 1e-5, 0.0, 0.0];
+        wide.push_simple(
+            mean,
+            [8.0f32.ln(); 3],
+            [1.0, 0.0, 0.0, 0.0],
+            0.0,
+            [0.5; 3],
+            [0; 3],
+        );
+    }
+    let mut trainer = Trainer::new(&ctx, &scene, cfg, Some(wide)).unwrap();
+    let progress = trainer.run(|_| true).unwrap();
+    assert_eq!(progress.step, 30);
+    assert_eq!(
+        trainer.clamped_renders(),
+        0,
+        "steps trained on clamped renders"
+    );
+}

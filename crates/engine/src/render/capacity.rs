@@ -18,30 +18,67 @@ pub struct CapacityReport {
     /// Some render since the previous sync needed more intersections than its buffers held, so
     /// it dropped tile entries (its image and gradients are approximate).
     pub overflowed: bool,
+    /// How many renders since the previous read did.
+    pub clamped_renders: u32,
 }
 
 /// Grow when the peak passes this fraction of the capacity.
 const GROW_AT_FRACTION: f64 = 0.8;
 /// New capacity = peak x this.
 const GROWTH_FACTOR: f64 = 1.5;
+
+/// The words of [`Renderer::peak_intersections`], which tile_budget.wgsl writes: the running
+/// maximum of unclamped intersection counts since the host last cleared it, and the renders
+/// clamped so far. The count is never cleared, so a read-back copy that is dropped for a newer
+/// one (`DeferredRead` keeps only the newest) loses none of it.
+pub(super) const PEAK_WORDS: u64 = 2;
+const PEAK_BYTES: u64 = 4;
+
+struct PeakWords {
+    peak: u32,
+    clamped_so_far: u32,
+}
+
+impl PeakWords {
+    fn parse(words: &[u32]) -> Self {
+        Self {
+            peak: words.first().copied().unwrap_or(0),
+            clamped_so_far: words.get(1).copied().unwrap_or(0),
+        }
+    }
+}
+
 impl Renderer {
     /// Reads the peak intersection count of the renders since the last sync (one small
     /// read-back; waits for submitted work), grows the capacity when the peak nears it, and
-    /// reports whether any of those renders overflowed.
+    /// reports whether any of those renders overflowed. Their clamped renders count as used
+    /// ([`Renderer::clamped_renders`]).
     pub fn sync_capacity(&mut self, ctx: &GpuContext) -> Result<CapacityReport, RenderError> {
-        let peak = ctx.read_vec::<u32>(&self.peak_intersections)?[0];
+        let report = self.sync_capacity_to_retry(ctx)?;
+        self.clamped_renders += u64::from(report.clamped_renders);
+        Ok(report)
+    }
+
+    /// [`Self::sync_capacity`] for a caller that renders again whatever overflowed, so its
+    /// clamped renders are not counted as used.
+    pub fn sync_capacity_to_retry(
+        &mut self,
+        ctx: &GpuContext,
+    ) -> Result<CapacityReport, RenderError> {
+        let words = PeakWords::parse(&ctx.read_vec::<u32>(&self.peak_intersections)?);
         ctx.queue
             .write_buffer(&self.peak_intersections, 0, bytemuck::bytes_of(&0u32));
         let used = self
             .smallest_capacity_used
             .take()
             .unwrap_or(self.intersection_capacity);
-        let overflowed = peak > used;
-        self.grow_for_peak(ctx, peak)?;
+        let overflowed = words.peak > used;
+        self.grow_for_peak(ctx, words.peak)?;
         Ok(CapacityReport {
-            peak_intersections: peak,
+            peak_intersections: words.peak,
             capacity: self.intersection_capacity,
             overflowed,
+            clamped_renders: self.clamped_since_last_read(words.clamped_so_far),
         })
     }
 
@@ -51,7 +88,7 @@ impl Renderer {
     /// copies are still on their way (the peak keeps counting until the next request).
     pub fn request_capacity_check(&mut self, encoder: &mut segsplat_gpu::Encoder) -> Option<usize> {
         let slot = self.peak_read.record(encoder, &self.peak_intersections)?;
-        encoder.clear_buffer(&self.peak_intersections, 0, None);
+        encoder.clear_buffer(&self.peak_intersections, 0, Some(PEAK_BYTES));
         Some(slot)
     }
 
@@ -61,15 +98,26 @@ impl Renderer {
     }
 
     /// Grows the capacity for the newest peak the device has delivered, without waiting (a
-    /// peak not delivered yet is applied at a later call). The training loop's renders clamp
-    /// to their capacity, so one that overflowed in between dropped tile entries for a step:
-    /// the cost of not draining the queue, the same as between two blocking syncs.
+    /// peak not delivered yet is applied at a later call), and counts the clamped renders it
+    /// reports as used. The training loop's renders clamp to their capacity, so one that
+    /// overflowed in between dropped tile entries for a step: the cost of not draining the
+    /// queue, the same as between two blocking syncs.
     pub fn apply_capacity_check(&mut self, ctx: &GpuContext) -> Result<(), RenderError> {
         let Some(bytes) = self.peak_read.take(ctx)? else {
             return Ok(());
         };
-        let peak = bytemuck::pod_read_unaligned::<u32>(&bytes[..4]);
-        self.grow_for_peak(ctx, peak)
+        let words = PeakWords::parse(&bytemuck::pod_collect_to_vec::<u8, u32>(&bytes));
+        let clamped = self.clamped_since_last_read(words.clamped_so_far);
+        self.clamped_renders += u64::from(clamped);
+        self.grow_for_peak(ctx, words.peak)
+    }
+
+    /// The renders clamped since the newest count read so far, given a count just read; a
+    /// copy older than that (a deferred one delivered after a sync) adds nothing.
+    fn clamped_since_last_read(&mut self, clamped_so_far: u32) -> u32 {
+        let new = clamped_so_far.saturating_sub(self.clamped_read);
+        self.clamped_read = self.clamped_read.max(clamped_so_far);
+        new
     }
 
     /// Grows the capacity to [`GROWTH_FACTOR`] x `peak` once `peak` passes

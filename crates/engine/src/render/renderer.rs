@@ -2,6 +2,7 @@
 
 use std::sync::Arc;
 
+use super::capacity::PEAK_WORDS;
 use super::kernels::{RasterVariant, RenderKernels};
 use super::output::{RenderError, RenderOutput};
 use super::uniforms::RenderUniforms;
@@ -27,23 +28,31 @@ pub(crate) const RENDER_ATTEMPTS: usize = 3;
 /// Capacity policy for tile intersections: the intersection buffers hold `capacity` entries
 /// (initially `max(65536, 8 x Gaussians)`, never above one storage binding). Every forward pass
 /// clamps its count to its capacity on the GPU (excess entries are dropped, never written out of
-/// bounds) and folds its unclamped count into a running peak on the GPU. The caller reads that
-/// peak lazily with [`Renderer::sync_capacity`] (one-off renders: [`Renderer::render_checked`];
-/// the training loop every few dozen steps without waiting, [`Renderer::request_capacity_check`]), which grows the capacity to
-/// 1.5x the peak once the peak passes 80% and reports whether any render overflowed, so an
-/// overflow is never silent.
+/// bounds), folds its unclamped count into a running peak on the GPU and counts itself when it
+/// was clamped. The caller reads both lazily with [`Renderer::sync_capacity`] (one-off renders:
+/// [`Renderer::render_checked`]; the training loop every few dozen steps without waiting,
+/// [`Renderer::request_capacity_check`]), which grows the capacity to 1.5x the peak once the
+/// peak passes 80% and reports whether any render overflowed; the clamped renders that were used
+/// add up in [`Renderer::clamped_renders`], so an overflow is never silent.
 pub struct Renderer {
     pub(super) kernels: RenderKernels,
     pub(super) scan: ExclusiveScan,
     pub(super) sort: RadixSort,
     pub(super) pool: Arc<WorkspacePool>,
-    /// One u32: running maximum of unclamped intersection counts since the last sync.
+    /// [`PEAK_WORDS`]: the running maximum of unclamped intersection counts since the last
+    /// read, and how many renders were ever clamped to their capacity.
     pub(super) peak_intersections: wgpu::Buffer,
     pub(super) intersection_capacity: u32,
     /// Smallest capacity any render used since the last sync.
     pub(super) smallest_capacity_used: Option<u32>,
     /// The peak's deferred read-back for loops that must not wait ([`Self::request_capacity_check`]).
     pub(super) peak_read: DeferredRead,
+    /// Renders clamped to their capacity whose output was used (not rendered again), since
+    /// this renderer was made: each dropped tile entries, so its image and gradients were
+    /// approximate ([`Self::clamped_renders`]).
+    pub(super) clamped_renders: u64,
+    /// The newest count of clamped renders read from the GPU (its second word).
+    pub(super) clamped_read: u32,
 }
 
 impl std::fmt::Debug for Renderer {
@@ -68,7 +77,7 @@ impl Renderer {
             pool: Arc::new(WorkspacePool::default()),
             peak_intersections: ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("peak intersections"),
-                size: 4,
+                size: PEAK_WORDS * 4,
                 usage: wgpu::BufferUsages::STORAGE
                     | wgpu::BufferUsages::COPY_SRC
                     | wgpu::BufferUsages::COPY_DST,
@@ -76,13 +85,22 @@ impl Renderer {
             }),
             intersection_capacity: MIN_INTERSECTION_CAPACITY,
             smallest_capacity_used: None,
-            peak_read: DeferredRead::new(ctx, "peak intersections read-back", 4),
+            peak_read: DeferredRead::new(ctx, "peak intersections read-back", PEAK_WORDS * 4),
+            clamped_renders: 0,
+            clamped_read: 0,
         })
     }
 
     /// Current intersection capacity.
     pub fn intersection_capacity(&self) -> u32 {
         self.intersection_capacity
+    }
+
+    /// Renders whose intersections were clamped to the capacity and which were used as they
+    /// were (training steps between two capacity checks), as far as the reads so far know: the
+    /// count a run reports so that approximate steps are never silent.
+    pub fn clamped_renders(&self) -> u64 {
+        self.clamped_renders
     }
 
     /// Sets the intersection capacity (e.g. restored from a previous run).
@@ -505,7 +523,8 @@ impl Renderer {
         settings: &RenderSettings,
     ) -> Result<RenderOutput, RenderError> {
         let gaussians: GaussianView<'_> = gaussians.into();
-        // A pending sync from earlier renders must not be mistaken for this render's.
+        // A pending sync from earlier renders must not be mistaken for this render's (theirs
+        // were used: counted).
         self.sync_capacity(ctx)?;
         // Each retry grows the capacity to 1.5x the needed count, so the second attempt fits
         // unless the scene exceeds the adapter (an error from sync_capacity).
@@ -513,7 +532,7 @@ impl Renderer {
             let mut encoder = segsplat_gpu::Encoder::new(ctx, "render");
             let output = self.forward(ctx, &mut encoder, gaussians, camera, settings)?;
             ctx.submit_untimed(encoder.finish());
-            let report = self.sync_capacity(ctx)?;
+            let report = self.sync_capacity_to_retry(ctx)?;
             if !report.overflowed {
                 return Ok(output);
             }

@@ -22,6 +22,7 @@ mod dynamics;
 mod error;
 mod fit_check;
 mod initial;
+mod intersection_sizing;
 mod measure;
 mod object_separate;
 mod object_step;
@@ -125,6 +126,9 @@ pub struct Trainer {
     object_buffers: object_step::ObjectBuffers,
     /// The training resolution of the last step ([`TrainSchedule::resolution_divisor_at`]).
     resolution_divisor: Option<u32>,
+    /// Whether the intersection capacity was fitted to a render before this trainer's first
+    /// step ([`Self::size_intersections`]).
+    intersections_sized: bool,
     /// Gaussians densification may grow to (the config's, or the scene's).
     gaussian_budget: usize,
     /// The convergence stop's checks and verdict (`config.stop_when_converged`).
@@ -219,6 +223,7 @@ impl Trainer {
             stop_check: None,
             object_buffers: object_step::ObjectBuffers::default(),
             resolution_divisor: None,
+            intersections_sized: false,
             gaussian_budget,
             fit_check: fit_check::FitCheck::default(),
         };
@@ -262,6 +267,14 @@ impl Trainer {
 
     pub fn gaussian_count(&self) -> usize {
         self.gaussians.count()
+    }
+
+    /// Renders of this trainer's steps clamped to the intersection capacity (they dropped tile
+    /// entries, so their images and gradients were approximate), as of the last read of the
+    /// renderer's peak: exact after [`Self::progress`]. The capacity follows the peak a few
+    /// steps late, so a model or resolution that grows fast between two reads can clamp.
+    pub fn clamped_renders(&self) -> u64 {
+        self.renderer.clamped_renders()
     }
 
     pub fn config(&self) -> &TrainConfig {
@@ -317,6 +330,9 @@ impl Trainer {
         let time = self.training_time(view_time);
         let divisor = self.schedule.resolution_divisor_at(self.step);
         self.follow_resolution(divisor);
+        if !self.intersections_sized {
+            self.size_intersections(view_index, divisor, time, &settings)?;
+        }
         let output =
             self.encode_view_render(&mut encoder, view_index, divisor, time, &settings, true)?;
         // The object renders reuse the full render's projection and depth order, and add their
@@ -470,7 +486,9 @@ impl Trainer {
 
     /// Reads the latest loss and the renderer's intersection peak (a sync point).
     pub fn progress(&mut self) -> Result<TrainProgress, TrainError> {
+        let clamped_before = self.renderer.clamped_renders();
         self.renderer.sync_capacity(&self.ctx)?;
+        self.log_clamped_since(clamped_before);
         let losses: Vec<f32> = self.ctx.read_vec(&self.loss_values)?;
         self.last_losses = Some(losses);
         Ok(self.progress_from_last_losses())
@@ -492,7 +510,9 @@ impl Trainer {
         if let Some(slot) = peak_slot {
             self.renderer.capacity_check_submitted(slot);
         }
+        let clamped_before = self.renderer.clamped_renders();
         self.renderer.apply_capacity_check(&self.ctx)?;
+        self.log_clamped_since(clamped_before);
         let delivered = if self.last_losses.is_none() {
             self.loss_read.read_now(&self.ctx)?
         } else {
@@ -502,6 +522,21 @@ impl Trainer {
             self.last_losses = Some(bytemuck::pod_collect_to_vec(&bytes));
         }
         Ok(self.progress_from_last_losses())
+    }
+
+    /// Says in the log when a read found clamped renders (the step is the read's, up to a few
+    /// dozen steps after the renders), which the run's reports only count.
+    fn log_clamped_since(&self, before: u64) {
+        let clamped = self.renderer.clamped_renders() - before;
+        if clamped > 0 {
+            tracing::debug!(
+                step = self.step,
+                clamped,
+                capacity = self.renderer.intersection_capacity(),
+                gaussians = self.gaussians.count(),
+                "training renders clamped to the intersection capacity"
+            );
+        }
     }
 
     fn progress_from_last_losses(&self) -> TrainProgress {

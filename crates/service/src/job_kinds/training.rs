@@ -252,6 +252,11 @@ pub struct TrainingStageReport {
     /// scene loaded), and the seconds that took there; absent when it did not run or failed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kernels_compiled_ahead: Option<KernelsCompiledAhead>,
+    /// Training renders clamped to the intersection capacity, which grows a few steps behind
+    /// the renders' peak (`Trainer::clamped_renders`): steps whose images and gradients dropped
+    /// tile entries. 0 when the capacity kept up.
+    #[serde(default)]
+    pub clamped_renders: u64,
     /// Where the convergence stop ended training before its steps (a job that left `steps`
     /// out), and the check views' fit at every check: (step, mean PSNR).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -336,6 +341,7 @@ fn train_stage(
     let gpu = trainer.gpu().clone();
     let first_step = trainer.step();
     let filter_before = trainer.partial_filter_cost().seconds;
+    let clamped_before = trainer.clamped_renders();
     let dispatches_before = segsplat_gpu::dispatches_on_this_thread();
     let host_before = gpu.host_costs.reading_on_this_thread();
     let started = std::time::Instant::now();
@@ -421,6 +427,16 @@ fn train_stage(
             let host_at_eval = gpu.host_costs.reading_on_this_thread();
             let eval = trainer.evaluate().map_err(train_failure)?;
             outside_steps_host.add(&gpu.host_costs.reading_on_this_thread().since(&host_at_eval));
+            // In the log as it happens: the curve reaches metrics.json only when the job ends,
+            // and an operator watching a long job (or a comparison cut short) wants it now.
+            tracing::info!(
+                job = %ctx.job_id,
+                step = trainer.step(),
+                psnr = eval.psnr,
+                ssim = eval.ssim,
+                gaussians = trainer.gaussian_count(),
+                "held-out point"
+            );
             held_out_curve.push(HeldOutPoint {
                 step: trainer.step(),
                 train_seconds,
@@ -496,6 +512,7 @@ fn train_stage(
         setup_kernel_compile_seconds: 0.0,
         setup_kernels_reused: 0,
         kernels_compiled_ahead: None,
+        clamped_renders: trainer.clamped_renders() - clamped_before,
         converged_at: trainer.converged_at(),
         fit_checks: trainer.fit_checks().to_vec(),
         held_out_curve,

@@ -5,6 +5,9 @@
 // counts[0] = Gaussian count (written by the host), counts[1] = intersections to process,
 // counts[2..5] = indirect workgroup counts for one invocation per intersection (256 per group),
 // counts[5] = unclamped total of this render.
+// peak_intersections[0] = running maximum of the unclamped totals since the host last cleared
+// it, [1] = renders clamped so far (their total exceeded the capacity, so tile entries were
+// dropped; never cleared, so no read-back copy's count is lost).
 
 @group(0) @binding(0) var<uniform> uniforms: RenderUniforms;
 @group(0) @binding(1) var<storage, read> tile_offsets: array<u32>;
@@ -29,4 +32,7 @@ fn tile_budget() {
     counts[4] = 1u;
     counts[5] = total;
     atomicMax(&peak_intersections[0], total);
+    if total > uniforms.intersection_capacity {
+        atomicAdd(&peak_intersections[1], 1u);
+    }
 }

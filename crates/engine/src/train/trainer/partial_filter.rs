@@ -112,7 +112,7 @@ impl Trainer {
                 }
                 drop(base);
                 self.ctx.submit(encoder.finish());
-                match self.renderer.sync_capacity(&self.ctx) {
+                match self.renderer.sync_capacity_to_retry(&self.ctx) {
                     Ok(report) if !report.overflowed => break,
                     // The capacity has grown to fit: render the view again.
                     Ok(_) => {
