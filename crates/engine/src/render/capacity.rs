@@ -73,12 +73,15 @@ impl Renderer {
             .take()
             .unwrap_or(self.intersection_capacity);
         let overflowed = words.peak > used;
+        // Taken before growing, which fails for a peak past the adapter's limit: the caller
+        // that renders again in smaller pieces then must not find these renders counted later.
+        let clamped_renders = self.clamped_since_last_read(words.clamped_so_far);
         self.grow_for_peak(ctx, words.peak)?;
         Ok(CapacityReport {
             peak_intersections: words.peak,
             capacity: self.intersection_capacity,
             overflowed,
-            clamped_renders: self.clamped_since_last_read(words.clamped_so_far),
+            clamped_renders,
         })
     }
 
