@@ -75,6 +75,24 @@ impl ProgressReporter {
             what: "progress".to_string(),
             message: error.to_string(),
         })?;
+        // Steps past this run's first report are progress, as a checkpoint is: a crash of the
+        // process after them is not counted as an attempt (issue 39: a host that crashes
+        // between checkpoints must not starve a job that trains on each life). Noted before
+        // the report is stored, so whoever sees these steps (an operator, a test that then
+        // kills the host) finds them counted; fired after it, a kill could beat the note.
+        if self.steps_since_last_report(&progress) > 0 && !self.steps_noted.load(Ordering::Relaxed)
+        {
+            match self
+                .database
+                .record_checkpoint(&self.job_id, &self.lease_owner)
+                .await
+            {
+                Ok(_) => self.steps_noted.store(true, Ordering::Relaxed),
+                Err(error) => {
+                    tracing::warn!(%error, job_id = %self.job_id, "cannot note the job's steps")
+                }
+            }
+        }
         let recorded = self
             .database
             .record_progress(&self.job_id, &self.lease_owner, &payload)
@@ -89,23 +107,26 @@ impl ProgressReporter {
     /// Adds the steps done since the last report of the same stage to
     /// `segsplat_job_steps_total{worker, stage}`, so dashboards show steps/s per worker.
     fn count_steps(&self, progress: &Progress) {
+        let done = self.steps_since_last_report(progress);
         let Ok(mut last) = self.last_step.lock() else {
             return;
         };
-        let done = match last.as_ref() {
-            Some((stage, step)) if *stage == progress.stage => progress.step.saturating_sub(*step),
-            _ => 0,
-        };
         *last = Some((progress.stage.clone(), progress.step));
-        // Steps past this run's first report are progress, as a checkpoint is: a crash of the
-        // process after them is not counted as an attempt (issue 39: a host that crashes
-        // between checkpoints must not starve a job that trains on each life).
-        if done > 0 && !self.steps_noted.swap(true, Ordering::Relaxed) {
-            self.note_checkpoint();
-        }
         metrics::counter!("segsplat_job_steps_total", "worker" => self.lease_owner.clone(),
             "stage" => progress.stage.clone())
         .increment(done);
+    }
+
+    /// Steps `progress` is past the last recorded report of the same stage (0 for a first
+    /// report or a new stage).
+    fn steps_since_last_report(&self, progress: &Progress) -> u64 {
+        let Ok(last) = self.last_step.lock() else {
+            return 0;
+        };
+        match last.as_ref() {
+            Some((stage, step)) if *stage == progress.stage => progress.step.saturating_sub(*step),
+            _ => 0,
+        }
     }
 
     /// [`Self::report`] from blocking code (inside `spawn_blocking`).
