@@ -424,6 +424,30 @@ fn gpu_intersection_overflow_is_reported_and_grown() {
     // A sync after the deferred read finds no new clamped render: the count is not read twice.
     assert_eq!(renderer.sync_capacity(&ctx).unwrap().clamped_renders, 0);
     assert_eq!(renderer.clamped_renders(), 2);
+    // Two deferred copies delivered together, the big render's first: `DeferredRead` hands back
+    // only the newer, which must still hold the big render's peak.
+    let mut renderer = Renderer::new(&ctx).unwrap();
+    renderer.set_intersection_capacity(needed / 2);
+    let few = random_scene(62, 4, &camera);
+    let few = GpuGaussians::upload(&ctx, &few, few.len()).unwrap();
+    for scene in [&gaussians, &few] {
+        let mut encoder = segsplat_gpu::Encoder::new(&ctx, "test");
+        let output = renderer
+            .forward(&ctx, &mut encoder, scene, &camera, &settings)
+            .unwrap();
+        drop(output);
+        let slot = renderer.request_capacity_check(&mut encoder).unwrap();
+        ctx.submit(encoder.finish());
+        renderer.capacity_check_submitted(slot);
+    }
+    ctx.wait_idle().unwrap();
+    renderer.apply_capacity_check(&ctx).unwrap();
+    assert!(
+        renderer.intersection_capacity() >= needed,
+        "the big render's peak was lost: capacity {} < {needed}",
+        renderer.intersection_capacity()
+    );
+    assert_eq!(renderer.clamped_renders(), 1);
 }
 
 #[test]

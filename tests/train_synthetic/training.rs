@@ -375,9 +375,77 @@ fn the_first_steps_render_every_intersection() {
             [0; 3],
         );
     }
-    let mut trainer = Trainer::new(&ctx, &scene, cfg, Some(wide)).unwrap();
+    assert_trains_unclamped(&ctx, &scene, cfg, wide);
+}
+
+/// Footprints that widen fast in the first steps (Gaussians growing and turning opaque to cover
+/// a background the render lacks: 45k intersections at the first step, 78k by step 10) keep
+/// their renders whole: the trainer reads the renders' peak every step of its first hundred.
+/// Read every 25 steps, as after them, 44 of these 50 steps trained on clamped renders.
+#[test]
+fn footprints_growing_in_the_first_steps_are_not_clamped() {
+    let Some(ctx) = new_gpu_context() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let spec = segsplat_scene::synthetic::SyntheticSpec {
+        frame_count: 16,
+        width: 128,
+        height: 96,
+        ..Default::default()
+    };
+    segsplat_scene::synthetic::write_colmap(
+        dir.path(),
+        &spec,
+        segsplat_scene::colmap::ColmapEncoding::Text,
+    )
+    .unwrap();
+    let scene =
+        segsplat_scene::load_scene(dir.path(), &segsplat_scene::LoadOptions::default()).unwrap();
+    // A black render background against the images' grey one: Gaussians of that grey gain by
+    // growing and turning opaque until they cover the frame.
+    let cfg = TrainConfig {
+        coarse_until: Some(0),
+        densify_from: Some(10_000),
+        background: [0.0; 3],
+        ..config(50)
+    };
+    let grey = segsplat_scene::synthetic::SYNTHETIC_BACKGROUND.map(|c| c as f32 / 255.0);
+    // Faint blobs filling a ball that every view frames, each about 16 px across at first.
+    let mut faint = segsplat_engine::GaussianModel::default();
+    let count = 8000;
+    for index in 0..count {
+        let turn = index as f32 * 2.399_963;
+        let height = 1.0 - 2.0 * (index as f32 + 0.5) / count as f32;
+        let ring = (1.0 - height * height).sqrt();
+        let radius = 1.5 * ((index * 7919 % count) as f32 / count as f32).cbrt();
+        let mean = [
+            radius * ring * turn.cos(),
+            radius * height,
+            radius * ring * turn.sin(),
+        ];
+        faint.push_simple(
+            mean,
+            [0.6f32.ln(); 3],
+            [1.0, 0.0, 0.0, 0.0],
+            -5.3,
+            grey,
+            [0; 3],
+        );
+    }
+    assert_trains_unclamped(&ctx, &scene, cfg, faint);
+}
+
+/// Trains `model` on `scene` for all of `cfg`'s steps and checks that no step used a clamped
+/// render.
+fn assert_trains_unclamped(
+    ctx: &segsplat_gpu::GpuContext,
+    scene: &segsplat_scene::Scene,
+    cfg: TrainConfig,
+    model: segsplat_engine::GaussianModel,
+) {
+    let steps = cfg.steps;
+    let mut trainer = Trainer::new(ctx, scene, cfg, Some(model)).unwrap();
     let progress = trainer.run(|_| true).unwrap();
-    assert_eq!(progress.step, 30);
+    assert_eq!(progress.step, steps);
     assert_eq!(
         trainer.clamped_renders(),
         0,

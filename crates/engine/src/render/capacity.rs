@@ -32,7 +32,6 @@ const GROWTH_FACTOR: f64 = 1.5;
 /// clamped so far. The count is never cleared, so a read-back copy that is dropped for a newer
 /// one (`DeferredRead` keeps only the newest) loses none of it.
 pub(super) const PEAK_WORDS: u64 = 2;
-const PEAK_BYTES: u64 = 4;
 
 struct PeakWords {
     peak: u32,
@@ -85,14 +84,15 @@ impl Renderer {
         })
     }
 
-    /// Records, with `encoder`, a copy of the peak for [`Self::apply_capacity_check`] and a
-    /// reset of the peak behind it; the caller submits `encoder` and then calls
-    /// [`Self::capacity_check_submitted`] with what this returned. `None` when the previous two
-    /// copies are still on their way (the peak keeps counting until the next request).
+    /// Records, with `encoder`, a copy of the peak for [`Self::apply_capacity_check`]; the
+    /// caller submits `encoder` and then calls [`Self::capacity_check_submitted`] with what
+    /// this returned. `None` when the previous two copies are still on their way (the peak
+    /// keeps counting until the next request). The peak is not reset behind the copy: it runs
+    /// on until the next blocking sync, so every copy holds the peaks of the copies before it
+    /// and one that `DeferredRead` drops for a newer loses nothing (the capacity only grows,
+    /// so an old peak read again changes nothing).
     pub fn request_capacity_check(&mut self, encoder: &mut segsplat_gpu::Encoder) -> Option<usize> {
-        let slot = self.peak_read.record(encoder, &self.peak_intersections)?;
-        encoder.clear_buffer(&self.peak_intersections, 0, Some(PEAK_BYTES));
-        Some(slot)
+        self.peak_read.record(encoder, &self.peak_intersections)
     }
 
     /// See [`Self::request_capacity_check`].

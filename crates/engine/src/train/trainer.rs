@@ -333,6 +333,7 @@ impl Trainer {
         if !self.intersections_sized {
             self.size_intersections(view_index, divisor, time, &settings)?;
         }
+        self.apply_watched_peak(step)?;
         let output =
             self.encode_view_render(&mut encoder, view_index, divisor, time, &settings, true)?;
         // The object renders reuse the full render's projection and depth order, and add their
@@ -354,7 +355,9 @@ impl Trainer {
         drop(output);
         self.encode_deform_backward_and_step(&mut encoder, step)?;
         self.encode_adam(&mut encoder, step, count, sh_degree)?;
+        let peak_slot = self.request_watched_peak(&mut encoder, step);
         self.ctx.submit(encoder.finish());
+        self.watched_peak_submitted(peak_slot);
         self.step = step;
         if self.schedule.densifies_at(step) || self.schedule.resets_opacity_at(step) {
             self.densify_and_reset(step)?;

@@ -8,10 +8,20 @@
 //! 8 intersections a Gaussian: on the figurine at 1000 px the first read, 25 steps in, found all
 //! 25 renders clamped, needing 121k entries against 65,536 (`clamped_renders` in a job's
 //! metrics.json). So the first step's view is rendered once beforehand and the peak read.
+//!
+//! In the steps after it the model's footprints grow fastest (opacities and scales leave their
+//! initial values, and a footprint is where alpha reaches its threshold, so it widens with the
+//! opacity): with the peak read every 25 steps, a figurine job at 1000 px still counted one
+//! clamped render, read at step 75, a view needing more than 1.5x the peak read at step 50. So
+//! for the first [`WATCHED_STEPS`] every step also copies its peak for a read without waiting,
+//! and the next step grows the capacity for the newest peak delivered: eight bytes a step.
 
 use super::{TrainError, Trainer};
 use crate::RenderSettings;
 use crate::render::{RENDER_ATTEMPTS, RenderError};
+
+/// The first steps of a run whose renders' peak is read every step (see the module's notes).
+pub(super) const WATCHED_STEPS: u32 = 100;
 
 impl Trainer {
     /// Renders training view `view_index` at `divisor` and `time` (forward only, as the coming
@@ -43,5 +53,37 @@ impl Trainer {
             attempts: RENDER_ATTEMPTS,
         }
         .into())
+    }
+
+    /// Before a watched step ([`WATCHED_STEPS`]): grows the capacity for the newest peak a
+    /// watched step has delivered, without waiting, and counts the renders it found clamped.
+    pub(super) fn apply_watched_peak(&mut self, step: u32) -> Result<(), TrainError> {
+        if step > WATCHED_STEPS {
+            return Ok(());
+        }
+        let clamped_before = self.renderer.clamped_renders();
+        self.renderer.apply_capacity_check(&self.ctx)?;
+        self.log_clamped_since(clamped_before);
+        Ok(())
+    }
+
+    /// Records, at the end of watched step `step`'s `encoder`, a copy of its peak; the caller
+    /// passes what this returns to [`Self::watched_peak_submitted`] after submitting.
+    pub(super) fn request_watched_peak(
+        &mut self,
+        encoder: &mut segsplat_gpu::Encoder,
+        step: u32,
+    ) -> Option<usize> {
+        if step > WATCHED_STEPS {
+            return None;
+        }
+        self.renderer.request_capacity_check(encoder)
+    }
+
+    /// See [`Self::request_watched_peak`].
+    pub(super) fn watched_peak_submitted(&mut self, slot: Option<usize>) {
+        if let Some(slot) = slot {
+            self.renderer.capacity_check_submitted(slot);
+        }
     }
 }
