@@ -4,6 +4,7 @@
 use std::time::Instant;
 
 use super::{EvalReport, TrainError, Trainer, dynamics};
+use crate::render::{RENDER_ATTEMPTS, RenderError};
 use crate::{ObjectFilter, RenderSettings};
 
 impl Trainer {
@@ -14,7 +15,27 @@ impl Trainer {
     /// the training's random numbers); the field's own backward is not timed. Returns (forward ms, backward-with-loss ms) averaged over `repeats`,
     /// after one untimed round (the first render of a trainer pays first-use costs, such as
     /// growing the intersection buffers, which would otherwise land in the forward figure).
+    ///
+    /// The timed renders run at full resolution, where a trainer's capacity may not have been
+    /// fitted yet (bench times them before the first step): a round with a clamped render is
+    /// timed again at the capacity its peak grew, since a clamped render skips work and times
+    /// short. Those renders train nothing, so they are not counted as clamped renders used.
     pub fn time_passes(&mut self, repeats: u32) -> Result<(f64, f64), TrainError> {
+        // Renders before these were used as they were: counted.
+        self.renderer.sync_capacity(&self.ctx)?;
+        for _ in 0..RENDER_ATTEMPTS {
+            let timed = self.time_passes_once(repeats)?;
+            if !self.renderer.sync_capacity_to_retry(&self.ctx)?.overflowed {
+                return Ok(timed);
+            }
+        }
+        Err(RenderError::CapacityNotConverging {
+            attempts: RENDER_ATTEMPTS,
+        }
+        .into())
+    }
+
+    fn time_passes_once(&mut self, repeats: u32) -> Result<(f64, f64), TrainError> {
         let settings = RenderSettings {
             filter: ObjectFilter::All,
             background: self.config.background,
