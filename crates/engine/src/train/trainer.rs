@@ -513,9 +513,7 @@ impl Trainer {
         if let Some(slot) = peak_slot {
             self.renderer.capacity_check_submitted(slot);
         }
-        let clamped_before = self.renderer.clamped_renders();
-        self.renderer.apply_capacity_check(&self.ctx)?;
-        self.log_clamped_since(clamped_before);
+        self.apply_deferred_peak()?;
         let delivered = if self.last_losses.is_none() {
             self.loss_read.read_now(&self.ctx)?
         } else {

@@ -80,8 +80,8 @@ impl ProgressReporter {
         // between checkpoints must not starve a job that trains on each life). Noted before
         // the report is stored, so whoever sees these steps (an operator, a test that then
         // kills the host) finds them counted; fired after it, a kill could beat the note.
-        if self.steps_since_last_report(&progress) > 0 && !self.steps_noted.load(Ordering::Relaxed)
-        {
+        let done = self.steps_since_last_report(&progress);
+        if done > 0 && !self.steps_noted.load(Ordering::Relaxed) {
             match self
                 .database
                 .record_checkpoint(&self.job_id, &self.lease_owner)
@@ -99,15 +99,15 @@ impl ProgressReporter {
             .await?;
         if recorded.is_some() {
             self.bus.notify(&self.job_id);
-            self.count_steps(&progress);
+            self.count_steps(&progress, done);
         }
         Ok(recorded.is_some())
     }
 
-    /// Adds the steps done since the last report of the same stage to
-    /// `segsplat_job_steps_total{worker, stage}`, so dashboards show steps/s per worker.
-    fn count_steps(&self, progress: &Progress) {
-        let done = self.steps_since_last_report(progress);
+    /// Adds `done`, the steps since the last report of the same stage, to
+    /// `segsplat_job_steps_total{worker, stage}`, so dashboards show steps/s per worker, and
+    /// makes `progress` the last report.
+    fn count_steps(&self, progress: &Progress, done: u64) {
         let Ok(mut last) = self.last_step.lock() else {
             return;
         };

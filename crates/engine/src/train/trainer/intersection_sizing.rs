@@ -35,18 +35,38 @@ impl Trainer {
         time: f32,
         settings: &RenderSettings,
     ) -> Result<(), TrainError> {
-        // Renders before this one (an evaluation) were used as they were: counted.
+        // Rendered only to be measured: a clamped attempt is not a used render.
+        self.until_renders_fit(|trainer| {
+            let mut encoder = segsplat_gpu::Encoder::new(&trainer.ctx, "intersection sizing");
+            let output = trainer.encode_view_render(
+                &mut encoder,
+                view_index,
+                divisor,
+                time,
+                settings,
+                false,
+            )?;
+            trainer.ctx.submit_untimed(encoder.finish());
+            drop(output);
+            Ok(())
+        })?;
+        self.intersections_sized = true;
+        Ok(())
+    }
+
+    /// Runs `attempt`, whose renders train nothing (they are measured or timed), until none of
+    /// them was clamped, growing the capacity for their peak in between; the clamped attempts
+    /// are not counted as used renders, while renders before the first were used as they were
+    /// and are counted. Returns the last attempt's value.
+    pub(super) fn until_renders_fit<T>(
+        &mut self,
+        mut attempt: impl FnMut(&mut Self) -> Result<T, TrainError>,
+    ) -> Result<T, TrainError> {
         self.renderer.sync_capacity(&self.ctx)?;
         for _ in 0..RENDER_ATTEMPTS {
-            let mut encoder = segsplat_gpu::Encoder::new(&self.ctx, "intersection sizing");
-            let output =
-                self.encode_view_render(&mut encoder, view_index, divisor, time, settings, false)?;
-            self.ctx.submit_untimed(encoder.finish());
-            drop(output);
-            // Rendered only to be measured: a clamped attempt is not a used render.
+            let value = attempt(self)?;
             if !self.renderer.sync_capacity_to_retry(&self.ctx)?.overflowed {
-                self.intersections_sized = true;
-                return Ok(());
+                return Ok(value);
             }
         }
         Err(RenderError::CapacityNotConverging {
@@ -61,6 +81,12 @@ impl Trainer {
         if step > WATCHED_STEPS {
             return Ok(());
         }
+        self.apply_deferred_peak()
+    }
+
+    /// Grows the capacity for the newest peak the device has delivered, without waiting, and
+    /// logs the clamped renders it reports.
+    pub(super) fn apply_deferred_peak(&mut self) -> Result<(), TrainError> {
         let clamped_before = self.renderer.clamped_renders();
         self.renderer.apply_capacity_check(&self.ctx)?;
         self.log_clamped_since(clamped_before);

@@ -4,7 +4,6 @@
 use std::time::Instant;
 
 use super::{EvalReport, TrainError, Trainer, dynamics};
-use crate::render::{RENDER_ATTEMPTS, RenderError};
 use crate::{ObjectFilter, RenderSettings};
 
 impl Trainer {
@@ -21,18 +20,7 @@ impl Trainer {
     /// timed again at the capacity its peak grew, since a clamped render skips work and times
     /// short. Those renders train nothing, so they are not counted as clamped renders used.
     pub fn time_passes(&mut self, repeats: u32) -> Result<(f64, f64), TrainError> {
-        // Renders before these were used as they were: counted.
-        self.renderer.sync_capacity(&self.ctx)?;
-        for _ in 0..RENDER_ATTEMPTS {
-            let timed = self.time_passes_once(repeats)?;
-            if !self.renderer.sync_capacity_to_retry(&self.ctx)?.overflowed {
-                return Ok(timed);
-            }
-        }
-        Err(RenderError::CapacityNotConverging {
-            attempts: RENDER_ATTEMPTS,
-        }
-        .into())
+        self.until_renders_fit(|trainer| trainer.time_passes_once(repeats))
     }
 
     fn time_passes_once(&mut self, repeats: u32) -> Result<(f64, f64), TrainError> {
